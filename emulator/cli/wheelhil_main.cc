@@ -1,0 +1,35 @@
+// `wheelhil`: the command-line front end of the emulator. Each subcommand lives with the module
+// that owns it; this file only wires them together. Exit codes: 0 success, 1 failure, 2 usage or
+// input error.
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include "emulator/bullet_precision.h"
+
+namespace {
+
+int RunVersion() {
+  fmt::print("wheelhil {}\n", WHEELHIL_VERSION);
+  fmt::print("bullet: {} precision (compiled {})\n",
+             wheelhil::emulator::LinkedBulletIsDoublePrecision() ? "double" : "single",
+             wheelhil::emulator::CompiledWithDoublePrecision() ? "double" : "single");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"wheelhil - hardware-in-the-loop emulator for wheeled mobile robots"};
+  app.require_subcommand(1);
+  auto* version = app.add_subcommand("version", "Print the version and build facts");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;
+  }
+  if (version->parsed()) return RunVersion();
+  return 2;
+}

@@ -1,0 +1,39 @@
+#include "firmware_stub/fw_config.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+namespace wheelhil::fw {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+std::string WriteTemp(const std::string& name, const std::string& text) {
+  const auto path = std::filesystem::path(::testing::TempDir()) / name;
+  std::ofstream(path) << text;
+  return path.string();
+}
+
+TEST(FwConfig, ReadsEstimator) {
+  const auto path = WriteTemp("fw_ok.yaml", "estimator: paper001\n");
+  EXPECT_EQ(LoadFwConfig(path).estimator, EstimatorKind::kPaper001FollowerOdometry);
+}
+
+TEST(FwConfig, UnknownEstimatorNamesFileLineAndField) {
+  const auto path = WriteTemp("fw_bad.yaml", "# comment\nestimator: paper999\n");
+  EXPECT_THAT([&] { LoadFwConfig(path); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("fw_bad.yaml:2:12: estimator")));
+}
+
+TEST(FwConfig, MissingFileIsNamed) {
+  EXPECT_THAT([] { LoadFwConfig("/nonexistent/fw.yaml"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/fw.yaml")));
+}
+
+}  // namespace
+}  // namespace wheelhil::fw
