@@ -1,0 +1,236 @@
+#include "emulator/devices/can_bus_model.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <limits>
+#include <stdexcept>
+
+namespace wheelhil::emulator {
+namespace {
+
+constexpr unsigned kTrailerBits = 3 + 7 + 3;  // CRC delimiter, ACK slot, ACK delimiter; EOF; IFS
+constexpr unsigned kIfsBits = 3;
+
+void PushBits(std::vector<std::uint8_t>& bits, std::uint32_t value, int count) {
+  for (int i = count - 1; i >= 0; --i) bits.push_back(static_cast<std::uint8_t>((value >> i) & 1u));
+}
+
+// Unstuffed bit stream SOF .. end of data field.
+std::vector<std::uint8_t> HeaderAndData(const bus::CanFrame& f) {
+  std::vector<std::uint8_t> bits;
+  bits.reserve(40 + 64 + 15);
+  bits.push_back(0);  // SOF, dominant
+  if (f.extended) {
+    PushBits(bits, f.id >> 18, 11);  // base id
+    bits.push_back(1);               // SRR, recessive
+    bits.push_back(1);               // IDE, recessive
+    PushBits(bits, f.id & 0x3FFFF, 18);
+    bits.push_back(f.rtr ? 1 : 0);
+    bits.push_back(0);  // r1
+    bits.push_back(0);  // r0
+  } else {
+    PushBits(bits, f.id, 11);
+    bits.push_back(f.rtr ? 1 : 0);
+    bits.push_back(0);  // IDE, dominant
+    bits.push_back(0);  // r0
+  }
+  PushBits(bits, f.len, 4);  // DLC
+  if (!f.rtr) {
+    for (std::size_t i = 0; i < f.len; ++i) PushBits(bits, f.data[i], 8);
+  }
+  return bits;
+}
+
+unsigned ExactBits(const bus::CanFrame& f) {
+  std::vector<std::uint8_t> bits = HeaderAndData(f);
+  PushBits(bits, CanCrc15(bits), 15);
+  // After 5 equal bits the transmitter inserts one complementary bit, which starts a new run.
+  unsigned stuffed = 0;
+  int run = 1;
+  std::uint8_t prev = bits[0];
+  for (std::size_t i = 1; i < bits.size(); ++i) {
+    if (bits[i] == prev) {
+      ++run;
+    } else {
+      prev = bits[i];
+      run = 1;
+    }
+    if (run == 5) {
+      ++stuffed;
+      prev = static_cast<std::uint8_t>(prev ^ 1u);
+      run = 1;
+    }
+  }
+  return static_cast<unsigned>(bits.size()) + stuffed + kTrailerBits;
+}
+
+}  // namespace
+
+std::uint16_t CanCrc15(const std::vector<std::uint8_t>& bits) noexcept {
+  std::uint16_t crc = 0;
+  for (std::uint8_t b : bits) {
+    const bool crc_next = ((b & 1u) != 0) != ((crc & 0x4000u) != 0);
+    crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
+    if (crc_next) crc ^= 0x4599;
+  }
+  return crc;
+}
+
+unsigned CanFrameBits(const bus::CanFrame& f, StuffingMode mode) noexcept {
+  if (f.fd || f.error || !f.IsValid()) return 0;
+  const unsigned n = f.rtr ? 0u : f.len;  // data bytes on the wire
+  switch (mode) {
+    case StuffingMode::kNoStuffing:
+      return (f.extended ? 67u : 47u) + 8u * n;
+    case StuffingMode::kTindell:
+      return ((f.extended ? 389u : 269u) + 48u * n) / 5u;
+    case StuffingMode::kWorstCase:
+      return (f.extended ? 67u : 47u) + 8u * n + ((f.extended ? 53u : 33u) + 8u * n) / 4u;
+    case StuffingMode::kExact:
+      return ExactBits(f);
+  }
+  return 0;
+}
+
+std::uint32_t ArbitrationKey(const bus::CanFrame& f) noexcept {
+  if (f.extended) {
+    return ((f.id >> 18) & 0x7FFu) << 21 | 1u << 20 | 1u << 19 | (f.id & 0x3FFFFu) << 1 |
+           (f.rtr ? 1u : 0u);
+  }
+  return (f.id & 0x7FFu) << 21 | (f.rtr ? 1u : 0u) << 20;
+}
+
+CanBusModel::CanBusModel(const CanBusConfig& config) : config_(config) {
+  if (config.bitrate_bps < 125'000 || config.bitrate_bps > 1'000'000) {
+    throw std::invalid_argument(
+        fmt::format("bus.bitrate_bps ({}) must be in 125000..1000000", config.bitrate_bps));
+  }
+  if (1'000'000'000 % config.bitrate_bps != 0) {
+    throw std::invalid_argument(fmt::format(
+        "bus.bitrate_bps ({}) must give a whole-ns bit time (e.g. 125k, 250k, 500k, 800k, 1M)",
+        config.bitrate_bps));
+  }
+  bit_time_ns_ = 1'000'000'000 / config.bitrate_bps;
+}
+
+int CanBusModel::AddNode(std::string name, QueueOrder order, std::size_t max_queue) {
+  nodes_.push_back(Node{std::move(name), order, max_queue, {}});
+  return static_cast<int>(nodes_.size()) - 1;
+}
+
+bool CanBusModel::Enqueue(int node, const bus::CanFrame& frame, std::int64_t ready_ns) noexcept {
+  if (node < 0 || static_cast<std::size_t>(node) >= nodes_.size() || ready_ns < now_ns_ ||
+      CanFrameBits(frame, StuffingMode::kNoStuffing) == 0) {
+    ++frames_dropped_;
+    return false;
+  }
+  Node& n = nodes_[static_cast<std::size_t>(node)];
+  if (n.queue.size() >= n.max_queue) {
+    ++frames_dropped_;
+    return false;
+  }
+  n.queue.push_back(Pending{frame, ready_ns, seq_++});
+  return true;
+}
+
+std::ptrdiff_t CanBusModel::HeadAt(const Node& n, std::int64_t s) {
+  if (n.queue.empty()) return -1;
+  if (n.order == QueueOrder::kFifo) return n.queue.front().ready_ns <= s ? 0 : -1;
+  std::ptrdiff_t best = -1;
+  for (std::size_t i = 0; i < n.queue.size(); ++i) {
+    const Pending& p = n.queue[i];
+    if (p.ready_ns > s) continue;
+    if (best < 0) {
+      best = static_cast<std::ptrdiff_t>(i);
+      continue;
+    }
+    const Pending& b = n.queue[static_cast<std::size_t>(best)];
+    if (ArbitrationKey(p.frame) < ArbitrationKey(b.frame)) best = static_cast<std::ptrdiff_t>(i);
+  }
+  return best;
+}
+
+std::int64_t CanBusModel::EarliestReady(const Node& n) {
+  if (n.queue.empty()) return std::numeric_limits<std::int64_t>::max();
+  if (n.order == QueueOrder::kFifo) return n.queue.front().ready_ns;
+  std::int64_t r = std::numeric_limits<std::int64_t>::max();
+  for (const Pending& p : n.queue) r = std::min(r, p.ready_ns);
+  return r;
+}
+
+void CanBusModel::Schedule(std::int64_t limit_ns) {
+  for (;;) {
+    std::int64_t ready = std::numeric_limits<std::int64_t>::max();
+    for (const Node& n : nodes_) ready = std::min(ready, EarliestReady(n));
+    if (ready == std::numeric_limits<std::int64_t>::max()) return;
+    const std::int64_t sof = std::max(bus_free_ns_, ready);
+    if (sof >= limit_ns) return;
+    // Arbitration among every node with a ready frame at this SOF instant.
+    int winner = -1;
+    std::ptrdiff_t winner_idx = -1;
+    std::uint32_t winner_key = 0;
+    for (std::size_t i = 0; i < nodes_.size(); ++i) {
+      const std::ptrdiff_t idx = HeadAt(nodes_[i], sof);
+      if (idx < 0) continue;
+      const std::uint32_t key =
+          ArbitrationKey(nodes_[i].queue[static_cast<std::size_t>(idx)].frame);
+      if (winner < 0 || key < winner_key) {
+        winner = static_cast<int>(i);
+        winner_idx = idx;
+        winner_key = key;
+      }
+    }
+    Node& n = nodes_[static_cast<std::size_t>(winner)];
+    const Pending p = n.queue[static_cast<std::size_t>(winner_idx)];
+    n.queue.erase(n.queue.begin() + winner_idx);
+    WireFrame w;
+    w.frame = p.frame;
+    w.node = winner;
+    w.ready_ns = p.ready_ns;
+    w.start_ns = sof;
+    w.bits = CanFrameBits(p.frame, config_.stuffing);
+    w.complete_ns = sof + static_cast<std::int64_t>(w.bits - kIfsBits) * bit_time_ns_;
+    const std::int64_t duration = static_cast<std::int64_t>(w.bits) * bit_time_ns_;
+    bus_free_ns_ = sof + duration;
+    busy_ns_total_ += duration;
+    max_queue_delay_ns_ = std::max(max_queue_delay_ns_, sof - p.ready_ns);
+    in_flight_.push_back(w);
+  }
+}
+
+std::vector<WireFrame> CanBusModel::AdvanceTo(std::int64_t t_ns) {
+  std::vector<WireFrame> done;
+  if (t_ns < now_ns_) return done;
+  Schedule(t_ns);
+  now_ns_ = t_ns;
+  while (!in_flight_.empty() && in_flight_.front().complete_ns <= t_ns) {
+    done.push_back(in_flight_.front());
+    in_flight_.pop_front();
+    ++frames_sent_;
+  }
+  return done;
+}
+
+std::vector<WireFrame> CanBusModel::Drain() {
+  Schedule(std::numeric_limits<std::int64_t>::max());
+  std::int64_t end = now_ns_;
+  if (!in_flight_.empty()) end = std::max(end, bus_free_ns_);
+  return AdvanceTo(end);
+}
+
+std::int64_t CanBusModel::busy_ns() const {
+  return busy_ns_total_ - std::max<std::int64_t>(0, bus_free_ns_ - now_ns_);
+}
+
+double CanBusModel::BusLoad() const {
+  if (now_ns_ <= 0) return 0.0;
+  return static_cast<double>(busy_ns()) / static_cast<double>(now_ns_);
+}
+
+std::size_t CanBusModel::queue_depth(int node) const {
+  if (node < 0 || static_cast<std::size_t>(node) >= nodes_.size()) return 0;
+  return nodes_[static_cast<std::size_t>(node)].queue.size();
+}
+
+}  // namespace wheelhil::emulator
