@@ -4,11 +4,17 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
+#include <fstream>
 #include <initializer_list>
+#include <memory>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "bus/can_frame.h"
 #include "emulator/devices/can_bus_model.h"
+#include "emulator/devices/canopen_encoder_node.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -236,6 +242,275 @@ TEST(CanBusModel, RejectsBadConfigurationAndFrames) {
   EXPECT_TRUE(bus.Enqueue(a, Std(0x100, {}), 0));
   EXPECT_FALSE(bus.Enqueue(a, Std(0x101, {}), 0));  // queue depth 1
   EXPECT_EQ(bus.frames_dropped(), 3u);
+}
+
+// Test-only codec: the CiA 301 byte layout written out by hand, independent of the DBC files,
+// so the node's logic can be checked against the golden traces on its own.
+class HandLayoutCodecForTest final : public Cia406Codec {
+ public:
+  bool EncodeNmtState(std::uint8_t node_id, std::uint8_t state, CanFrame& out) const override {
+    out = Std(0x700u + node_id, {state});
+    return true;
+  }
+  bool EncodeTpdo1(std::uint32_t cob_id, std::uint32_t position, std::int16_t speed,
+                   CanFrame& out) const override {
+    const auto s = static_cast<std::uint16_t>(speed);
+    out = Std(cob_id, {Byte(position, 0), Byte(position, 1), Byte(position, 2), Byte(position, 3),
+                       Byte(s, 0), Byte(s, 1)});
+    return true;
+  }
+  bool EncodeEmcy(std::uint8_t node_id, std::uint16_t code, std::uint8_t reg,
+                  CanFrame& out) const override {
+    out = Std(0x080u + node_id, {Byte(code, 0), Byte(code, 1), reg, 0, 0, 0, 0, 0});
+    return true;
+  }
+  bool EncodeSdoResponse(std::uint8_t node_id, const SdoFields& s, CanFrame& out) const override {
+    out =
+        Std(0x580u + node_id, {s.command, Byte(s.index, 0), Byte(s.index, 1), s.subindex,
+                               Byte(s.data, 0), Byte(s.data, 1), Byte(s.data, 2), Byte(s.data, 3)});
+    return true;
+  }
+  bool DecodeNmt(const CanFrame& f, std::uint8_t& command, std::uint8_t& node) const override {
+    if (f.len != 2) return false;
+    command = f.data[0];
+    node = f.data[1];
+    return true;
+  }
+  bool DecodeSdoRequest(const CanFrame& f, SdoFields& s) const override {
+    if (f.len != 8) return false;
+    s.command = f.data[0];
+    s.index = static_cast<std::uint16_t>(f.data[1] | f.data[2] << 8);
+    s.subindex = f.data[3];
+    s.data = static_cast<std::uint32_t>(f.data[4] | f.data[5] << 8 | f.data[6] << 16 |
+                                        static_cast<std::uint32_t>(f.data[7]) << 24);
+    return true;
+  }
+
+ private:
+  static std::uint8_t Byte(std::uint32_t v, int i) {
+    return static_cast<std::uint8_t>((v >> (8 * i)) & 0xFF);
+  }
+};
+
+std::shared_ptr<const Cia406Codec> Codec() { return std::make_shared<HandLayoutCodecForTest>(); }
+
+// ---------------------------------------------------------------------------------------------
+// CANopen CiA 406 encoder node against hand-written golden candump traces.
+
+// "ID#DATA" (can-utils notation, classic frames only) to a frame.
+CanFrame ParseCanUtils(const std::string& text) {
+  const auto hash = text.find('#');
+  CanFrame f;
+  f.id = static_cast<std::uint32_t>(std::stoul(text.substr(0, hash), nullptr, 16));
+  f.extended = hash > 3;
+  const std::string data = text.substr(hash + 1);
+  f.len = static_cast<std::uint8_t>(data.size() / 2);
+  for (std::size_t i = 0; i < f.len; ++i) {
+    f.data[i] = static_cast<std::uint8_t>(std::stoul(data.substr(2 * i, 2), nullptr, 16));
+  }
+  return f;
+}
+
+std::string CandumpLine(std::int64_t t_ns, const CanFrame& f) {
+  char stamp[40];
+  std::snprintf(stamp, sizeof stamp, "(%010lld.%06lld)",
+                static_cast<long long>(t_ns / 1'000'000'000),
+                static_cast<long long>((t_ns % 1'000'000'000) / 1000));
+  return std::string(stamp) + " vcan0 " + bus::ToCanUtilsString(f);
+}
+
+std::vector<std::string> ReadGolden(const std::string& name) {
+  std::ifstream in(std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/golden/" + name);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty()) lines.push_back(line);
+  }
+  return lines;
+}
+
+constexpr std::int64_t Ms(double ms) { return static_cast<std::int64_t>(ms * 1'000'000.0 + 0.5); }
+
+// A scripted master: frames sent to the node, encoder readings and faults, at given instants.
+struct Step {
+  std::int64_t t_ns;
+  enum Kind { kFrame, kMeasure, kFault, kClear } kind;
+  std::string frame{};
+  std::uint32_t position = 0;
+  double speed = 0.0;
+  std::uint16_t code = 0;
+  std::uint8_t reg = 0;
+};
+
+// Runs the node through the script and returns the candump trace of both directions, ordered by
+// instant (at equal instants: the node's timed frames, then the master's frame, then answers).
+std::vector<std::string> RunScript(CanopenEncoderNode& node, const std::vector<Step>& steps,
+                                   std::int64_t end_ns) {
+  std::vector<std::pair<std::int64_t, std::string>> log;
+  auto add = [&](const std::vector<NodeFrame>& frames) {
+    for (const auto& f : frames) log.emplace_back(f.due_ns, CandumpLine(f.due_ns, f.frame));
+  };
+  for (const Step& s : steps) {
+    add(node.Poll(s.t_ns));
+    switch (s.kind) {
+      case Step::kFrame: {
+        const CanFrame f = ParseCanUtils(s.frame);
+        log.emplace_back(s.t_ns, CandumpLine(s.t_ns, f));
+        add(node.OnFrame(f, s.t_ns));
+        break;
+      }
+      case Step::kMeasure:
+        node.SetMeasurement(s.position, s.speed);
+        break;
+      case Step::kFault:
+        node.RaiseFault(s.code, s.reg, s.t_ns);
+        break;
+      case Step::kClear:
+        node.ClearFault(s.t_ns);
+        break;
+    }
+  }
+  add(node.Poll(end_ns));
+  std::stable_sort(log.begin(), log.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<std::string> lines;
+  for (auto& [t, line] : log) lines.push_back(line);
+  return lines;
+}
+
+void ExpectTraceMatches(const std::vector<std::string>& actual, const std::string& golden) {
+  const std::vector<std::string> expected = ReadGolden(golden);
+  ASSERT_FALSE(expected.empty()) << "missing golden trace " << golden;
+  for (std::size_t i = 0; i < std::max(actual.size(), expected.size()); ++i) {
+    EXPECT_EQ(i < actual.size() ? actual[i] : "<end>", i < expected.size() ? expected[i] : "<end>")
+        << golden << " line " << i + 1;
+  }
+}
+
+Step Frame(double ms, std::string f) { return {Ms(ms), Step::kFrame, std::move(f)}; }
+Step Measure(double ms, std::uint32_t position, double speed) {
+  return {Ms(ms), Step::kMeasure, "", position, speed};
+}
+
+TEST(CanopenEncoderNode, NmtAndHeartbeatMatchGoldenTrace) {
+  CanopenEncoderNode node(
+      {.node_id = 5, .power_on_delay_ns = Ms(50), .reset_delay_ns = Ms(10), .heartbeat_ms = 100},
+      Codec());
+  const std::vector<Step> script = {
+      Frame(200, "000#0105"),  {Ms(220), Step::kFault, "", 0, 0.0, 0x7305, 0x00},
+      Frame(300, "000#0200"),  Frame(400, "000#8005"),
+      {Ms(420), Step::kClear}, Frame(500, "000#8205"),
+      Frame(650, "000#0106"),  Frame(700, "000#8100"),
+  };
+  ExpectTraceMatches(RunScript(node, script, Ms(950)), "cia406_nmt_heartbeat.log");
+  EXPECT_EQ(node.state(), CanopenEncoderNode::NmtState::kPreOperational);
+}
+
+TEST(CanopenEncoderNode, SyncAndCyclicTpdoMatchGoldenTrace) {
+  CanopenEncoderNode node(
+      {.node_id = 1, .power_on_delay_ns = Ms(100), .response_delay_ns = Ms(0.2), .heartbeat_ms = 0},
+      Codec());
+  std::vector<Step> script = {
+      Frame(150, "601#2F00180202000000"),  // 0x1800:2 transmission type = 2
+      Frame(190, "080#"),                  // pre-operational: no TPDO
+      Frame(200, "000#0101"),
+      Measure(205, 1000, 250.0),
+  };
+  for (int k = 1; k <= 6; ++k) {
+    if (k == 3) script.push_back(Measure(225, 0x12345678, -100.0));
+    if (k == 5) script.push_back(Measure(245, 0xFFFFFFFF, 40000.0));  // speed saturates
+    script.push_back(Frame(200 + 10 * k, "080#"));
+  }
+  const std::vector<Step> tail = {
+      Frame(270, "000#0201"),              // stop
+      Frame(280, "080#"),                  // stopped: no TPDO
+      Frame(290, "000#8001"),              // pre-operational
+      Frame(300, "601#2B00620014000000"),  // 0x6200 cyclic timer = 20 ms
+      Frame(310, "601#2F001802FE000000"),  // 0x1800:2 = 254
+      Frame(320, "000#0101"),              // start: TPDO every 20 ms
+      Measure(350, 5, -40000.0),
+  };
+  script.insert(script.end(), tail.begin(), tail.end());
+  ExpectTraceMatches(RunScript(node, script, Ms(390)), "cia406_sync_tpdo.log");
+}
+
+TEST(CanopenEncoderNode, SdoServerMatchesGoldenTrace) {
+  CanopenEncoderNode node({.node_id = 3,
+                           .power_on_delay_ns = Ms(10),
+                           .response_delay_ns = Ms(0.1),
+                           .heartbeat_ms = 0,
+                           .device_type = 0x00020196,
+                           .vendor_id = 0x12345678,
+                           .product_code = 0x406,
+                           .revision = 0x00010002,
+                           .serial = 0xBEEF},
+                          Codec());
+  const std::vector<Step> script = {
+      Measure(5, 123456, -1234.4),
+      Frame(20, "603#4000100000000000"),  // upload 0x1000
+      Frame(30, "603#4018100000000000"),  // 0x1018:0..5
+      Frame(40, "603#4018100100000000"),
+      Frame(50, "603#4018100200000000"),
+      Frame(60, "603#4018100300000000"),
+      Frame(70, "603#4018100400000000"),
+      Frame(80, "603#4018100500000000"),   // no sub 5
+      Frame(90, "603#4017100000000000"),   // 0x1017 = 0
+      Frame(100, "603#2B17100032000000"),  // 0x1017 := 50 ms
+      Frame(110, "603#4017100000000000"),
+      Frame(120, "603#4000200000000000"),  // no object 0x2000
+      Frame(130, "603#2304600000000000"),  // 0x6004 is read-only
+      Frame(140, "603#E000100000000000"),  // bad command specifier
+      Frame(160, "603#40001A0100000000"),  // mapping 0x1A00:1, :2
+      Frame(170, "603#40001A0200000000"),
+      Frame(180, "603#4000180100000000"),  // TPDO1 COB-ID
+      Frame(190, "603#4000180300000000"),  // 0x1800:3 not implemented
+      Frame(210, "603#2300100001000000"),  // 0x1000 read-only
+      Frame(220, "603#2317100064000000"),  // 4 bytes into a u16
+      Frame(230, "603#2F001802FA000000"),  // transmission type 250 invalid
+      Frame(240, "603#4030600100000000"),  // speed 0x6030:1
+      Frame(245, "603#4004600000000000"),  // position 0x6004
+      Frame(255, "000#0203"),              // stop: no SDO service
+      Frame(260, "603#4000100000000000"),
+  };
+  ExpectTraceMatches(RunScript(node, script, Ms(310)), "cia406_sdo.log");
+}
+
+TEST(CanopenEncoderNode, CodeSequenceInvertsPositionAndSpeed) {
+  CanopenEncoderNode node({.node_id = 2, .power_on_delay_ns = 0}, Codec());
+  node.Poll(0);
+  node.SetMeasurement(10, 100.0);
+  auto upload = [&](const char* request) {
+    const auto out = node.OnFrame(ParseCanUtils(request), Ms(1));
+    return out.size() == 1 ? bus::ToCanUtilsString(out[0].frame) : std::string("<none>");
+  };
+  EXPECT_EQ(upload("602#2B00600001000000"), "582#6000600000000000");  // 0x6000 := 1
+  EXPECT_EQ(upload("602#4004600000000000"), "582#43046000F6FFFFFF");  // -10
+  EXPECT_EQ(upload("602#4030600100000000"), "582#4B3060019CFF0000");  // -100
+}
+
+TEST(CanopenEncoderNode, IgnoresForeignAndMalformedFramesWithoutCrashing) {
+  CanopenEncoderNode node({.node_id = 9, .power_on_delay_ns = 0, .heartbeat_ms = 10}, Codec());
+  node.Poll(0);
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("000#01"), Ms(1)).empty());                // short NMT
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("609#4000"), Ms(1)).empty());              // short SDO
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("608#4000100000000000"), Ms(1)).empty());  // not ours
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("12345678#00"), Ms(1)).empty());           // extended
+  EXPECT_EQ(node.rejected_frames(), 2u);
+  EXPECT_EQ(node.state(), CanopenEncoderNode::NmtState::kPreOperational);
+  // Poll catches up every heartbeat it skipped, each at its own instant.
+  const auto frames = node.Poll(Ms(35));
+  ASSERT_EQ(frames.size(), 3u);
+  EXPECT_EQ(frames[0].due_ns, Ms(10));
+  EXPECT_EQ(frames[2].due_ns, Ms(30));
+  EXPECT_EQ(node.NextEventNs(), Ms(40));
+}
+
+TEST(CanopenEncoderNode, RejectsBadConfiguration) {
+  EXPECT_THAT([] { CanopenEncoderNode({.node_id = 0}, Codec()); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("node_id")));
+  EXPECT_THAT([] { CanopenEncoderNode({.tpdo1_transmission_type = 250}, Codec()); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("transmission_type")));
+  EXPECT_THAT([] { CanopenEncoderNode({}, nullptr); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("codec")));
 }
 
 }  // namespace
