@@ -1,0 +1,141 @@
+#!/usr/bin/env bash
+# Runs COMMAND inside a user-mode-linux (UML) guest that has a real kernel SocketCAN stack with
+# two virtual CAN interfaces, vcan0 and vcan1, both up. Needs no root: UML is an ordinary
+# process. The guest sees the host's file system (read-only, except the current directory and
+# --rw directories), the caller's environment plus WHEELHIL_VCAN=vcan0 WHEELHIL_VCAN2=vcan1
+# WHEELHIL_UML=1, and the current directory. COMMAND runs as root inside the guest (so it may
+# `ip link set vcan1 down`); files it writes belong to the host user running this script.
+# COMMAND's stdout/stderr are printed after it ends; its exit code is this script's exit code.
+#
+# usage: tests/vcan/uml_run.sh [--timeout SEC] [--mem SIZE] [--rw DIR]... [--keep] [--] COMMAND...
+#   --timeout SEC  kill the guest after SEC seconds (default 120; exit code 124)
+#   --mem SIZE     guest memory (default 256M)
+#   --rw DIR       also make host directory DIR writable inside the guest
+#   --keep         keep the work directory (console log, init log) and print its path
+# Exit codes: COMMAND's; 77 with "SKIP: <reason>" when UML, busybox/insmod, ip or the CAN
+# modules are missing (CTest SKIP_RETURN_CODE); 1 when the guest failed to boot or set up.
+# Environment: WHEELHIL_UML_LINUX (UML binary, default /usr/bin/linux.uml or `linux`),
+# WHEELHIL_UML_MODULES (module tree, default /usr/lib/uml/modules/<version>).
+set -euo pipefail
+
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+INIT="$HERE/uml_init.sh"
+timeout_s=120
+mem=256M
+keep=0
+rw=()
+
+skip() { echo "SKIP: $*"; exit 77; }
+die() { echo "uml_run.sh: $*" >&2; exit 1; }
+
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --timeout) timeout_s="$2"; shift 2 ;;
+    --mem) mem="$2"; shift 2 ;;
+    --rw) rw+=("$(cd "$2" && pwd)"); shift 2 ;;
+    --keep) keep=1; shift ;;
+    --) shift; break ;;
+    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -*) die "unknown option $1 (see --help)" ;;
+    *) break ;;
+  esac
+done
+[ $# -gt 0 ] || die "no command given (usage: uml_run.sh [options] [--] COMMAND...)"
+
+# --- What the guest needs; anything missing is a SKIP, not a failure. ---
+uml="${WHEELHIL_UML_LINUX:-}"
+if [ -z "$uml" ]; then
+  if [ -x /usr/bin/linux.uml ]; then uml=/usr/bin/linux.uml
+  else uml="$(command -v linux || true)"; fi
+fi
+[ -n "$uml" ] && [ -x "$uml" ] || skip "user-mode-linux not installed (apt-get install user-mode-linux)"
+kver="$("$uml" --version 2>/dev/null | head -n1 | tr -d '[:space:]')"
+[ -n "$kver" ] || skip "$uml --version printed no kernel version (not a UML kernel?)"
+moddir="${WHEELHIL_UML_MODULES:-/usr/lib/uml/modules/$kver}"
+[ -f "$moddir/modules.dep" ] || skip "no UML kernel modules for $kver in $moddir"
+if ! command -v busybox > /dev/null && ! command -v insmod > /dev/null; then
+  skip "neither busybox nor insmod found (apt-get install busybox-static)"
+fi
+command -v ip > /dev/null || command -v busybox > /dev/null || skip "no ip command (iproute2)"
+[ -x "$INIT" ] || die "$INIT missing or not executable"
+case "$INIT" in *[[:space:],]*) skip "path $INIT contains spaces or commas (kernel command line)" ;; esac
+
+work="$(mktemp -d "${TMPDIR:-/tmp}/wheelhil-uml.XXXXXX")"
+cleanup() { if [ "$keep" = 1 ]; then echo "uml_run.sh: kept $work" >&2; else rm -rf "$work"; fi; }
+trap cleanup EXIT
+case "$work" in *[[:space:],]*) skip "work directory $work contains spaces or commas" ;; esac
+
+# Module list in load order, dependencies first (modules.dep: "path: dep1 dep2", the deps
+# listed so that the last one loads first). Compressed modules are unpacked for busybox insmod.
+declare -A loaded=()
+: > "$work/modules"
+add_module() {  # add_module NAME [optional]
+  local name="$1" optional="${2:-}" line path deps dep
+  line="$(grep -E "(^|/)${name}\.ko(\.xz|\.zst|\.gz)?:" "$moddir/modules.dep" | head -n1 || true)"
+  if [ -z "$line" ]; then
+    [ -n "$optional" ] && return 0
+    skip "kernel module $name not in $moddir (UML kernel built without it?)"
+  fi
+  path="${line%%:*}"
+  [ -n "${loaded[$path]:-}" ] && return 0
+  loaded[$path]=1
+  deps="${line#*:}"
+  for dep in $(echo $deps | tr ' ' '\n' | tac); do
+    dep="$(basename "$dep")"; dep="${dep%%.ko*}"
+    add_module "$dep" "$optional"
+  done
+  local src="$moddir/$path" ko
+  case "$path" in
+    *.ko) ko="$src" ;;
+    *.ko.xz) ko="$work/$(basename "$path" .xz)"; xz -dc "$src" > "$ko" || skip "cannot unpack $src (xz)" ;;
+    *.ko.zst) ko="$work/$(basename "$path" .zst)"; zstd -qdc "$src" > "$ko" || skip "cannot unpack $src (zstd)" ;;
+    *.ko.gz) ko="$work/$(basename "$path" .gz)"; gzip -dc "$src" > "$ko" || skip "cannot unpack $src (gzip)" ;;
+  esac
+  [ -f "$ko" ] || skip "module file $ko missing"
+  echo "${optional:+?}$ko" >> "$work/modules"
+}
+for m in can can-raw can-dev vcan; do add_module "$m"; done
+# Optional extras (each insmod costs ~0.2 s of boot): the broadcast manager, and the netem
+# queueing discipline so tests can provoke ENOBUFS on a full device queue.
+for m in can-bcm sch_netem; do add_module "$m" optional; done
+
+pwd -P > "$work/cwd"
+printf '%s\n' "${rw[@]+"${rw[@]}"}" > "$work/rw"
+env -0 | grep -zvE '^(PWD|OLDPWD|SHLVL|_)=' > "$work/env" || true
+printf '%s\0' "$@" > "$work/cmd"
+
+mkdir -p "$work/uml"
+start_ns="$(date +%s%N)"
+set +e
+# UML backs guest memory with a file under TMPDIR; keep it in RAM (/dev/shm) when possible.
+shm="${TMPDIR:-/tmp}"
+[ -d /dev/shm ] && [ -w /dev/shm ] && shm=/dev/shm
+TMPDIR="$shm" timeout --kill-after=5 "$timeout_s" "$uml" \
+  mem="$mem" uml_dir="$work/uml" umid=wheelhil "root=/dev/root" rootfstype=hostfs \
+  rootflags=/ ro init="$INIT" WHEELHIL_UML_WORK="$work" con=null con0=null,fd:1 \
+  < /dev/null > "$work/console.log" 2>&1
+uml_rc=$?
+set -e
+elapsed_ms=$(( ($(date +%s%N) - start_ns) / 1000000 ))
+
+if [ -f "$work/skip" ]; then skip "$(cat "$work/skip")"; fi
+if [ -f "$work/rc" ]; then
+  [ -f "$work/stdout" ] && cat "$work/stdout"
+  [ -f "$work/stderr" ] && cat "$work/stderr" >&2
+  echo "uml_run.sh: guest ran for ${elapsed_ms} ms; $(grep -m1 'vcan ready' "$work/init.log" || true)" >&2
+  exit "$(cat "$work/rc")"
+fi
+{
+  if [ "$uml_rc" = 124 ] || [ "$uml_rc" = 137 ]; then
+    echo "uml_run.sh: the UML guest timed out after ${timeout_s} s"
+  else
+    echo "uml_run.sh: the UML guest ended (status $uml_rc) without reporting an exit code"
+  fi
+  echo "--- last lines of the UML console ($work/console.log) ---"
+  tail -n 25 "$work/console.log"
+  if [ -f "$work/init.log" ]; then echo "--- init log ---"; cat "$work/init.log"; fi
+  [ -f "$work/stdout" ] && { echo "--- command stdout ---"; tail -n 50 "$work/stdout"; }
+  [ -f "$work/stderr" ] && { echo "--- command stderr ---"; tail -n 50 "$work/stderr"; }
+} >&2
+[ "$uml_rc" = 124 ] || [ "$uml_rc" = 137 ] && exit 124
+exit 1
