@@ -64,8 +64,9 @@ bool SlidingModeObserver::Step(double x1_u, double f_u_s2, double dt_s) noexcept
     started_ = true;
     xh1_ = x1_u;
     xh2_ = 0.0;
-    return true;
   }
+  position_ = xh1_;
+  velocity_ = xh2_;
   const double e = xh1_ - x1_u;
   double s;
   if (gains_.boundary_layer_u > 0.0) {

@@ -39,15 +39,19 @@ struct SlidingModeGains {
   double k12_u_s = 0.002;    ///< Switching position gain [u/s], >= 0.
   double k21_1_s2 = 1600.0;  ///< Linear velocity-error gain [1/s^2], > 0.
   double k22_u_s2 = 0.5;     ///< Switching velocity gain [u/s^2], >= 0.
-  /// Boundary layer phi [u]: sgn(e) is replaced by clamp(e/phi, -1, 1). 0 = the paper's sgn.
-  double boundary_layer_u = 0.0;
+  /// Boundary layer phi [u]: sgn(e) is replaced by clamp(e/phi, -1, 1); 0 = the paper's pure
+  /// sgn. The default 0.1 mm removes the explicit-Euler chatter at 1 ms (docs/estimators.md).
+  double boundary_layer_u = 1e-4;
 };
 
 /// Eq 5, one axis, explicit Euler at the step's dt:
 ///   e = xh1 - x1;  s = sgn(e) (or clamp(e/phi, -1, 1) with a boundary layer)
 ///   xh1 += dt * (xh2 - k11 e - k12 s)
 ///   xh2 += dt * (f  - k21 e - k22 s)
-/// xh2 is the velocity estimate. The first Step sets xh1 = x1, xh2 = 0.
+/// xh2 is the velocity estimate. Explicit Euler turns the state into a one-step prediction, so
+/// position()/velocity() report the state at the time of the last measurement (before it is
+/// advanced by dt), not the prediction for the next one; on a constant acceleration a the
+/// prediction would read a*dt high. The first Step sets xh1 = x1, xh2 = 0.
 /// Thread-compatible.
 class SlidingModeObserver {
  public:
@@ -61,18 +65,21 @@ class SlidingModeObserver {
   [[nodiscard]] bool Step(double x1_u, double f_u_s2, double dt_s) noexcept;
   void Reset() noexcept {
     started_ = false;
-    xh1_ = xh2_ = 0.0;
+    xh1_ = xh2_ = position_ = velocity_ = 0.0;
   }
 
-  double position() const { return xh1_; }
-  double velocity() const { return xh2_; }
+  /// Estimates at the time of the last measurement [u], [u/s].
+  double position() const { return position_; }
+  double velocity() const { return velocity_; }
   const SlidingModeGains& gains() const { return gains_; }
 
  private:
   SlidingModeGains gains_;
   bool started_ = false;
-  double xh1_ = 0.0;
+  double xh1_ = 0.0;  // State predicted for the next measurement.
   double xh2_ = 0.0;
+  double position_ = 0.0;  // State at the last measurement.
+  double velocity_ = 0.0;
 };
 
 enum FusionAxis : int { kX = 0, kY = 1, kTheta = 2 };
@@ -91,7 +98,7 @@ struct VelocityFusionConfig {
   /// Per axis x, y, theta. Defaults: tau = 100, 150, 200 ms; d = 0.1 m/s^2 (x, y), 0.5 rad/s^2.
   std::array<FusionAxisConfig, 3> axes = {
       FusionAxisConfig{{}, 0.1, 0.100}, FusionAxisConfig{{}, 0.1, 0.150},
-      FusionAxisConfig{{80.0, 0.002, 1600.0, 0.5, 0.0}, 0.5, 0.200}};
+      FusionAxisConfig{{80.0, 0.002, 1600.0, 0.5, 1e-4}, 0.5, 0.200}};
   /// Weight floor k_min in (0, 1]: k right after a disturbance.
   double k_min = 0.01;
   /// Feed the commanded acceleration to the observer as f (else f = 0).
