@@ -474,6 +474,44 @@ TEST(CanopenEncoderNode, SdoServerMatchesGoldenTrace) {
   ExpectTraceMatches(RunScript(node, script, Ms(310)), "cia406_sdo.log");
 }
 
+// The node and a master on a 500 kbit/s bus (no stuffing, 2 us per bit): timestamps are the
+// completion instants on the wire. At 150 ms the master's SYNC (0x080, 47 bits) wins over the
+// node's heartbeat (0x705) and completes at 150.088 ms; the node answers at once with TPDO1
+// (0x185, 95 bits), which wins the next arbitration against the still-waiting heartbeat
+// (SOF 150.094, done 150.278); the heartbeat follows (SOF 150.284, done 150.388).
+TEST(CanopenEncoderNode, OnTheBusModelTimestampsAreWireCompletionInstants) {
+  CanBusModel bus({.bitrate_bps = 500'000, .stuffing = StuffingMode::kNoStuffing});
+  // The encoder's controller sends its mailboxes by priority (a FIFO queue would send the
+  // older heartbeat first).
+  const int master = bus.AddNode("master");
+  const int encoder = bus.AddNode("encoder", CanBusModel::QueueOrder::kPriority);
+  CanopenEncoderNode node({.node_id = 5,
+                           .power_on_delay_ns = Ms(50),
+                           .heartbeat_ms = 100,
+                           .tpdo1_transmission_type = 1},
+                          Codec());
+  node.SetMeasurement(0x100, 0.0);
+  const std::vector<std::pair<std::int64_t, std::string>> script = {{Ms(100), "000#0105"},
+                                                                    {Ms(150), "080#"}};
+  std::vector<std::string> lines;
+  for (std::int64_t t = 0; t <= Ms(260); t += bus.bit_time_ns()) {
+    for (const auto& [at, text] : script) {
+      if (at == t) {
+        ASSERT_TRUE(bus.Enqueue(master, ParseCanUtils(text), t));
+      }
+    }
+    for (const auto& f : node.Poll(t)) ASSERT_TRUE(bus.Enqueue(encoder, f.frame, f.due_ns));
+    for (const auto& w : bus.AdvanceTo(t)) {
+      lines.push_back(CandumpLine(w.complete_ns, w.frame));
+      if (w.node != master) continue;
+      for (const auto& r : node.OnFrame(w.frame, w.complete_ns)) {
+        ASSERT_TRUE(bus.Enqueue(encoder, r.frame, r.due_ns));
+      }
+    }
+  }
+  ExpectTraceMatches(lines, "cia406_on_bus_500k.log");
+}
+
 TEST(CanopenEncoderNode, CodeSequenceInvertsPositionAndSpeed) {
   CanopenEncoderNode node({.node_id = 2, .power_on_delay_ns = 0}, Codec());
   node.Poll(0);
