@@ -96,11 +96,11 @@ bool SlipCorrectingOdometry::Step(double dL_m, double dR_m, double dth_gyro_rad)
     out.dtheta_rad = dth_gyro_rad;  // Heading from the gyro in every slip case.
     if (right) {
       out.slip_right = true;
-      out.dR_corrected_m = dL_m + B * dth_gyro_rad;  // eq for right slip
+      out.dR_corrected_m = dL_m + B * dth_gyro_rad;  // eqs 9-12, right slipped
       ++slips_right_;
     } else if (left) {
       out.slip_left = true;
-      out.dL_corrected_m = dR_m - B * dth_gyro_rad;  // eq for left slip
+      out.dL_corrected_m = dR_m - B * dth_gyro_rad;  // eqs 9-12, left slipped
       ++slips_left_;
     } else {
       out.slip_unattributed = true;  // Travel stays the encoders' mean, heading the gyro's.
