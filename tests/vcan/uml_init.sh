@@ -74,6 +74,13 @@ echo "uml_init: vcan ready at $(up) s"
 
 mapfile -d '' -t envs < "$W/env"
 mapfile -d '' -t argv < "$W/cmd"
+# The command runs as root in here; give it the sbin directories (ip, tc) an ordinary user's
+# PATH may lack.
+for i in "${!envs[@]}"; do
+  case "${envs[$i]}" in
+    PATH=*) [[ ":${envs[$i]#PATH=}:" == *:/usr/sbin:* ]] || envs[$i]="${envs[$i]}:/usr/sbin:/sbin" ;;
+  esac
+done
 cd "$cwd" || fail "cannot cd to $cwd"
 
 env -i "${envs[@]}" WHEELHIL_VCAN=vcan0 WHEELHIL_VCAN2=vcan1 WHEELHIL_UML=1 \
