@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <limits>
 #include <stdexcept>
 
@@ -12,48 +13,46 @@ namespace {
 constexpr unsigned kTrailerBits = 3 + 7 + 3;  // CRC delimiter, ACK slot, ACK delimiter; EOF; IFS
 constexpr unsigned kIfsBits = 3;
 
-void PushBits(std::vector<std::uint8_t>& bits, std::uint32_t value, int count) {
-  for (int i = count - 1; i >= 0; --i) bits.push_back(static_cast<std::uint8_t>((value >> i) & 1u));
-}
-
-// Unstuffed bit stream SOF .. end of data field.
-std::vector<std::uint8_t> HeaderAndData(const bus::CanFrame& f) {
-  std::vector<std::uint8_t> bits;
-  bits.reserve(40 + 64 + 15);
-  bits.push_back(0);  // SOF, dominant
-  if (f.extended) {
-    PushBits(bits, f.id >> 18, 11);  // base id
-    bits.push_back(1);               // SRR, recessive
-    bits.push_back(1);               // IDE, recessive
-    PushBits(bits, f.id & 0x3FFFF, 18);
-    bits.push_back(f.rtr ? 1 : 0);
-    bits.push_back(0);  // r1
-    bits.push_back(0);  // r0
-  } else {
-    PushBits(bits, f.id, 11);
-    bits.push_back(f.rtr ? 1 : 0);
-    bits.push_back(0);  // IDE, dominant
-    bits.push_back(0);  // r0
+// Unstuffed bits SOF .. CRC of one classic frame (at most 39 + 64 + 15 = 118).
+struct BitStream {
+  std::array<std::uint8_t, 128> bits{};
+  std::size_t size = 0;
+  void Push(std::uint32_t value, int count) {
+    for (int i = count - 1; i >= 0; --i) {
+      bits[size++] = static_cast<std::uint8_t>((value >> i) & 1u);
+    }
   }
-  PushBits(bits, f.len, 4);  // DLC
-  if (!f.rtr) {
-    for (std::size_t i = 0; i < f.len; ++i) PushBits(bits, f.data[i], 8);
-  }
-  return bits;
-}
+};
 
 unsigned ExactBits(const bus::CanFrame& f) {
-  std::vector<std::uint8_t> bits = HeaderAndData(f);
-  PushBits(bits, CanCrc15(bits), 15);
+  BitStream b;
+  b.Push(0, 1);  // SOF, dominant
+  if (f.extended) {
+    b.Push(f.id >> 18, 11);  // base id
+    b.Push(1, 1);            // SRR, recessive
+    b.Push(1, 1);            // IDE, recessive
+    b.Push(f.id & 0x3FFFF, 18);
+    b.Push(f.rtr ? 1 : 0, 1);
+    b.Push(0, 2);  // r1, r0
+  } else {
+    b.Push(f.id, 11);
+    b.Push(f.rtr ? 1 : 0, 1);
+    b.Push(0, 2);  // IDE (dominant), r0
+  }
+  b.Push(f.len, 4);  // DLC
+  if (!f.rtr) {
+    for (std::size_t i = 0; i < f.len; ++i) b.Push(f.data[i], 8);
+  }
+  b.Push(CanCrc15({b.bits.data(), b.size}), 15);
   // After 5 equal bits the transmitter inserts one complementary bit, which starts a new run.
   unsigned stuffed = 0;
   int run = 1;
-  std::uint8_t prev = bits[0];
-  for (std::size_t i = 1; i < bits.size(); ++i) {
-    if (bits[i] == prev) {
+  std::uint8_t prev = b.bits[0];
+  for (std::size_t i = 1; i < b.size; ++i) {
+    if (b.bits[i] == prev) {
       ++run;
     } else {
-      prev = bits[i];
+      prev = b.bits[i];
       run = 1;
     }
     if (run == 5) {
@@ -62,12 +61,12 @@ unsigned ExactBits(const bus::CanFrame& f) {
       run = 1;
     }
   }
-  return static_cast<unsigned>(bits.size()) + stuffed + kTrailerBits;
+  return static_cast<unsigned>(b.size) + stuffed + kTrailerBits;
 }
 
 }  // namespace
 
-std::uint16_t CanCrc15(const std::vector<std::uint8_t>& bits) noexcept {
+std::uint16_t CanCrc15(std::span<const std::uint8_t> bits) noexcept {
   std::uint16_t crc = 0;
   for (std::uint8_t b : bits) {
     const bool crc_next = ((b & 1u) != 0) != ((crc & 0x4000u) != 0);

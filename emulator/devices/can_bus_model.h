@@ -35,6 +35,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -49,7 +50,7 @@ enum class StuffingMode { kNoStuffing, kTindell, kWorstCase, kExact };
 unsigned CanFrameBits(const bus::CanFrame& frame, StuffingMode mode) noexcept;
 
 /// The 15-bit CAN CRC of an unstuffed bit sequence (0/1 values), poly 0x4599, init 0.
-std::uint16_t CanCrc15(const std::vector<std::uint8_t>& bits) noexcept;
+std::uint16_t CanCrc15(std::span<const std::uint8_t> bits) noexcept;
 
 /// Arbitration key of a frame: lower wins. Bit layout (MSB first, 32 bits used): base id (11),
 /// RTR/SRR, IDE, extension id (18), extended RTR.
