@@ -239,7 +239,7 @@ class VcanTest : public ::testing::Test {
     int timeout = first_timeout_ms;
     while (!t.Receive(rf, timeout)) {
       out.push_back(rf);
-      timeout = 50;
+      timeout = 100;
     }
     return out;
   }
@@ -439,7 +439,7 @@ TEST_F(VcanTest, MovedFromTransportIsInert) {
   EXPECT_FALSE(b.Send(CanFrame::Classic(1, {})));
 }
 
-// A netem queue of one frame that holds each frame 5 ms makes the second of two back-to-back
+// A netem queue of one frame that holds each frame a while makes the second of two back-to-back
 // writes fail with ENOBUFS: without retries Send() reports it, with retries every frame gets out.
 class VcanQueueFullTest : public VcanTest {
  protected:
@@ -447,19 +447,25 @@ class VcanQueueFullTest : public VcanTest {
     VcanTest::SetUp();
     if (IsSkipped()) return;
     if (iface2_.empty()) GTEST_SKIP() << "set WHEELHIL_VCAN2 to a second vcan";
-    const std::string cmd = "tc qdisc replace dev " + iface2_ + " root netem delay 5ms limit 1";
-    if (std::system((cmd + " 2>/dev/null").c_str()) != 0) {
-      GTEST_SKIP() << "`" << cmd << "` failed (needs root, tc and sch_netem)";
-    }
-    qdisc_ = true;
   }
   void TearDown() override {
     if (qdisc_) (void)std::system(("tc qdisc del dev " + iface2_ + " root 2>/dev/null").c_str());
   }
+  // Returns false (and the test should skip) when the qdisc cannot be installed.
+  bool InstallNetem(int delay_ms) {
+    const std::string cmd = "tc qdisc replace dev " + iface2_ + " root netem delay " +
+                            std::to_string(delay_ms) + "ms limit 1";
+    if (std::system((cmd + " 2>/dev/null").c_str()) != 0) return false;
+    qdisc_ = true;
+    return true;
+  }
+  static constexpr const char* kNoNetem = "`tc qdisc ... netem` failed (needs root, tc, sch_netem)";
   bool qdisc_ = false;
 };
 
 TEST_F(VcanQueueFullTest, WithoutRetriesEnobufsIsReturnedAndCounted) {
+  // 200 ms: the queue stays full for the whole loop below, however slowly the guest runs.
+  if (!InstallNetem(200)) GTEST_SKIP() << kNoNetem;
   CanTransportOptions no_retry;
   no_retry.send_retry_limit = 0;
   SocketCanTransport tx = SocketCanTransport::Open(iface2_, no_retry);
@@ -472,6 +478,7 @@ TEST_F(VcanQueueFullTest, WithoutRetriesEnobufsIsReturnedAndCounted) {
 }
 
 TEST_F(VcanQueueFullTest, RetriesGetEveryFrameOutInOrder) {
+  if (!InstallNetem(5)) GTEST_SKIP() << kNoNetem;
   CanTransportOptions retry;
   retry.send_retry_limit = 30;
   retry.send_retry_budget_us = 500'000;
