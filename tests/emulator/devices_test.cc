@@ -512,6 +512,40 @@ TEST(CanopenEncoderNode, OnTheBusModelTimestampsAreWireCompletionInstants) {
   ExpectTraceMatches(lines, "cia406_on_bus_500k.log");
 }
 
+TEST(CanopenEncoderNode, AcyclicSyncTypeAndCobIdRules) {
+  CanopenEncoderNode node({.node_id = 4, .power_on_delay_ns = 0, .tpdo1_transmission_type = 0},
+                          Codec());
+  node.Poll(0);
+  auto send = [&](const char* text, std::int64_t t) {
+    std::string out;
+    for (const auto& f : node.OnFrame(ParseCanUtils(text), t)) {
+      if (!out.empty()) out.push_back(' ');
+      out.append(bus::ToCanUtilsString(f.frame));
+    }
+    return out;
+  };
+  EXPECT_EQ(send("000#0104", Ms(1)), "");
+  node.SetMeasurement(7, 0.0);
+  EXPECT_EQ(send("080#", Ms(2)), "184#070000000000");  // type 0: first SYNC sends
+  EXPECT_EQ(send("080#", Ms(3)), "");                  // unchanged position: nothing
+  node.SetMeasurement(8, 0.0);
+  EXPECT_EQ(send("080#", Ms(4)), "184#080000000000");
+  // The CAN-ID of a valid PDO cannot change; invalidate (bit 31) first, then move it.
+  EXPECT_EQ(send("604#2300180185020000", Ms(5)), "584#8000180130000906");
+  EXPECT_EQ(send("604#2300180184010080", Ms(6)), "584#6000180100000000");
+  node.SetMeasurement(9, 0.0);
+  EXPECT_EQ(send("080#", Ms(7)), "");  // PDO not valid: silent
+  EXPECT_EQ(send("604#2300180185020080", Ms(8)), "584#6000180100000000");
+  EXPECT_EQ(send("604#2300180185020000", Ms(9)), "584#6000180100000000");
+  EXPECT_EQ(send("080#", Ms(10)), "285#090000000000");
+  // EMCY is not sent in stopped, but the error register still shows the fault.
+  EXPECT_EQ(send("000#0204", Ms(11)), "");
+  node.RaiseFault(0x5000, 0x04, Ms(12));
+  EXPECT_TRUE(node.Poll(Ms(13)).empty());
+  EXPECT_EQ(send("000#8004", Ms(14)), "");
+  EXPECT_EQ(send("604#4001100000000000", Ms(15)), "584#4F01100005000000");
+}
+
 TEST(CanopenEncoderNode, CodeSequenceInvertsPositionAndSpeed) {
   CanopenEncoderNode node({.node_id = 2, .power_on_delay_ns = 0}, Codec());
   node.Poll(0);
