@@ -66,7 +66,9 @@ struct TransportStats {
   std::uint64_t send_retries = 0;   ///< Writes retried after ENOBUFS / EAGAIN.
   std::uint64_t send_failures = 0;  ///< Send() calls that returned an error.
   std::uint64_t rx_invalid = 0;     ///< Received datagrams rejected (bad size, length, flags).
-  std::uint64_t rx_kernel_drops = 0;  ///< Socket receive-queue overflows (SO_RXQ_OVFL), total.
+  /// Frames the kernel dropped because this socket's receive queue was full (SO_RXQ_OVFL);
+  /// the kernel reports the total with the next frame that is queued, so it lags by one frame.
+  std::uint64_t rx_kernel_drops = 0;
 };
 
 class SocketCanTransport {

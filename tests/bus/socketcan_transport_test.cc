@@ -16,6 +16,7 @@
 #include <stdexcept>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <vector>
 
 #include "bus/internal/socketcan_convert.h"
@@ -437,6 +438,47 @@ TEST_F(VcanTest, MovedFromTransportIsInert) {
   EXPECT_EQ(a.fd(), -1);  // NOLINT(bugprone-use-after-move): documented moved-from state.
   EXPECT_EQ(a.Send(CanFrame::Classic(1, {})), std::make_error_code(std::errc::bad_file_descriptor));
   EXPECT_FALSE(b.Send(CanFrame::Classic(1, {})));
+}
+
+TEST_F(VcanTest, KernelReceiveQueueOverflowIsCounted) {
+  SocketCanTransport tx = SocketCanTransport::Open(iface_);
+  SocketCanTransport rx = SocketCanTransport::Open(iface_);
+  const int tiny = 1;  // The kernel rounds it up to its minimum, a few frames' worth.
+  ASSERT_EQ(::setsockopt(rx.fd(), SOL_SOCKET, SO_RCVBUF, &tiny, sizeof(tiny)), 0);
+  constexpr int kFrames = 200;
+  for (int i = 0; i < kFrames; ++i) ASSERT_FALSE(tx.Send(CanFrame::Classic(0x200, {})));
+  const std::vector<ReceivedFrame> got = Drain(rx);
+  ASSERT_FALSE(got.empty());
+  EXPECT_LT(got.size(), static_cast<std::size_t>(kFrames));
+  // The kernel reports the drop count with the next frame that does get queued.
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x201, {})));
+  ReceivedFrame next;
+  ASSERT_FALSE(rx.Receive(next, 1000));
+  EXPECT_EQ(next.frame.id, 0x201u);
+  EXPECT_EQ(rx.stats().received, got.size() + 1);
+  EXPECT_EQ(rx.stats().rx_kernel_drops, kFrames - got.size());
+}
+
+TEST_F(VcanTest, OneThreadSendsWhileAnotherReceives) {
+  CanTransportOptions own;
+  own.receive_own = true;
+  SocketCanTransport bus = SocketCanTransport::Open(iface_, own);
+  constexpr std::uint32_t kFrames = 100;
+  std::vector<std::uint32_t> ids;
+  std::thread reader([&] {
+    ReceivedFrame rf;
+    while (ids.size() < kFrames && !bus.Receive(rf, 2000)) ids.push_back(rf.frame.id);
+  });
+  std::uint32_t send_errors = 0;
+  for (std::uint32_t i = 0; i < kFrames; ++i) {
+    send_errors += bus.Send(CanFrame::Classic(0x300 + i, {})) ? 1 : 0;
+  }
+  reader.join();
+  EXPECT_EQ(send_errors, 0u);
+  ASSERT_EQ(ids.size(), kFrames);
+  for (std::uint32_t i = 0; i < kFrames; ++i) EXPECT_EQ(ids[i], 0x300 + i);
+  EXPECT_EQ(bus.stats().sent, kFrames);
+  EXPECT_EQ(bus.stats().received, kFrames);
 }
 
 // A netem queue of one frame that holds each frame a while makes the second of two back-to-back
