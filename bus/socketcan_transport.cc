@@ -3,8 +3,8 @@
 #include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
-#include <net/if_arp.h>
 #include <net/if.h>
+#include <net/if_arp.h>
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
@@ -15,8 +15,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
-#include <cstddef>
 #include <chrono>
+#include <cstddef>
 #include <cstring>
 #include <ctime>
 #include <stdexcept>
@@ -409,8 +409,7 @@ std::error_code SocketCanTransport::Receive(ReceivedFrame& out, int timeout_ms) 
         out.timestamp_ns = static_cast<std::int64_t>(tv.tv_sec) * 1'000'000'000 +
                            static_cast<std::int64_t>(tv.tv_usec) * 1000;
         out.kernel_timestamp = true;
-      } else if (cm->cmsg_type == SO_RXQ_OVFL &&
-                 cm->cmsg_len >= CMSG_LEN(sizeof(std::uint32_t))) {
+      } else if (cm->cmsg_type == SO_RXQ_OVFL && cm->cmsg_len >= CMSG_LEN(sizeof(std::uint32_t))) {
         std::uint32_t drops;
         std::memcpy(&drops, CMSG_DATA(cm), sizeof(drops));
         c.rx_kernel_drops.store(drops, std::memory_order_relaxed);

@@ -114,11 +114,15 @@ TEST(SocketCanConvert, InvalidFramesAreNotEncoded) {
 
 TEST(SocketCanConvert, RoundTripsEveryKind) {
   const std::vector<std::uint8_t> eight{1, 2, 3, 4, 5, 6, 7, 8};
-  const std::vector<CanFrame> frames = {
-      CanFrame::Classic(0x000, {}),      CanFrame::Classic(0x7FF, eight),
-      CanFrame::Classic(0x1FFFFFFF, eight, true), Remote(0x123, 8), Remote(0x12345, 0, true),
-      ErrorFrame(CAN_ERR_CRTL | CAN_ERR_BUSERROR), Fd(0x1, 0, 0), Fd(0x7FF, 12, CANFD_BRS),
-      Fd(0x1FFFFFFF, 64, CANFD_ESI, true)};
+  const std::vector<CanFrame> frames = {CanFrame::Classic(0x000, {}),
+                                        CanFrame::Classic(0x7FF, eight),
+                                        CanFrame::Classic(0x1FFFFFFF, eight, true),
+                                        Remote(0x123, 8),
+                                        Remote(0x12345, 0, true),
+                                        ErrorFrame(CAN_ERR_CRTL | CAN_ERR_BUSERROR),
+                                        Fd(0x1, 0, 0),
+                                        Fd(0x7FF, 12, CANFD_BRS),
+                                        Fd(0x1FFFFFFF, 64, CANFD_ESI, true)};
   for (const CanFrame& f : frames) {
     canfd_frame buf;
     const std::size_t size = internal::EncodeFrame(f, buf);
@@ -186,10 +190,10 @@ TEST(SocketCanMessages, SayWhatIsWrongAndHowToFixIt) {
   EXPECT_THAT(internal::InterfaceDownMessage("can7"),
               HasSubstr("CAN interface 'can7' is down: ip link set can7 up"));
   EXPECT_THAT(internal::NotCanInterfaceMessage("eth0"), HasSubstr("'eth0' is not a CAN"));
-  EXPECT_THAT(internal::NoSocketCanMessage("can0", EAFNOSUPPORT),
-              AllOf(HasSubstr("'can0'"), HasSubstr("no SocketCAN support"), HasSubstr("AF_CAN"),
-                    HasSubstr("wheelhil exec"), HasSubstr("ucan"),
-                    HasSubstr(std::strerror(EAFNOSUPPORT))));
+  EXPECT_THAT(
+      internal::NoSocketCanMessage("can0", EAFNOSUPPORT),
+      AllOf(HasSubstr("'can0'"), HasSubstr("no SocketCAN support"), HasSubstr("AF_CAN"),
+            HasSubstr("wheelhil exec"), HasSubstr("ucan"), HasSubstr(std::strerror(EAFNOSUPPORT))));
 }
 
 TEST(SocketCanTransport, RejectsBadNamesAndOptionsBeforeTouchingTheKernel) {
@@ -279,8 +283,8 @@ TEST_F(VcanTest, SendsAndReceivesClassicFrames) {
   EXPECT_GT(rx.ifindex(), 0);
   const std::vector<std::uint8_t> bytes{0xDE, 0xAD, 0xBE, 0xEF};
   const std::vector<CanFrame> sent = {CanFrame::Classic(0x123, bytes),
-                                      CanFrame::Classic(0x1234567, bytes, true),
-                                      Remote(0x321, 2), CanFrame::Classic(0x7FF, {})};
+                                      CanFrame::Classic(0x1234567, bytes, true), Remote(0x321, 2),
+                                      CanFrame::Classic(0x7FF, {})};
   for (const CanFrame& f : sent) ASSERT_FALSE(tx.Send(f)) << ToCanUtilsString(f);
 
   const std::vector<ReceivedFrame> got = Drain(rx);
@@ -314,11 +318,11 @@ TEST_F(VcanTest, FiltersSelectByIdFormatAndInverse) {
   SocketCanTransport tx = SocketCanTransport::Open(iface_);
 
   const std::vector<std::uint8_t> b{1};
-  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x105, b)));              // passes filter 1
-  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x205, b)));              // id differs
-  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x105, b, true)));        // 29-bit, filter 1 is 11-bit
-  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x18DAF1AA, b, true)));   // passes filter 2
-  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x18DAF2AA, b, true)));   // id differs
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x105, b)));             // passes filter 1
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x205, b)));             // id differs
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x105, b, true)));       // 29-bit, filter 1 is 11-bit
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x18DAF1AA, b, true)));  // passes filter 2
+  ASSERT_FALSE(tx.Send(CanFrame::Classic(0x18DAF2AA, b, true)));  // id differs
 
   EXPECT_EQ(Ids(Drain(rx)), (std::vector<std::uint32_t>{0x105, 0x18DAF1AA}));
   // The inverse filter drops only the 11-bit 0x105.
@@ -409,8 +413,9 @@ TEST_F(VcanTest, KernelTimestampsArePresentAndNonDecreasing) {
 }
 
 TEST_F(VcanTest, MissingInterfaceIsNamed) {
-  EXPECT_THAT([] { (void)SocketCanTransport::Open("vcan9"); },
-              ThrowsMessage<std::system_error>(HasSubstr("CAN interface 'vcan9' not found (ENODEV)")));
+  EXPECT_THAT(
+      [] { (void)SocketCanTransport::Open("vcan9"); },
+      ThrowsMessage<std::system_error>(HasSubstr("CAN interface 'vcan9' not found (ENODEV)")));
 }
 
 TEST_F(VcanTest, NonCanInterfaceIsNamed) {
@@ -423,7 +428,8 @@ TEST_F(VcanTest, DownInterfaceSaysHowToBringItUp) {
   const int err = SetLinkUp(iface2_, false);
   if (err == EPERM || err == EACCES) GTEST_SKIP() << "not allowed to set " << iface2_ << " down";
   ASSERT_EQ(err, 0) << std::strerror(err);
-  const std::string expected = "CAN interface '" + iface2_ + "' is down: ip link set " + iface2_ + " up";
+  const std::string expected =
+      "CAN interface '" + iface2_ + "' is down: ip link set " + iface2_ + " up";
   EXPECT_THAT([&] { (void)SocketCanTransport::Open(iface2_); },
               ThrowsMessage<std::system_error>(HasSubstr(expected)));
   ASSERT_EQ(SetLinkUp(iface2_, true), 0);
