@@ -140,7 +140,8 @@ fi
   else
     echo "uml_run.sh: the UML guest ended (status $uml_rc) without reporting an exit code"
   fi
-  echo "--- last lines of the UML console ($work/console.log) ---"
+  [ "$keep" = 1 ] || echo "(rerun with --keep to keep $work: console.log, init.log)"
+  echo "--- last lines of the UML console ---"
   tail -n 25 "$work/console.log"
   if [ -f "$work/init.log" ]; then echo "--- init log ---"; cat "$work/init.log"; fi
   [ -f "$work/stdout" ] && { echo "--- command stdout ---"; tail -n 50 "$work/stdout"; }
