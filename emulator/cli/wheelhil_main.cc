@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "emulator/bullet_precision.h"
+#include "emulator/cli/bus_commands.h"
 
 namespace {
 
@@ -20,9 +21,11 @@ int RunVersion() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (auto code = wheelhil::emulator::BusCommands::RunExecIfRequested(argc, argv)) return *code;
   CLI::App app{"wheelhil - hardware-in-the-loop emulator for wheeled mobile robots"};
   app.require_subcommand(1);
   auto* version = app.add_subcommand("version", "Print the version and build facts");
+  wheelhil::emulator::BusCommands bus_commands(app);
 
   try {
     app.parse(argc, argv);
@@ -31,5 +34,6 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
   if (version->parsed()) return RunVersion();
+  if (auto code = bus_commands.Run()) return *code;
   return 2;
 }

@@ -1,0 +1,887 @@
+#include "bus/ucan_broker.h"
+
+#include <fcntl.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
+#include <poll.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/file.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <condition_variable>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <system_error>
+#include <thread>
+#include <unordered_map>
+#include <utility>
+
+#include "bus/ucan_protocol.h"
+#include "bus/ucan_runtime_dir.h"
+
+namespace wheelhil::bus {
+namespace {
+
+using ucan::BusInfo;
+using ucan::Op;
+using ucan::RawOptions;
+using ucan::Reply;
+using ucan::Request;
+using ucan::RxTrailer;
+using ucan::TxAddress;
+
+constexpr std::uint64_t kListenTag = 0;
+constexpr std::uint64_t kWakeTag = 1;
+constexpr std::uint32_t kFirstClientId = 2;  // ids 0 and 1 are the tags above
+constexpr int kBatch = 64;
+constexpr int kReadBatchesPerWakeup = 4;  // fairness between flooding clients
+constexpr std::size_t kMaxRequest = sizeof(Request) + ucan::kMaxFilters * sizeof(can_filter);
+constexpr std::size_t kClientMsgBuf = 128;  // > 80, so a larger message shows as MSG_TRUNC
+
+/// An owned file descriptor.
+class Fd {
+ public:
+  Fd() = default;
+  explicit Fd(int fd) : fd_(fd) {}
+  Fd(Fd&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  Fd& operator=(Fd&& o) noexcept {
+    if (this != &o) {
+      Reset();
+      fd_ = std::exchange(o.fd_, -1);
+    }
+    return *this;
+  }
+  ~Fd() { Reset(); }
+  void Reset() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+  int get() const { return fd_; }
+
+ private:
+  int fd_ = -1;
+};
+
+std::system_error SysError(int err, const std::string& what) {
+  return std::system_error(err, std::generic_category(), what);
+}
+
+struct Msg {
+  std::uint16_t len = 0;
+  std::array<std::uint8_t, ucan::kMaxRxMessage> bytes{};
+};
+
+/// FIFO of messages with a hard capacity; grows by doubling up to it.
+class MsgRing {
+ public:
+  bool empty() const { return size_ == 0; }
+  std::size_t size() const { return size_; }
+  Msg& PushBack() {
+    if (size_ == buf_.size()) Grow();
+    Msg& m = buf_[(head_ + size_) & (buf_.size() - 1)];
+    ++size_;
+    return m;
+  }
+  const Msg& At(std::size_t i) const { return buf_[(head_ + i) & (buf_.size() - 1)]; }
+  void PopFront(std::size_t n) {
+    head_ = (head_ + n) & (buf_.size() - 1);
+    size_ -= n;
+    if (size_ == 0) head_ = 0;
+  }
+
+ private:
+  void Grow() {
+    std::vector<Msg> next(buf_.empty() ? 64 : buf_.size() * 2);
+    for (std::size_t i = 0; i < size_; ++i) next[i] = At(i);
+    buf_ = std::move(next);
+    head_ = 0;
+  }
+  std::vector<Msg> buf_;
+  std::size_t head_ = 0;
+  std::size_t size_ = 0;
+};
+
+/// One CAN_RAW filter after the kernel's normalisation (net/can/af_can.c: can_rcv_list_find).
+struct Filter {
+  enum Kind { kAll, kMatch, kInverse, kError } kind = kAll;
+  std::uint32_t id = 0;
+  std::uint32_t mask = 0;
+};
+
+Filter Normalize(can_filter f) {
+  Filter out;
+  std::uint32_t id = f.can_id;
+  std::uint32_t mask = f.can_mask;
+  const bool inverse = (id & CAN_INV_FILTER) != 0;
+  if (mask & CAN_ERR_FLAG) {
+    out.kind = Filter::kError;
+    out.mask = mask & CAN_ERR_MASK;
+    return out;
+  }
+  if ((mask & CAN_EFF_FLAG) && !(id & CAN_EFF_FLAG)) {
+    mask &= (CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG);
+  }
+  id &= mask;
+  out.id = id;
+  out.mask = mask;
+  if (inverse) {
+    out.kind = Filter::kInverse;
+  } else if (mask == 0) {
+    out.kind = Filter::kAll;
+  } else {
+    out.kind = Filter::kMatch;
+  }
+  return out;
+}
+
+struct Bus;
+
+struct Client {
+  Fd fd;
+  std::uint32_t id = 0;
+  pid_t pid = 0;
+  bool data = false;  // kOpen done
+  bool any = false;   // bound to ifindex 0
+  bool dead = false;
+  bool dirty = false;
+  bool want_out = false;
+  Bus* bus = nullptr;
+  RawOptions options;
+  std::vector<Filter> filters;
+  MsgRing queue;
+  std::uint32_t drops = 0;
+
+  /// net/can/raw.c raw_rcv(): filter match counting incl. CAN_RAW_JOIN_FILTERS.
+  bool Accepts(std::uint32_t can_id) const {
+    std::size_t matches = 0;
+    if (can_id & CAN_ERR_FLAG) {
+      if (can_id & options.err_mask & CAN_ERR_MASK) ++matches;
+      for (const Filter& f : filters) {
+        if (f.kind == Filter::kError && (can_id & f.mask)) ++matches;
+      }
+    } else {
+      for (const Filter& f : filters) {
+        switch (f.kind) {
+          case Filter::kAll: ++matches; break;
+          case Filter::kMatch: matches += (can_id & f.mask) == f.id; break;
+          case Filter::kInverse: matches += (can_id & f.mask) != f.id; break;
+          case Filter::kError: break;
+        }
+      }
+    }
+    if (matches == 0) return false;
+    if (options.join_filters && filters.size() > 1) return matches >= filters.size();
+    return true;
+  }
+};
+
+struct Bus {
+  std::string name;
+  int ifindex = 0;
+  std::vector<Client*> members;
+  std::uint64_t frames = 0;
+  std::uint64_t drops = 0;
+  std::uint64_t bad_messages = 0;
+  std::int64_t last_ts_ns = 0;
+};
+
+std::int64_t RealtimeNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
+void CopyName(char (&dst)[ucan::kNameSize], const std::string& src) {
+  std::memset(dst, 0, sizeof(dst));
+  std::memcpy(dst, src.data(), std::min(src.size(), sizeof(dst) - 1));
+}
+
+std::string NameOf(const char (&src)[ucan::kNameSize]) {
+  return std::string(src, strnlen(src, sizeof(src)));
+}
+
+}  // namespace
+
+bool IsValidUcanBusName(const std::string& name) noexcept {
+  if (name.empty() || name.size() >= ucan::kNameSize) return false;
+  for (char c : name) {
+    if (c == '/' || c == ':' || c <= ' ' || c == 0x7F) return false;
+  }
+  return name != "any" && name != "." && name != "..";
+}
+
+struct UcanBroker::Impl {
+  UcanBrokerOptions options;
+  std::string dir;
+  std::string sock_path;
+  Fd lock_fd;
+  Fd listen_fd;
+  Fd epoll_fd;
+  Fd wake_fd;
+
+  mutable std::mutex mu;
+  std::condition_variable stopped_cv;
+  bool stop_requested = false;
+  bool stopped = false;
+
+  std::unordered_map<std::uint32_t, std::unique_ptr<Client>> clients;
+  std::map<std::string, std::unique_ptr<Bus>> buses;
+  std::map<std::string, int> index_of;  // every name ever added -> its ifindex
+  int next_named_index = ucan::kFirstNamedIfindex;
+  std::vector<Client*> any_clients;
+  std::vector<Client*> dirty;
+  std::uint32_t next_id = kFirstClientId;
+  std::uint64_t orphan_bad_messages = 0;
+
+  std::thread thread;
+
+  explicit Impl(UcanBrokerOptions opts) : options(std::move(opts)) {
+    dir = options.runtime_dir.empty() ? ResolveUcanRuntimeDir() : options.runtime_dir;
+    if (auto ec = EnsureUcanRuntimeDir(dir)) {
+      throw SysError(ec.value(), "ucan runtime directory " + dir +
+                                     " (must be a directory owned by you with mode 0700)");
+    }
+    sock_path = UcanSocketPath(dir);
+    sockaddr_un addr{};
+    if (sock_path.size() >= sizeof(addr.sun_path)) {
+      throw SysError(ENAMETOOLONG, "ucan socket path " + sock_path);
+    }
+    const std::string lock_path = dir + "/" + ucan::kLockName;
+    lock_fd = Fd(::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600));
+    if (lock_fd.get() < 0) throw SysError(errno, "ucan lock " + lock_path);
+    if (::flock(lock_fd.get(), LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno == EWOULDBLOCK ? EBUSY : errno;
+      throw SysError(err, "another ucan broker serves " + dir);
+    }
+    ::unlink(sock_path.c_str());  // stale: we hold the lock, so nobody serves it
+    listen_fd = Fd(::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
+    if (listen_fd.get() < 0) throw SysError(errno, "ucan socket");
+    addr.sun_family = AF_UNIX;
+    std::memcpy(addr.sun_path, sock_path.c_str(), sock_path.size() + 1);
+    if (::bind(listen_fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+      throw SysError(errno, "bind " + sock_path);
+    }
+    if (::listen(listen_fd.get(), 256) != 0) throw SysError(errno, "listen " + sock_path);
+    epoll_fd = Fd(::epoll_create1(EPOLL_CLOEXEC));
+    wake_fd = Fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+    if (epoll_fd.get() < 0 || wake_fd.get() < 0) throw SysError(errno, "epoll/eventfd");
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.u64 = kListenTag;
+    ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, listen_fd.get(), &ev);
+    ev.data.u64 = kWakeTag;
+    ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, wake_fd.get(), &ev);
+    thread = std::thread([this] { Loop(); });
+  }
+
+  ~Impl() {
+    RequestStop();
+    if (thread.joinable()) thread.join();
+    std::lock_guard lk(mu);
+    for (auto& [id, c] : clients) c->fd.Reset();
+    clients.clear();
+    if (!sock_path.empty() && listen_fd.get() >= 0) ::unlink(sock_path.c_str());
+  }
+
+  void RequestStop() {
+    {
+      std::lock_guard lk(mu);
+      stop_requested = true;
+    }
+    Wake();
+  }
+
+  void Wake() const {
+    const std::uint64_t one = 1;
+    [[maybe_unused]] ssize_t n = ::write(wake_fd.get(), &one, sizeof(one));
+  }
+
+  // ---- buses (mu held) ----
+
+  int IndexFor(const std::string& name) {
+    if (auto it = index_of.find(name); it != index_of.end()) return it->second;
+    int index = 0;
+    if (name.size() > 4 && name.size() <= 7 && name.compare(0, 4, "ucan") == 0 &&
+        std::all_of(name.begin() + 4, name.end(), [](char c) { return c >= '0' && c <= '9'; }) &&
+        !(name.size() > 5 && name[4] == '0')) {
+      index = ucan::kFirstIfindex + std::stoi(name.substr(4));
+    } else {
+      index = next_named_index++;
+    }
+    index_of[name] = index;
+    return index;
+  }
+
+  int AddBusLocked(const std::string& name) {
+    if (auto it = buses.find(name); it != buses.end()) return it->second->ifindex;
+    auto bus = std::make_unique<Bus>();
+    bus->name = name;
+    bus->ifindex = IndexFor(name);
+    const int index = bus->ifindex;
+    buses[name] = std::move(bus);
+    return index;
+  }
+
+  bool RemoveBusLocked(const std::string& name) {
+    auto it = buses.find(name);
+    if (it == buses.end()) return false;
+    for (Client* c : it->second->members) {
+      c->bus = nullptr;
+      Kill(c);
+    }
+    it->second->members.clear();
+    buses.erase(it);
+    ReapDead();
+    return true;
+  }
+
+  Bus* BusByIndex(int ifindex) {
+    for (auto& [name, bus] : buses) {
+      if (bus->ifindex == ifindex) return bus.get();
+    }
+    return nullptr;
+  }
+
+  // ---- clients (mu held) ----
+
+  void Kill(Client* c) {
+    if (c->dead) return;
+    c->dead = true;
+    ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
+  }
+
+  void ReapDead() {
+    for (auto it = clients.begin(); it != clients.end();) {
+      Client* c = it->second.get();
+      if (!c->dead) {
+        ++it;
+        continue;
+      }
+      if (c->bus != nullptr) {
+        auto& m = c->bus->members;
+        m.erase(std::remove(m.begin(), m.end(), c), m.end());
+      }
+      if (c->any) {
+        any_clients.erase(std::remove(any_clients.begin(), any_clients.end(), c),
+                          any_clients.end());
+      }
+      dirty.erase(std::remove(dirty.begin(), dirty.end(), c), dirty.end());
+      it = clients.erase(it);
+    }
+  }
+
+  void AcceptAll() {
+    for (;;) {
+      const int fd = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+      if (fd < 0) return;  // EAGAIN, or out of fds: the client's connect stays pending
+      auto c = std::make_unique<Client>();
+      c->fd = Fd(fd);
+      c->id = next_id++;
+      if (next_id < kFirstClientId) next_id = kFirstClientId;
+      ucred cred{};
+      socklen_t len = sizeof(cred);
+      if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0) c->pid = cred.pid;
+      const int sndbuf = 1 << 20;
+      ::setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof(sndbuf));
+      epoll_event ev{};
+      ev.events = EPOLLIN;
+      ev.data.u64 = c->id;
+      if (::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, fd, &ev) != 0) continue;
+      clients[c->id] = std::move(c);
+    }
+  }
+
+  Client* Find(std::uint32_t id) {
+    auto it = clients.find(id);
+    return it == clients.end() || it->second->dead ? nullptr : it->second.get();
+  }
+
+  void SendReply(Client* c, const Reply& reply, const void* extra = nullptr,
+                 std::size_t extra_len = 0) {
+    iovec iov[2] = {{const_cast<Reply*>(&reply), sizeof(reply)},
+                    {const_cast<void*>(extra), extra_len}};
+    msghdr msg{};
+    msg.msg_iov = iov;
+    msg.msg_iovlen = extra_len ? 2 : 1;
+    [[maybe_unused]] ssize_t n = ::sendmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
+  }
+
+  bool SetOptions(Client* c, const Request& req, const std::uint8_t* filters_bytes,
+                  std::size_t filters_len) {
+    const std::uint32_t count = req.options.filter_count;
+    if (count > ucan::kMaxFilters || filters_len != count * sizeof(can_filter)) return false;
+    std::vector<Filter> filters(count);
+    for (std::uint32_t i = 0; i < count; ++i) {
+      can_filter f{};
+      std::memcpy(&f, filters_bytes + i * sizeof(can_filter), sizeof(f));
+      filters[i] = Normalize(f);
+    }
+    c->options = req.options;
+    c->filters = std::move(filters);
+    return true;
+  }
+
+  /// First message of a connection.
+  void HandleRequest(Client* c) {
+    std::vector<std::uint8_t> buf(kMaxRequest + 1);
+    const ssize_t n = ::recv(c->fd.get(), buf.data(), buf.size(), MSG_DONTWAIT);
+    if (n < 0 && (errno == EAGAIN || errno == EINTR)) return;
+    Request req;
+    if (n < static_cast<ssize_t>(sizeof(Request))) {
+      ++orphan_bad_messages;
+      Kill(c);
+      return;
+    }
+    std::memcpy(&req, buf.data(), sizeof(req));
+    if (req.magic != ucan::kMagic) {
+      ++orphan_bad_messages;
+      Kill(c);
+      return;
+    }
+    req.name[ucan::kNameSize - 1] = '\0';
+    const std::string name = NameOf(req.name);
+    const std::uint8_t* extra = buf.data() + sizeof(Request);
+    const std::size_t extra_len = static_cast<std::size_t>(n) - sizeof(Request);
+    Reply reply;
+    switch (req.op) {
+      case Op::kOpen: {
+        Bus* bus = nullptr;
+        if (!name.empty()) {
+          auto it = buses.find(name);
+          if (it == buses.end()) {
+            reply.error = ENODEV;
+            break;
+          }
+          bus = it->second.get();
+        }
+        if (!SetOptions(c, req, extra, extra_len)) {
+          reply.error = EINVAL;
+          break;
+        }
+        c->data = true;
+        if (bus != nullptr) {
+          c->bus = bus;
+          bus->members.push_back(c);
+          reply.ifindex = bus->ifindex;
+          CopyName(reply.name, bus->name);
+        } else {
+          c->any = true;
+          any_clients.push_back(c);
+        }
+        reply.client_id = c->id;
+        SendReply(c, reply);
+        return;  // stays connected
+      }
+      case Op::kSetOptions: {
+        Client* target = Find(req.client_id);
+        if (target == nullptr || !target->data) {
+          reply.error = ENOTCONN;
+          break;
+        }
+        ReadData(target, /*max_batches=*/1024);  // frames sent before the change go first
+        FlushDirty();
+        if (!SetOptions(target, req, extra, extra_len)) reply.error = EINVAL;
+        break;
+      }
+      case Op::kResolveName: {
+        auto it = buses.find(name);
+        if (it == buses.end()) {
+          reply.error = ENODEV;
+        } else {
+          reply.ifindex = it->second->ifindex;
+          CopyName(reply.name, name);
+        }
+        break;
+      }
+      case Op::kResolveIndex: {
+        Bus* bus = BusByIndex(req.ifindex);
+        if (bus == nullptr) {
+          reply.error = ENODEV;
+        } else {
+          reply.ifindex = bus->ifindex;
+          CopyName(reply.name, bus->name);
+        }
+        break;
+      }
+      case Op::kAddBus:
+        if (!IsValidUcanBusName(name)) {
+          reply.error = EINVAL;
+        } else {
+          reply.ifindex = AddBusLocked(name);
+          CopyName(reply.name, name);
+        }
+        break;
+      case Op::kRemoveBus:
+        if (!RemoveBusLocked(name)) reply.error = ENODEV;
+        if (options.exit_when_empty && buses.empty()) stop_requested = true;
+        break;
+      case Op::kList: {
+        std::vector<BusInfo> infos;
+        for (const UcanBusStats& s : StatsLocked()) {
+          BusInfo info;
+          CopyName(info.name, s.name);
+          info.ifindex = s.ifindex;
+          info.clients = static_cast<std::uint32_t>(s.clients);
+          info.frames = s.frames;
+          info.drops = s.drops;
+          info.bad_messages = s.bad_messages;
+          infos.push_back(info);
+        }
+        reply.count = static_cast<std::uint32_t>(infos.size());
+        SendReply(c, reply, infos.data(), infos.size() * sizeof(BusInfo));
+        Kill(c);
+        return;
+      }
+      case Op::kShutdown:
+        stop_requested = true;
+        break;
+      default:
+        reply.error = EOPNOTSUPP;
+        break;
+    }
+    SendReply(c, reply);
+    Kill(c);
+  }
+
+  void ReadData(Client* c, int max_batches) {
+    std::array<std::array<std::uint8_t, kClientMsgBuf>, kBatch> bufs;
+    std::array<iovec, kBatch> iovs;
+    std::array<mmsghdr, kBatch> msgs;
+    for (int batch = 0; batch < max_batches && !c->dead; ++batch) {
+      for (int i = 0; i < kBatch; ++i) {
+        iovs[i] = {bufs[i].data(), bufs[i].size()};
+        msgs[i] = {};
+        msgs[i].msg_hdr.msg_iov = &iovs[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+      }
+      const int n = ::recvmmsg(c->fd.get(), msgs.data(), kBatch, MSG_DONTWAIT, nullptr);
+      if (n < 0) {
+        if (errno != EAGAIN && errno != EINTR) Kill(c);
+        return;
+      }
+      if (n == 0) {
+        Kill(c);
+        return;
+      }
+      for (int i = 0; i < n; ++i) {
+        const std::size_t len = msgs[i].msg_len;
+        if (len == 0) {  // end of stream
+          Kill(c);
+          return;
+        }
+        HandleFrame(c, bufs[i].data(), len, (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0);
+      }
+      if (n < kBatch) return;
+    }
+  }
+
+  void CountBad(Client* c) {
+    if (c->bus != nullptr) {
+      ++c->bus->bad_messages;
+    } else {
+      ++orphan_bad_messages;
+    }
+  }
+
+  void HandleFrame(Client* c, const std::uint8_t* p, std::size_t len, bool truncated) {
+    Bus* bus = c->bus;
+    std::size_t frame_len = len;
+    if (!truncated && (len == ucan::kCanMtu + sizeof(TxAddress) ||
+                       len == ucan::kCanFdMtu + sizeof(TxAddress))) {
+      TxAddress to;
+      frame_len = len - sizeof(TxAddress);
+      std::memcpy(&to, p + frame_len, sizeof(to));
+      bus = to.magic == ucan::kMagic ? BusByIndex(to.ifindex) : nullptr;
+    }
+    if (truncated || bus == nullptr ||
+        (frame_len != ucan::kCanMtu && frame_len != ucan::kCanFdMtu) ||
+        (frame_len == ucan::kCanFdMtu && !c->options.fd_frames)) {
+      CountBad(c);
+      return;
+    }
+    const std::uint8_t payload_len = p[4];
+    if (payload_len > (frame_len == ucan::kCanMtu ? CAN_MAX_DLEN : CANFD_MAX_DLEN)) {
+      ++bus->bad_messages;
+      return;
+    }
+    std::uint32_t can_id = 0;
+    std::memcpy(&can_id, p, sizeof(can_id));
+    Route(c, bus, can_id, p, frame_len);
+  }
+
+  void Route(Client* sender, Bus* bus, std::uint32_t can_id, const std::uint8_t* frame,
+             std::size_t frame_len) {
+    const std::int64_t ts = std::max(RealtimeNs(), bus->last_ts_ns);
+    bus->last_ts_ns = ts;
+    ++bus->frames;
+    const bool is_fd = frame_len == ucan::kCanFdMtu;
+    auto deliver = [&](Client* r) {
+      if (r->dead) return;
+      std::uint32_t flags = 0;
+      if (r == sender) {
+        if (!sender->options.recv_own || !sender->options.loopback) return;
+        flags = ucan::kRxOwn;
+      } else if (!sender->options.loopback && r->pid == sender->pid) {
+        return;
+      }
+      if (is_fd && !r->options.fd_frames) return;
+      if (!r->Accepts(can_id)) return;
+      if (r->queue.size() >= options.client_queue_limit) {
+        ++r->drops;
+        ++bus->drops;
+        return;
+      }
+      Msg& m = r->queue.PushBack();
+      std::memcpy(m.bytes.data(), frame, frame_len);
+      RxTrailer t;
+      t.ifindex = bus->ifindex;
+      t.flags = flags;
+      t.timestamp_ns = ts;
+      t.drops = r->drops;
+      std::memcpy(m.bytes.data() + frame_len, &t, sizeof(t));
+      m.len = static_cast<std::uint16_t>(frame_len + sizeof(t));
+      if (!r->dirty) {
+        r->dirty = true;
+        dirty.push_back(r);
+      }
+    };
+    for (Client* r : bus->members) deliver(r);
+    for (Client* r : any_clients) deliver(r);
+  }
+
+  void Flush(Client* c) {
+    std::array<iovec, kBatch> iovs;
+    std::array<mmsghdr, kBatch> msgs;
+    while (!c->queue.empty() && !c->dead) {
+      const int n = static_cast<int>(std::min<std::size_t>(c->queue.size(), kBatch));
+      for (int i = 0; i < n; ++i) {
+        const Msg& m = c->queue.At(i);
+        iovs[i] = {const_cast<std::uint8_t*>(m.bytes.data()), m.len};
+        msgs[i] = {};
+        msgs[i].msg_hdr.msg_iov = &iovs[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+      }
+      const int sent = ::sendmmsg(c->fd.get(), msgs.data(), n, MSG_DONTWAIT | MSG_NOSIGNAL);
+      if (sent < 0) {
+        if (errno == EAGAIN || errno == ENOBUFS) break;
+        if (errno == EINTR) continue;
+        Kill(c);
+        return;
+      }
+      c->queue.PopFront(static_cast<std::size_t>(sent));
+      if (sent < n) break;
+    }
+    const bool want_out = !c->queue.empty();
+    if (want_out != c->want_out && !c->dead) {
+      c->want_out = want_out;
+      epoll_event ev{};
+      ev.events = EPOLLIN | (want_out ? EPOLLOUT : 0u);
+      ev.data.u64 = c->id;
+      ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_MOD, c->fd.get(), &ev);
+    }
+  }
+
+  void FlushDirty() {
+    for (std::size_t i = 0; i < dirty.size(); ++i) {
+      Client* c = dirty[i];
+      c->dirty = false;
+      if (!c->want_out) Flush(c);  // a blocked reader is flushed on EPOLLOUT
+    }
+    dirty.clear();
+  }
+
+  void Loop() {
+    std::array<epoll_event, kBatch> events;
+    for (;;) {
+      const int n = ::epoll_wait(epoll_fd.get(), events.data(), kBatch, -1);
+      if (n < 0 && errno != EINTR) break;
+      std::lock_guard lk(mu);
+      if (stop_requested) break;
+      for (int i = 0; i < n; ++i) {
+        const std::uint64_t tag = events[i].data.u64;
+        if (tag == kListenTag) {
+          AcceptAll();
+          continue;
+        }
+        if (tag == kWakeTag) {
+          std::uint64_t v = 0;
+          [[maybe_unused]] ssize_t r = ::read(wake_fd.get(), &v, sizeof(v));
+          continue;
+        }
+        Client* c = Find(static_cast<std::uint32_t>(tag));
+        if (c == nullptr) continue;
+        if (events[i].events & EPOLLOUT) Flush(c);
+        if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
+          if (c->data) {
+            ReadData(c, kReadBatchesPerWakeup);
+          } else {
+            HandleRequest(c);
+          }
+        }
+      }
+      FlushDirty();
+      ReapDead();
+      if (stop_requested) break;
+    }
+    std::lock_guard lk(mu);
+    stop_requested = true;
+    stopped = true;
+    for (auto& [id, c] : clients) Kill(c.get());
+    ReapDead();
+    stopped_cv.notify_all();
+  }
+
+  std::vector<UcanBusStats> StatsLocked() const {
+    std::vector<UcanBusStats> out;
+    for (const auto& [name, bus] : buses) {
+      UcanBusStats s;
+      s.name = name;
+      s.ifindex = bus->ifindex;
+      s.clients = bus->members.size();
+      s.frames = bus->frames;
+      s.drops = bus->drops;
+      s.bad_messages = bus->bad_messages;
+      out.push_back(s);
+    }
+    return out;
+  }
+};
+
+UcanBroker::UcanBroker(UcanBrokerOptions options)
+    : impl_(std::make_unique<Impl>(std::move(options))) {}
+
+UcanBroker::~UcanBroker() = default;
+
+int UcanBroker::AddBus(const std::string& name) {
+  if (!IsValidUcanBusName(name)) {
+    throw std::invalid_argument("ucan bus name '" + name +
+                                "': must be 1..15 characters without '/', ':' or spaces");
+  }
+  std::lock_guard lk(impl_->mu);
+  return impl_->AddBusLocked(name);
+}
+
+bool UcanBroker::RemoveBus(const std::string& name) {
+  std::lock_guard lk(impl_->mu);
+  return impl_->RemoveBusLocked(name);
+}
+
+std::vector<UcanBusStats> UcanBroker::Stats() const {
+  std::lock_guard lk(impl_->mu);
+  return impl_->StatsLocked();
+}
+
+void UcanBroker::Wait() {
+  std::unique_lock lk(impl_->mu);
+  impl_->stopped_cv.wait(lk, [this] { return impl_->stopped; });
+}
+
+void UcanBroker::Stop() { impl_->RequestStop(); }
+
+const std::string& UcanBroker::runtime_dir() const noexcept { return impl_->dir; }
+
+std::string UcanBroker::socket_path() const { return impl_->sock_path; }
+
+namespace {
+
+std::error_code Request(const std::string& dir, Op op, const std::string& name, Reply* reply,
+                        std::vector<BusInfo>* infos) noexcept {
+  try {
+    if (auto ec = VerifyUcanRuntimeDir(dir)) return ec;
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    const std::string path = UcanSocketPath(dir);
+    if (path.size() >= sizeof(addr.sun_path)) {
+      return std::make_error_code(std::errc::filename_too_long);
+    }
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    Fd s(::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0));
+    if (s.get() < 0) return {errno, std::generic_category()};
+    if (::connect(s.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+      return {errno, std::generic_category()};
+    }
+    ucan::Request req;
+    req.op = op;
+    CopyName(req.name, name);
+    if (::send(s.get(), &req, sizeof(req), MSG_NOSIGNAL) != sizeof(req)) {
+      return {errno, std::generic_category()};
+    }
+    pollfd p{s.get(), POLLIN, 0};
+    int rc = 0;
+    do {
+      rc = ::poll(&p, 1, ucan::kRequestTimeoutMs);
+    } while (rc < 0 && errno == EINTR);
+    if (rc == 0) return std::make_error_code(std::errc::timed_out);
+    std::vector<std::uint8_t> buf(sizeof(Reply) + 4096 * sizeof(BusInfo));
+    const ssize_t n = ::recv(s.get(), buf.data(), buf.size(), MSG_DONTWAIT);
+    if (n < static_cast<ssize_t>(sizeof(Reply))) return std::make_error_code(std::errc::io_error);
+    std::memcpy(reply, buf.data(), sizeof(Reply));
+    if (reply->magic != ucan::kMagic) return std::make_error_code(std::errc::io_error);
+    if (reply->error != 0) return {reply->error, std::generic_category()};
+    if (infos != nullptr) {
+      const std::size_t count =
+          std::min<std::size_t>(reply->count, (n - sizeof(Reply)) / sizeof(BusInfo));
+      infos->resize(count);
+      if (count > 0) std::memcpy(infos->data(), buf.data() + sizeof(Reply), count * sizeof(BusInfo));
+    }
+    return {};
+  } catch (const std::bad_alloc&) {
+    return std::make_error_code(std::errc::not_enough_memory);
+  }
+}
+
+}  // namespace
+
+std::error_code UcanAddBus(const std::string& runtime_dir, const std::string& name,
+                           int* ifindex) noexcept {
+  if (!IsValidUcanBusName(name)) return std::make_error_code(std::errc::invalid_argument);
+  Reply reply;
+  auto ec = Request(runtime_dir, Op::kAddBus, name, &reply, nullptr);
+  if (!ec && ifindex != nullptr) *ifindex = reply.ifindex;
+  return ec;
+}
+
+std::error_code UcanRemoveBus(const std::string& runtime_dir, const std::string& name) noexcept {
+  Reply reply;
+  return Request(runtime_dir, Op::kRemoveBus, name, &reply, nullptr);
+}
+
+std::error_code UcanListBuses(const std::string& runtime_dir,
+                              std::vector<UcanBusStats>* out) noexcept {
+  Reply reply;
+  std::vector<BusInfo> infos;
+  auto ec = Request(runtime_dir, Op::kList, "", &reply, &infos);
+  if (ec || out == nullptr) return ec;
+  try {
+    out->clear();
+    for (const BusInfo& info : infos) {
+      UcanBusStats s;
+      s.name = NameOf(info.name);
+      s.ifindex = info.ifindex;
+      s.clients = info.clients;
+      s.frames = info.frames;
+      s.drops = info.drops;
+      s.bad_messages = info.bad_messages;
+      out->push_back(std::move(s));
+    }
+  } catch (const std::bad_alloc&) {
+    return std::make_error_code(std::errc::not_enough_memory);
+  }
+  return {};
+}
+
+std::error_code UcanShutdown(const std::string& runtime_dir) noexcept {
+  Reply reply;
+  return Request(runtime_dir, Op::kShutdown, "", &reply, nullptr);
+}
+
+}  // namespace wheelhil::bus

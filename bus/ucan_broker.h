@@ -1,0 +1,90 @@
+#pragma once
+/// The userspace CAN bus broker: owns named buses (`ucan0`, ...) that programs reach through
+/// the SocketCAN API when bus/ucan_interpose.cc (libwheelhil_ucan.so) is preloaded or linked.
+/// Serves `<runtime dir>/ucan.sock` (see bus/ucan_protocol.h) from one epoll thread.
+///
+/// Semantics follow vcan: a frame written by one socket reaches every other socket on the bus
+/// (and sockets bound to "any", ifindex 0) whose CAN_RAW filters match, in one global order per
+/// bus; the sender sees it only with CAN_RAW_RECV_OWN_MSGS; with CAN_RAW_LOOPBACK off, sockets
+/// of the sender's own process do not see it (other processes are other nodes on the bus).
+/// Each reader has a bounded queue (kernel socket buffer + `client_queue_limit` messages);
+/// overflow is dropped for that reader only and counted (per bus in Stats(), per socket through
+/// SO_RXQ_OVFL). Bad client messages are counted and ignored; they never reach other clients.
+///
+/// Interface indexes are stable per runtime directory: "ucanN" -> 1000 + N, other names 2000 +
+/// order of first creation (a removed and re-added bus keeps its index).
+///
+/// Thread-safety: all public methods may be called from any thread.
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <system_error>
+#include <vector>
+
+namespace wheelhil::bus {
+
+struct UcanBrokerOptions {
+  /// Runtime directory; empty: ResolveUcanRuntimeDir(). Created (mode 0700) when missing.
+  std::string runtime_dir;
+  /// Messages queued in the broker per reader once its socket buffer is full.
+  std::size_t client_queue_limit = 8192;
+  /// Stop the broker when the last bus is removed through a kRemoveBus request (daemon mode).
+  bool exit_when_empty = false;
+};
+
+struct UcanBusStats {
+  std::string name;
+  int ifindex = 0;
+  std::size_t clients = 0;         ///< Sockets bound to this bus.
+  std::uint64_t frames = 0;        ///< Frames accepted.
+  std::uint64_t drops = 0;         ///< Deliveries dropped (a reader's queue was full).
+  std::uint64_t bad_messages = 0;  ///< Rejected client messages (bad size or frame).
+};
+
+class UcanBroker {
+ public:
+  /// Creates/verifies the runtime directory, takes its lock, binds the socket and starts the
+  /// broker thread. Throws std::system_error when the directory is unsafe or unusable, or
+  /// (errc::device_or_resource_busy) when another broker already serves it.
+  explicit UcanBroker(UcanBrokerOptions options = {});
+  ~UcanBroker();  ///< Stops the thread, disconnects clients, removes the socket.
+  UcanBroker(const UcanBroker&) = delete;
+  UcanBroker& operator=(const UcanBroker&) = delete;
+
+  /// Adds a bus (idempotent) and returns its interface index. Throws std::invalid_argument for
+  /// a name that is empty, longer than 15 characters, or contains '/', whitespace or ':'.
+  int AddBus(const std::string& name);
+  /// Removes a bus and disconnects its sockets (their reads/writes then fail with ENETDOWN).
+  /// False when there is no such bus.
+  bool RemoveBus(const std::string& name);
+  std::vector<UcanBusStats> Stats() const;
+
+  /// Blocks until the broker stops (a kShutdown request, exit_when_empty, or Stop()).
+  void Wait();
+  void Stop();
+
+  const std::string& runtime_dir() const noexcept;
+  std::string socket_path() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// True when `name` is acceptable as a bus name (see AddBus).
+bool IsValidUcanBusName(const std::string& name) noexcept;
+
+// Client side of the broker's control requests (used by `wheelhil bus`). Each opens one
+// connection to the broker serving `runtime_dir`. No broker there: errc::connection_refused or
+// errc::no_such_file_or_directory; an unknown bus: errc::no_such_device; bad name:
+// errc::invalid_argument. Never throw.
+std::error_code UcanAddBus(const std::string& runtime_dir, const std::string& name,
+                           int* ifindex) noexcept;
+std::error_code UcanRemoveBus(const std::string& runtime_dir, const std::string& name) noexcept;
+std::error_code UcanListBuses(const std::string& runtime_dir,
+                              std::vector<UcanBusStats>* out) noexcept;
+std::error_code UcanShutdown(const std::string& runtime_dir) noexcept;
+
+}  // namespace wheelhil::bus

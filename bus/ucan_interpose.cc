@@ -1,0 +1,966 @@
+// libwheelhil_ucan.so: makes the plain SocketCAN API (PF_CAN / SOCK_RAW / CAN_RAW) work on the
+// userspace CAN bus of bus/ucan_broker.h, preloaded (LD_PRELOAD) or linked into a program.
+//
+// A ucan socket IS a real fd: socket(PF_CAN, SOCK_RAW, CAN_RAW) returns an AF_UNIX
+// SOCK_SEQPACKET placeholder; bind() to a ucan bus replaces it (dup3) by a connection to the
+// broker, so poll/select/epoll/fcntl/dup work unchanged. The broker applies the filters; each
+// message it sends is a frame plus an RxTrailer, which the recv* wrappers strip, returning what
+// the kernel would (address, SCM_TIMESTAMP[NS], SO_RXQ_OVFL, MSG_DONTROUTE / MSG_CONFIRM).
+// bind() to a name that is not a ucan bus opens a real PF_CAN socket in place (options replayed)
+// or fails with the kernel's own error.
+//
+// Per-fd state lives in a table indexed by fd, guarded by one mutex (fork-safe through
+// pthread_atfork); a lock-free byte per fd keeps the fast path for other fds to one load.
+// No global objects with constructors: the library is loaded into python, candump, ...
+
+#include <dlfcn.h>
+#include <fcntl.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
+#include <net/if.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <new>
+
+#include "bus/ucan_protocol.h"
+#include "bus/ucan_runtime_dir.h"
+
+#define UCAN_EXPORT extern "C" __attribute__((visibility("default")))
+
+namespace {
+
+namespace ucan = wheelhil::bus::ucan;
+
+constexpr int kMaxFds = 1 << 16;
+constexpr int kSoTimestampOld = 29;
+constexpr int kSoTimestampNsOld = 35;
+constexpr int kSoTimestampNew = 63;
+constexpr int kSoTimestampNsNew = 64;
+constexpr int kSoRxqOvfl = 40;
+constexpr unsigned long kSiocgstampOld = 0x8906;
+constexpr unsigned long kSiocgstampNsOld = 0x8907;
+constexpr unsigned long kSiocgstampNew = _IOR(0x89, 0x06, long long[2]);
+constexpr unsigned long kSiocgstampNsNew = _IOR(0x89, 0x07, long long[2]);
+
+// ---- the real functions ----
+
+template <typename F>
+F Resolve(F& slot, const char* name) {
+  F f = __atomic_load_n(&slot, __ATOMIC_ACQUIRE);
+  if (f == nullptr) {
+    f = reinterpret_cast<F>(dlsym(RTLD_NEXT, name));
+    __atomic_store_n(&slot, f, __ATOMIC_RELEASE);
+  }
+  return f;
+}
+
+#define REAL_FN(name, ret, params)                   \
+  using name##_fn = ret(*) params;                   \
+  name##_fn g_real_##name = nullptr;                 \
+  inline name##_fn real_##name() { return Resolve(g_real_##name, #name); }
+
+REAL_FN(socket, int, (int, int, int))
+REAL_FN(bind, int, (int, const sockaddr*, socklen_t))
+REAL_FN(close, int, (int))
+REAL_FN(dup, int, (int))
+REAL_FN(dup2, int, (int, int))
+REAL_FN(dup3, int, (int, int, int))
+REAL_FN(fcntl, int, (int, int, ...))
+REAL_FN(fcntl64, int, (int, int, ...))
+REAL_FN(ioctl, int, (int, unsigned long, ...))
+REAL_FN(setsockopt, int, (int, int, int, const void*, socklen_t))
+REAL_FN(getsockopt, int, (int, int, int, void*, socklen_t*))
+REAL_FN(getsockname, int, (int, sockaddr*, socklen_t*))
+REAL_FN(read, ssize_t, (int, void*, size_t))
+REAL_FN(write, ssize_t, (int, const void*, size_t))
+REAL_FN(send, ssize_t, (int, const void*, size_t, int))
+REAL_FN(sendto, ssize_t, (int, const void*, size_t, int, const sockaddr*, socklen_t))
+REAL_FN(sendmsg, ssize_t, (int, const msghdr*, int))
+REAL_FN(recv, ssize_t, (int, void*, size_t, int))
+REAL_FN(recvfrom, ssize_t, (int, void*, size_t, int, sockaddr*, socklen_t*))
+REAL_FN(recvmsg, ssize_t, (int, msghdr*, int))
+REAL_FN(if_nametoindex, unsigned, (const char*))
+REAL_FN(if_indextoname, char*, (unsigned, char*))
+
+// ---- per-fd state ----
+
+struct UcanSocket {
+  int refs = 1;
+  int type_flags = 0;  // SOCK_NONBLOCK | SOCK_CLOEXEC given to socket()
+  bool bound = false;
+  int ifindex = 0;
+  char name[ucan::kNameSize] = {};
+  std::uint32_t client_id = 0;
+  ucan::RawOptions options;
+  can_filter* filters = nullptr;  // options.filter_count entries (malloc'd)
+  int timestamp_mode = 0;         // 0 none, 1 us, 2 ns
+  int timestamp_cmsg = 0;         // SCM type to emit
+  bool rxq_ovfl = false;
+};
+
+/// What the data path needs, copied out under the lock.
+struct View {
+  bool bound = false;
+  int ifindex = 0;
+  bool fd_frames = false;
+  int timestamp_mode = 0;
+  int timestamp_cmsg = 0;
+  bool rxq_ovfl = false;
+  char name[ucan::kNameSize] = {};
+};
+
+pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
+unsigned char g_is_ucan[kMaxFds];
+UcanSocket* g_sockets[kMaxFds];
+std::int64_t g_last_ts_ns[kMaxFds];
+
+void LockTable() { pthread_mutex_lock(&g_lock); }
+void UnlockTable() { pthread_mutex_unlock(&g_lock); }
+
+__attribute__((constructor)) void InstallForkHandlers() {
+  pthread_atfork(LockTable, UnlockTable, UnlockTable);
+}
+
+inline bool IsUcan(int fd) {
+  return fd >= 0 && fd < kMaxFds && __atomic_load_n(&g_is_ucan[fd], __ATOMIC_ACQUIRE) != 0;
+}
+
+void Release(UcanSocket* s) {
+  if (s != nullptr && --s->refs == 0) {
+    free(s->filters);
+    delete s;
+  }
+}
+
+/// Lock held. Drops fd's reference, if any.
+void DetachLocked(int fd) {
+  if (fd < 0 || fd >= kMaxFds || g_sockets[fd] == nullptr) return;
+  __atomic_store_n(&g_is_ucan[fd], 0, __ATOMIC_RELEASE);
+  Release(g_sockets[fd]);
+  g_sockets[fd] = nullptr;
+  g_last_ts_ns[fd] = 0;
+}
+
+/// Lock held.
+void AttachLocked(int fd, UcanSocket* s) {
+  DetachLocked(fd);
+  g_sockets[fd] = s;
+  g_last_ts_ns[fd] = 0;
+  __atomic_store_n(&g_is_ucan[fd], 1, __ATOMIC_RELEASE);
+}
+
+void ShareFd(int from, int to) {
+  if (to < 0 || to >= kMaxFds || from == to) return;
+  LockTable();
+  if (from >= 0 && from < kMaxFds && g_sockets[from] != nullptr) {
+    UcanSocket* s = g_sockets[from];
+    ++s->refs;
+    AttachLocked(to, s);
+  } else {
+    DetachLocked(to);
+  }
+  UnlockTable();
+}
+
+bool GetView(int fd, View* v) {
+  if (!IsUcan(fd)) return false;
+  bool ok = false;
+  LockTable();
+  if (const UcanSocket* s = g_sockets[fd]) {
+    v->bound = s->bound;
+    v->ifindex = s->ifindex;
+    v->fd_frames = s->options.fd_frames != 0;
+    v->timestamp_mode = s->timestamp_mode;
+    v->timestamp_cmsg = s->timestamp_cmsg;
+    v->rxq_ovfl = s->rxq_ovfl;
+    std::memcpy(v->name, s->name, sizeof(v->name));
+    ok = true;
+  }
+  UnlockTable();
+  return ok;
+}
+
+// ---- broker requests ----
+
+/// Connects to the broker of the current runtime directory. -1 and errno when there is none
+/// (or the directory is not private).
+int ConnectBroker() {
+  std::string dir;
+  try {
+    dir = wheelhil::bus::ResolveUcanRuntimeDir();
+  } catch (...) {
+    errno = ENOMEM;
+    return -1;
+  }
+  if (auto ec = wheelhil::bus::VerifyUcanRuntimeDir(dir)) {
+    errno = ENOENT;
+    return -1;
+  }
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  const std::string path = dir + "/" + ucan::kSocketName;
+  if (path.size() >= sizeof(addr.sun_path)) {
+    errno = ENAMETOOLONG;
+    return -1;
+  }
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  const int s = real_socket()(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+  if (s < 0) return -1;
+  if (::connect(s, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+    const int err = errno;
+    real_close()(s);
+    errno = err;
+    return -1;
+  }
+  return s;
+}
+
+/// Sends `req` (+ filters) and waits for the reply. Returns the connected socket (caller
+/// closes) or -1 with errno. A broker-side refusal is reported in reply->error.
+int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* reply,
+             void* extra = nullptr, std::size_t extra_cap = 0) {
+  const int s = ConnectBroker();
+  if (s < 0) return -1;
+  iovec iov[2] = {{const_cast<ucan::Request*>(&req), sizeof(req)},
+                  {const_cast<can_filter*>(filters), req.options.filter_count * sizeof(can_filter)}};
+  msghdr msg{};
+  msg.msg_iov = iov;
+  msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
+  if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0) {
+    const int err = errno;
+    real_close()(s);
+    errno = err;
+    return -1;
+  }
+  pollfd p{s, POLLIN, 0};
+  int rc = 0;
+  do {
+    rc = ::poll(&p, 1, ucan::kRequestTimeoutMs);
+  } while (rc < 0 && errno == EINTR);
+  iovec riov[2] = {{reply, sizeof(*reply)}, {extra, extra_cap}};
+  msghdr rmsg{};
+  rmsg.msg_iov = riov;
+  rmsg.msg_iovlen = extra != nullptr ? 2 : 1;
+  const ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT) : -1;
+  if (n < static_cast<ssize_t>(sizeof(*reply)) || reply->magic != ucan::kMagic) {
+    real_close()(s);
+    errno = rc == 0 ? ETIMEDOUT : EIO;
+    return -1;
+  }
+  return s;
+}
+
+/// name -> ifindex on the ucan broker; 0 when it is not a ucan bus.
+int ResolveName(const char* name) {
+  ucan::Request req;
+  req.op = ucan::Op::kResolveName;
+  std::strncpy(req.name, name, ucan::kNameSize - 1);
+  ucan::Reply reply;
+  const int saved = errno;
+  const int s = Transact(req, nullptr, &reply);
+  errno = saved;
+  if (s < 0) return 0;
+  real_close()(s);
+  return reply.error == 0 ? reply.ifindex : 0;
+}
+
+/// ifindex -> name; false when it is not a ucan bus.
+bool ResolveIndex(int ifindex, char (&name)[ucan::kNameSize]) {
+  if (ifindex <= 0) return false;
+  ucan::Request req;
+  req.op = ucan::Op::kResolveIndex;
+  req.ifindex = ifindex;
+  ucan::Reply reply;
+  const int saved = errno;
+  const int s = Transact(req, nullptr, &reply);
+  errno = saved;
+  if (s < 0) return false;
+  real_close()(s);
+  if (reply.error != 0) return false;
+  std::memcpy(name, reply.name, sizeof(name));
+  name[ucan::kNameSize - 1] = '\0';
+  return true;
+}
+
+/// Copies the socket's options under the lock (filters into `filters`, malloc'd).
+bool SnapshotOptions(int fd, ucan::RawOptions* opts, can_filter** filters, int* type_flags,
+                     std::uint32_t* client_id, bool* bound) {
+  bool ok = false;
+  LockTable();
+  if (UcanSocket* s = (fd >= 0 && fd < kMaxFds) ? g_sockets[fd] : nullptr) {
+    *opts = s->options;
+    *filters = nullptr;
+    if (s->options.filter_count > 0) {
+      const std::size_t bytes = s->options.filter_count * sizeof(can_filter);
+      *filters = static_cast<can_filter*>(malloc(bytes));
+      if (*filters != nullptr) std::memcpy(*filters, s->filters, bytes);
+    }
+    *type_flags = s->type_flags;
+    *client_id = s->client_id;
+    *bound = s->bound;
+    ok = s->options.filter_count == 0 || *filters != nullptr;
+  }
+  UnlockTable();
+  return ok;
+}
+
+/// Pushes the socket's CAN_RAW options to the broker (bound sockets only).
+void SyncOptions(int fd) {
+  ucan::RawOptions opts;
+  can_filter* filters = nullptr;
+  int type_flags = 0;
+  std::uint32_t client_id = 0;
+  bool bound = false;
+  if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound)) return;
+  if (bound) {
+    ucan::Request req;
+    req.op = ucan::Op::kSetOptions;
+    req.client_id = client_id;
+    req.options = opts;
+    ucan::Reply reply;
+    const int saved = errno;
+    const int s = Transact(req, filters, &reply);
+    if (s >= 0) real_close()(s);
+    errno = saved;
+  }
+  free(filters);
+}
+
+/// Replaces fd by a real PF_CAN socket (bind to a non-ucan interface). Returns 0 or errno.
+int SwitchToKernel(int fd, const sockaddr* addr, socklen_t len) {
+  ucan::RawOptions opts;
+  can_filter* filters = nullptr;
+  int type_flags = 0;
+  std::uint32_t client_id = 0;
+  bool bound = false;
+  if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound)) return ENOMEM;
+  int timestamp_mode = 0;
+  int timestamp_cmsg = 0;
+  bool rxq_ovfl = false;
+  LockTable();
+  if (UcanSocket* s = g_sockets[fd]) {
+    timestamp_mode = s->timestamp_mode;
+    timestamp_cmsg = s->timestamp_cmsg;
+    rxq_ovfl = s->rxq_ovfl;
+  }
+  UnlockTable();
+  const int k = real_socket()(PF_CAN, SOCK_RAW | type_flags, CAN_RAW);
+  if (k < 0) {
+    const int err = errno;
+    free(filters);
+    return err;
+  }
+  auto set = real_setsockopt();
+  const int on = 1;
+  const int off = 0;
+  set(k, SOL_CAN_RAW, CAN_RAW_FILTER, filters, opts.filter_count * sizeof(can_filter));
+  if (opts.err_mask) set(k, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &opts.err_mask, sizeof(opts.err_mask));
+  if (!opts.loopback) set(k, SOL_CAN_RAW, CAN_RAW_LOOPBACK, &off, sizeof(off));
+  if (opts.recv_own) set(k, SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS, &on, sizeof(on));
+  if (opts.fd_frames) set(k, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
+  if (opts.join_filters) set(k, SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, &on, sizeof(on));
+  if (timestamp_mode != 0) set(k, SOL_SOCKET, timestamp_cmsg, &on, sizeof(on));
+  if (rxq_ovfl) set(k, SOL_SOCKET, kSoRxqOvfl, &on, sizeof(on));
+  free(filters);
+  LockTable();
+  const int rc = real_dup3()(k, fd, (type_flags & SOCK_CLOEXEC) ? O_CLOEXEC : 0);
+  if (rc >= 0) DetachLocked(fd);
+  UnlockTable();
+  const int err = errno;
+  real_close()(k);
+  if (rc < 0) return err;
+  return real_bind()(fd, addr, len) == 0 ? 0 : errno;
+}
+
+int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
+  if (addr == nullptr) return EFAULT;
+  if (len < static_cast<socklen_t>(offsetof(sockaddr_can, can_ifindex) + sizeof(int))) {
+    return EINVAL;
+  }
+  sockaddr_can sa{};
+  std::memcpy(&sa, addr, std::min<std::size_t>(len, sizeof(sa)));
+  if (sa.can_family != AF_CAN) return EINVAL;
+  char name[ucan::kNameSize] = {};
+  if (sa.can_ifindex != 0 && !ResolveIndex(sa.can_ifindex, name)) {
+    return SwitchToKernel(fd, addr, len);
+  }
+  ucan::RawOptions opts;
+  can_filter* filters = nullptr;
+  int type_flags = 0;
+  std::uint32_t client_id = 0;
+  bool bound = false;
+  if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound)) return ENOMEM;
+  ucan::Request req;
+  req.op = ucan::Op::kOpen;
+  std::memcpy(req.name, name, sizeof(name));
+  req.options = opts;
+  ucan::Reply reply;
+  const int conn = Transact(req, filters, &reply);
+  free(filters);
+  if (conn < 0) {
+    // No broker: only "any" can get here (an index was resolved above); let the kernel say.
+    return SwitchToKernel(fd, addr, len);
+  }
+  if (reply.error != 0) {
+    real_close()(conn);
+    return reply.error == ENODEV ? SwitchToKernel(fd, addr, len) : reply.error;
+  }
+  const int fl = real_fcntl()(fd, F_GETFL);
+  if (fl >= 0 && (fl & O_NONBLOCK)) real_fcntl()(conn, F_SETFL, O_NONBLOCK);
+  const int fdfl = real_fcntl()(fd, F_GETFD);
+  LockTable();
+  int rc = real_dup3()(conn, fd, (fdfl >= 0 && (fdfl & FD_CLOEXEC)) ? O_CLOEXEC : 0);
+  const int err = errno;
+  if (rc >= 0) {
+    if (UcanSocket* s = g_sockets[fd]) {
+      s->bound = true;
+      s->ifindex = reply.ifindex;
+      std::memcpy(s->name, reply.name, sizeof(s->name));
+      s->name[ucan::kNameSize - 1] = '\0';
+      s->client_id = reply.client_id;
+    }
+  }
+  UnlockTable();
+  real_close()(conn);
+  return rc < 0 ? err : 0;
+}
+
+// ---- data path ----
+
+ssize_t Fail(int err) {
+  errno = err;
+  return -1;
+}
+
+/// Writes one frame gathered from iov to the broker, with the kernel's checks.
+ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, int flags,
+                  const void* dest, socklen_t dest_len) {
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < iovcnt; ++i) total += iov[i].iov_len;
+  if (total != ucan::kCanMtu && total != ucan::kCanFdMtu) return Fail(EINVAL);
+  if (total == ucan::kCanFdMtu && !v.fd_frames) return Fail(EINVAL);
+  std::uint8_t buf[ucan::kCanFdMtu + sizeof(ucan::TxAddress)];
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < iovcnt; ++i) {
+    if (iov[i].iov_len == 0) continue;
+    if (iov[i].iov_base == nullptr) return Fail(EFAULT);
+    std::memcpy(buf + off, iov[i].iov_base, iov[i].iov_len);
+    off += iov[i].iov_len;
+  }
+  if (buf[4] > (total == ucan::kCanMtu ? CAN_MAX_DLEN : CANFD_MAX_DLEN)) return Fail(EINVAL);
+  int ifindex = v.ifindex;
+  if (dest != nullptr) {
+    if (dest_len < static_cast<socklen_t>(offsetof(sockaddr_can, can_ifindex) + sizeof(int))) {
+      return Fail(EINVAL);
+    }
+    sockaddr_can sa{};
+    std::memcpy(&sa, dest, std::min<std::size_t>(dest_len, sizeof(sa)));
+    if (sa.can_family != AF_CAN) return Fail(EINVAL);
+    ifindex = sa.can_ifindex;
+  }
+  if (ifindex == 0 || !v.bound) return Fail(ENXIO);
+  std::size_t len = total;
+  if (ifindex != v.ifindex) {
+    ucan::TxAddress to;
+    to.ifindex = ifindex;
+    std::memcpy(buf + total, &to, sizeof(to));
+    len += sizeof(to);
+  }
+  const ssize_t n = real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+  if (n < 0) {
+    if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN) return Fail(ENETDOWN);
+    return -1;
+  }
+  return static_cast<ssize_t>(total);
+}
+
+/// Appends one cmsg; false (and MSG_CTRUNC) when it does not fit.
+bool PutCmsg(msghdr* msg, std::size_t* used, int level, int type, const void* data,
+             std::size_t len) {
+  const std::size_t space = CMSG_SPACE(len);
+  if (msg->msg_control == nullptr || *used + CMSG_LEN(len) > msg->msg_controllen) {
+    msg->msg_flags |= MSG_CTRUNC;
+    return false;
+  }
+  auto* c = reinterpret_cast<cmsghdr*>(static_cast<std::uint8_t*>(msg->msg_control) + *used);
+  c->cmsg_level = level;
+  c->cmsg_type = type;
+  c->cmsg_len = CMSG_LEN(len);
+  std::memcpy(CMSG_DATA(c), data, len);
+  *used += std::min(space, msg->msg_controllen - *used);
+  return true;
+}
+
+/// Receives one frame into `msg` (msg_name, msg_control, msg_flags optional).
+ssize_t RecvFrame(int fd, const View& v, msghdr* msg, int flags) {
+  if (!v.bound) {
+    // An unbound CAN_RAW socket never receives anything.
+    const int fl = real_fcntl()(fd, F_GETFL);
+    if ((flags & MSG_DONTWAIT) || (fl >= 0 && (fl & O_NONBLOCK))) return Fail(EAGAIN);
+    ::ppoll(nullptr, 0, nullptr, nullptr);
+    return Fail(EINTR);
+  }
+  std::uint8_t buf[ucan::kMaxRxMessage + 8];
+  iovec iov{buf, sizeof(buf)};
+  msghdr m{};
+  m.msg_iov = &iov;
+  m.msg_iovlen = 1;
+  const ssize_t n = real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));
+  if (n < 0) {
+    if (errno == ECONNRESET || errno == EPIPE) return Fail(ENETDOWN);
+    return -1;
+  }
+  if (n == 0) return Fail(ENETDOWN);  // the broker closed the bus
+  const std::size_t frame_len = static_cast<std::size_t>(n) - sizeof(ucan::RxTrailer);
+  ucan::RxTrailer t;
+  if (static_cast<std::size_t>(n) < sizeof(t) ||
+      (frame_len != ucan::kCanMtu && frame_len != ucan::kCanFdMtu)) {
+    return Fail(EIO);
+  }
+  std::memcpy(&t, buf + frame_len, sizeof(t));
+  if (t.magic != ucan::kMagic) return Fail(EIO);
+  std::size_t copied = 0;
+  for (std::size_t i = 0; i < static_cast<std::size_t>(msg->msg_iovlen) && copied < frame_len;
+       ++i) {
+    const std::size_t k = std::min(msg->msg_iov[i].iov_len, frame_len - copied);
+    if (k > 0) std::memcpy(msg->msg_iov[i].iov_base, buf + copied, k);
+    copied += k;
+  }
+  int out_flags = MSG_DONTROUTE;
+  if (t.flags & ucan::kRxOwn) out_flags |= MSG_CONFIRM;
+  if (copied < frame_len) out_flags |= MSG_TRUNC;
+  msg->msg_flags = out_flags;
+  if (msg->msg_name != nullptr) {
+    sockaddr_can sa{};
+    sa.can_family = AF_CAN;
+    sa.can_ifindex = t.ifindex;
+    std::memcpy(msg->msg_name, &sa, std::min<std::size_t>(msg->msg_namelen, sizeof(sa)));
+    msg->msg_namelen = sizeof(sa);
+  }
+  std::size_t used = 0;
+  if (v.timestamp_mode == 1) {
+    struct {
+      std::int64_t sec, usec;
+    } tv{t.timestamp_ns / 1000000000, (t.timestamp_ns % 1000000000) / 1000};
+    PutCmsg(msg, &used, SOL_SOCKET, v.timestamp_cmsg, &tv, sizeof(tv));
+  } else if (v.timestamp_mode == 2) {
+    struct {
+      std::int64_t sec, nsec;
+    } ts{t.timestamp_ns / 1000000000, t.timestamp_ns % 1000000000};
+    PutCmsg(msg, &used, SOL_SOCKET, v.timestamp_cmsg, &ts, sizeof(ts));
+  }
+  if (v.rxq_ovfl && t.drops != 0) {
+    PutCmsg(msg, &used, SOL_SOCKET, kSoRxqOvfl, &t.drops, sizeof(t.drops));
+  }
+  msg->msg_controllen = used;
+  if (fd < kMaxFds) __atomic_store_n(&g_last_ts_ns[fd], t.timestamp_ns, __ATOMIC_RELAXED);
+  return static_cast<ssize_t>((flags & MSG_TRUNC) ? frame_len : copied);
+}
+
+ssize_t RecvSimple(int fd, const View& v, void* buf, std::size_t len, int flags, sockaddr* from,
+                   socklen_t* from_len) {
+  iovec iov{buf, len};
+  msghdr m{};
+  m.msg_iov = &iov;
+  m.msg_iovlen = 1;
+  if (from != nullptr && from_len != nullptr) {
+    m.msg_name = from;
+    m.msg_namelen = *from_len;
+  }
+  const ssize_t n = RecvFrame(fd, v, &m, flags);
+  if (n >= 0 && from != nullptr && from_len != nullptr) *from_len = m.msg_namelen;
+  return n;
+}
+
+int DupFcntl(int fd, int cmd, int rc) {
+  if (rc >= 0 && (cmd == F_DUPFD || cmd == F_DUPFD_CLOEXEC) && IsUcan(fd)) ShareFd(fd, rc);
+  return rc;
+}
+
+}  // namespace
+
+// ---- the interposed API ----
+
+UCAN_EXPORT int socket(int domain, int type, int protocol) {
+  if (domain != PF_CAN || (type & 0xF) != SOCK_RAW || protocol != CAN_RAW) {
+    return real_socket()(domain, type, protocol);
+  }
+  const int flags = type & (SOCK_NONBLOCK | SOCK_CLOEXEC);
+  const int fd = real_socket()(AF_UNIX, SOCK_SEQPACKET | flags, 0);
+  if (fd < 0) return fd;
+  if (fd >= kMaxFds) {
+    real_close()(fd);
+    errno = EMFILE;
+    return -1;
+  }
+  auto* s = new (std::nothrow) UcanSocket;
+  auto* all = static_cast<can_filter*>(malloc(sizeof(can_filter)));
+  if (s == nullptr || all == nullptr) {
+    delete s;
+    free(all);
+    real_close()(fd);
+    errno = ENOMEM;
+    return -1;
+  }
+  all[0] = {0, 0};
+  s->filters = all;
+  s->options.filter_count = 1;
+  s->type_flags = flags;
+  LockTable();
+  AttachLocked(fd, s);
+  UnlockTable();
+  return fd;
+}
+
+UCAN_EXPORT int bind(int fd, const sockaddr* addr, socklen_t len) {
+  if (!IsUcan(fd)) return real_bind()(fd, addr, len);
+  const int err = BindUcan(fd, addr, len);
+  if (err != 0) {
+    errno = err;
+    return -1;
+  }
+  return 0;
+}
+
+UCAN_EXPORT int close(int fd) {
+  if (IsUcan(fd)) {
+    LockTable();
+    DetachLocked(fd);
+    UnlockTable();
+  }
+  return real_close()(fd);
+}
+
+UCAN_EXPORT int dup(int fd) {
+  const int rc = real_dup()(fd);
+  if (rc >= 0 && IsUcan(fd)) ShareFd(fd, rc);
+  return rc;
+}
+
+UCAN_EXPORT int dup2(int fd, int fd2) {
+  const int rc = real_dup2()(fd, fd2);
+  if (rc >= 0 && fd != fd2 && (IsUcan(fd) || IsUcan(fd2))) ShareFd(fd, fd2);
+  return rc;
+}
+
+UCAN_EXPORT int dup3(int fd, int fd2, int flags) {
+  const int rc = real_dup3()(fd, fd2, flags);
+  if (rc >= 0 && (IsUcan(fd) || IsUcan(fd2))) ShareFd(fd, fd2);
+  return rc;
+}
+
+UCAN_EXPORT int fcntl(int fd, int cmd, ...) {
+  va_list ap;
+  va_start(ap, cmd);
+  void* arg = va_arg(ap, void*);
+  va_end(ap);
+  return DupFcntl(fd, cmd, real_fcntl()(fd, cmd, arg));
+}
+
+UCAN_EXPORT int fcntl64(int fd, int cmd, ...) {
+  va_list ap;
+  va_start(ap, cmd);
+  void* arg = va_arg(ap, void*);
+  va_end(ap);
+  auto f = real_fcntl64();
+  return DupFcntl(fd, cmd, f != nullptr ? f(fd, cmd, arg) : real_fcntl()(fd, cmd, arg));
+}
+
+UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
+  va_list ap;
+  va_start(ap, request);
+  void* arg = va_arg(ap, void*);
+  va_end(ap);
+  if (request == SIOCGIFINDEX && arg != nullptr) {
+    auto* ifr = static_cast<ifreq*>(arg);
+    char name[ucan::kNameSize] = {};
+    std::memcpy(name, ifr->ifr_name, sizeof(name) - 1);
+    if (const int index = ResolveName(name); index > 0) {
+      ifr->ifr_ifindex = index;
+      return 0;
+    }
+  } else if (request == SIOCGIFNAME && arg != nullptr) {
+    auto* ifr = static_cast<ifreq*>(arg);
+    View v;
+    if (GetView(fd, &v) && v.bound && v.ifindex == ifr->ifr_ifindex) {
+      std::memcpy(ifr->ifr_name, v.name, sizeof(v.name));
+      return 0;
+    }
+    char name[ucan::kNameSize] = {};
+    if (ResolveIndex(ifr->ifr_ifindex, name)) {
+      std::memcpy(ifr->ifr_name, name, sizeof(name));
+      return 0;
+    }
+  } else if ((request == kSiocgstampOld || request == kSiocgstampNsOld ||
+              request == kSiocgstampNew || request == kSiocgstampNsNew) &&
+             IsUcan(fd)) {
+    const std::int64_t ns = __atomic_load_n(&g_last_ts_ns[fd], __ATOMIC_RELAXED);
+    if (ns == 0) {
+      errno = ENOENT;
+      return -1;
+    }
+    if (arg == nullptr) {
+      errno = EFAULT;
+      return -1;
+    }
+    const bool nano = request == kSiocgstampNsOld || request == kSiocgstampNsNew;
+    const std::int64_t v[2] = {ns / 1000000000,
+                               nano ? ns % 1000000000 : (ns % 1000000000) / 1000};
+    std::memcpy(arg, v, sizeof(v));
+    return 0;
+  }
+  return real_ioctl()(fd, request, arg);
+}
+
+UCAN_EXPORT unsigned if_nametoindex(const char* name) {
+  if (name != nullptr) {
+    if (const int index = ResolveName(name); index > 0) return static_cast<unsigned>(index);
+  }
+  return real_if_nametoindex()(name);
+}
+
+UCAN_EXPORT char* if_indextoname(unsigned index, char* name) {
+  char found[ucan::kNameSize] = {};
+  if (name != nullptr && index <= 0x7FFFFFFF && ResolveIndex(static_cast<int>(index), found)) {
+    std::memcpy(name, found, sizeof(found));
+    return name;
+  }
+  return real_if_indextoname()(index, name);
+}
+
+UCAN_EXPORT int setsockopt(int fd, int level, int opt, const void* val, socklen_t len) {
+  if (!IsUcan(fd) || (level != SOL_CAN_RAW && level != SOL_SOCKET)) {
+    return real_setsockopt()(fd, level, opt, val, len);
+  }
+  if (level == SOL_SOCKET) {
+    if (opt != kSoTimestampOld && opt != kSoTimestampNsOld && opt != kSoTimestampNew &&
+        opt != kSoTimestampNsNew && opt != kSoRxqOvfl) {
+      return real_setsockopt()(fd, level, opt, val, len);
+    }
+    if (len < static_cast<socklen_t>(sizeof(int))) return static_cast<int>(Fail(EINVAL));
+    if (val == nullptr) return static_cast<int>(Fail(EFAULT));
+    int on = 0;
+    std::memcpy(&on, val, sizeof(on));
+    LockTable();
+    if (UcanSocket* s = g_sockets[fd]) {
+      if (opt == kSoRxqOvfl) {
+        s->rxq_ovfl = on != 0;
+      } else if (on == 0) {
+        s->timestamp_mode = 0;
+      } else {
+        const bool ns = opt == kSoTimestampNsOld || opt == kSoTimestampNsNew;
+        s->timestamp_mode = ns ? 2 : 1;
+        s->timestamp_cmsg = opt;
+      }
+    }
+    UnlockTable();
+    return 0;
+  }
+  // SOL_CAN_RAW, checks as net/can/raw.c raw_setsockopt().
+  if (len > 0 && val == nullptr) return static_cast<int>(Fail(EFAULT));
+  switch (opt) {
+    case CAN_RAW_FILTER: {
+      if (len % sizeof(can_filter) != 0) return static_cast<int>(Fail(EINVAL));
+      const std::uint32_t count = len / sizeof(can_filter);
+      if (count > ucan::kMaxFilters) return static_cast<int>(Fail(EINVAL));
+      can_filter* copy = nullptr;
+      if (count > 0) {
+        copy = static_cast<can_filter*>(malloc(len));
+        if (copy == nullptr) return static_cast<int>(Fail(ENOMEM));
+        std::memcpy(copy, val, len);
+      }
+      LockTable();
+      if (UcanSocket* s = g_sockets[fd]) {
+        free(s->filters);
+        s->filters = copy;
+        s->options.filter_count = count;
+        copy = nullptr;
+      }
+      UnlockTable();
+      free(copy);
+      break;
+    }
+    case CAN_RAW_ERR_FILTER:
+    case CAN_RAW_LOOPBACK:
+    case CAN_RAW_RECV_OWN_MSGS:
+    case CAN_RAW_FD_FRAMES:
+    case CAN_RAW_JOIN_FILTERS: {
+      if (len != sizeof(int)) return static_cast<int>(Fail(EINVAL));
+      std::uint32_t v = 0;
+      std::memcpy(&v, val, sizeof(v));
+      LockTable();
+      if (UcanSocket* s = g_sockets[fd]) {
+        switch (opt) {
+          case CAN_RAW_ERR_FILTER: s->options.err_mask = v & CAN_ERR_MASK; break;
+          case CAN_RAW_LOOPBACK: s->options.loopback = v != 0; break;
+          case CAN_RAW_RECV_OWN_MSGS: s->options.recv_own = v != 0; break;
+          case CAN_RAW_FD_FRAMES: s->options.fd_frames = v != 0; break;
+          default: s->options.join_filters = v != 0; break;
+        }
+      }
+      UnlockTable();
+      break;
+    }
+    default:
+      return static_cast<int>(Fail(ENOPROTOOPT));
+  }
+  SyncOptions(fd);
+  return 0;
+}
+
+UCAN_EXPORT int getsockopt(int fd, int level, int opt, void* val, socklen_t* len) {
+  if (!IsUcan(fd) || (level != SOL_CAN_RAW && level != SOL_SOCKET)) {
+    return real_getsockopt()(fd, level, opt, val, len);
+  }
+  if (len == nullptr) return static_cast<int>(Fail(EFAULT));
+  int ival = 0;
+  if (level == SOL_SOCKET) {
+    LockTable();
+    const UcanSocket* s = g_sockets[fd];
+    bool handled = true;
+    switch (opt) {
+      case SO_DOMAIN: ival = AF_CAN; break;
+      case SO_TYPE: ival = SOCK_RAW; break;
+      case SO_PROTOCOL: ival = CAN_RAW; break;
+      case kSoRxqOvfl: ival = s && s->rxq_ovfl; break;
+      case kSoTimestampOld:
+      case kSoTimestampNew: ival = s && s->timestamp_mode == 1; break;
+      case kSoTimestampNsOld:
+      case kSoTimestampNsNew: ival = s && s->timestamp_mode == 2; break;
+      default: handled = false; break;
+    }
+    UnlockTable();
+    if (!handled) return real_getsockopt()(fd, level, opt, val, len);
+  } else {
+    LockTable();
+    UcanSocket* s = g_sockets[fd];
+    if (s == nullptr) {
+      UnlockTable();
+      return static_cast<int>(Fail(EBADF));
+    }
+    if (opt == CAN_RAW_FILTER) {
+      const socklen_t need = s->options.filter_count * sizeof(can_filter);
+      if (*len < need) {
+        *len = need;
+        UnlockTable();
+        return static_cast<int>(Fail(ERANGE));
+      }
+      if (need > 0) std::memcpy(val, s->filters, need);
+      *len = need;
+      UnlockTable();
+      return 0;
+    }
+    switch (opt) {
+      case CAN_RAW_ERR_FILTER: ival = static_cast<int>(s->options.err_mask); break;
+      case CAN_RAW_LOOPBACK: ival = s->options.loopback; break;
+      case CAN_RAW_RECV_OWN_MSGS: ival = s->options.recv_own; break;
+      case CAN_RAW_FD_FRAMES: ival = s->options.fd_frames; break;
+      case CAN_RAW_JOIN_FILTERS: ival = s->options.join_filters; break;
+      default:
+        UnlockTable();
+        return static_cast<int>(Fail(ENOPROTOOPT));
+    }
+    UnlockTable();
+  }
+  const socklen_t n = std::min<socklen_t>(*len, sizeof(ival));
+  if (n > 0) std::memcpy(val, &ival, n);
+  *len = n;
+  return 0;
+}
+
+UCAN_EXPORT int getsockname(int fd, sockaddr* addr, socklen_t* len) {
+  View v;
+  if (!GetView(fd, &v)) return real_getsockname()(fd, addr, len);
+  if (addr == nullptr || len == nullptr) return static_cast<int>(Fail(EFAULT));
+  sockaddr_can sa{};
+  sa.can_family = AF_CAN;
+  sa.can_ifindex = v.ifindex;
+  std::memcpy(addr, &sa, std::min<std::size_t>(*len, sizeof(sa)));
+  *len = sizeof(sa);
+  return 0;
+}
+
+UCAN_EXPORT ssize_t write(int fd, const void* buf, size_t n) {
+  View v;
+  if (!GetView(fd, &v)) return real_write()(fd, buf, n);
+  iovec iov{const_cast<void*>(buf), n};
+  return SendFrame(fd, v, &iov, 1, 0, nullptr, 0);
+}
+
+UCAN_EXPORT ssize_t send(int fd, const void* buf, size_t n, int flags) {
+  View v;
+  if (!GetView(fd, &v)) return real_send()(fd, buf, n, flags);
+  iovec iov{const_cast<void*>(buf), n};
+  return SendFrame(fd, v, &iov, 1, flags, nullptr, 0);
+}
+
+UCAN_EXPORT ssize_t sendto(int fd, const void* buf, size_t n, int flags, const sockaddr* to,
+                           socklen_t to_len) {
+  View v;
+  if (!GetView(fd, &v)) return real_sendto()(fd, buf, n, flags, to, to_len);
+  iovec iov{const_cast<void*>(buf), n};
+  return SendFrame(fd, v, &iov, 1, flags, to, to_len);
+}
+
+UCAN_EXPORT ssize_t sendmsg(int fd, const msghdr* msg, int flags) {
+  View v;
+  if (!GetView(fd, &v)) return real_sendmsg()(fd, msg, flags);
+  if (msg == nullptr) return Fail(EFAULT);
+  return SendFrame(fd, v, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name,
+                   msg->msg_namelen);
+}
+
+UCAN_EXPORT ssize_t read(int fd, void* buf, size_t n) {
+  View v;
+  if (!GetView(fd, &v)) return real_read()(fd, buf, n);
+  return RecvSimple(fd, v, buf, n, 0, nullptr, nullptr);
+}
+
+UCAN_EXPORT ssize_t recv(int fd, void* buf, size_t n, int flags) {
+  View v;
+  if (!GetView(fd, &v)) return real_recv()(fd, buf, n, flags);
+  return RecvSimple(fd, v, buf, n, flags, nullptr, nullptr);
+}
+
+UCAN_EXPORT ssize_t recvfrom(int fd, void* buf, size_t n, int flags, sockaddr* from,
+                             socklen_t* from_len) {
+  View v;
+  if (!GetView(fd, &v)) return real_recvfrom()(fd, buf, n, flags, from, from_len);
+  return RecvSimple(fd, v, buf, n, flags, from, from_len);
+}
+
+UCAN_EXPORT ssize_t recvmsg(int fd, msghdr* msg, int flags) {
+  View v;
+  if (!GetView(fd, &v)) return real_recvmsg()(fd, msg, flags);
+  if (msg == nullptr) return Fail(EFAULT);
+  return RecvFrame(fd, v, msg, flags);
+}
+
+// _FORTIFY_SOURCE entry points (programs built with it call these instead).
+UCAN_EXPORT ssize_t __read_chk(int fd, void* buf, size_t n, size_t buflen) {
+  if (n > buflen) abort();  // what glibc's __chk_fail does, minus the message
+  return read(fd, buf, n);
+}
+
+UCAN_EXPORT ssize_t __recv_chk(int fd, void* buf, size_t n, size_t buflen, int flags) {
+  if (n > buflen) abort();
+  return recv(fd, buf, n, flags);
+}
+
+UCAN_EXPORT ssize_t __recvfrom_chk(int fd, void* buf, size_t n, size_t buflen, int flags,
+                                   sockaddr* from, socklen_t* from_len) {
+  if (n > buflen) abort();
+  return recvfrom(fd, buf, n, flags, from, from_len);
+}

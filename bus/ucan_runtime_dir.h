@@ -1,0 +1,29 @@
+#pragma once
+/// The private runtime directory of the userspace CAN bus: where the broker's socket
+/// (`ucan.sock`) and lock file live. Chosen as `$WHEELHIL_UCAN_DIR` if set, else
+/// `$XDG_RUNTIME_DIR/wheelhil`, else `/tmp/wheelhil-<uid>`. It must be a real directory (not a
+/// symlink) owned by the effective user with mode 0700; anything else is refused, so another
+/// user cannot plant a fake broker.
+///
+/// Used by the broker and by the interposition library (loaded into arbitrary programs):
+/// no global objects, no exceptions escape; thread-safe (reads the environment only).
+
+#include <string>
+#include <system_error>
+
+namespace wheelhil::bus {
+
+/// The directory the environment selects (not created, not checked).
+std::string ResolveUcanRuntimeDir();
+
+/// Checks that `dir` is a directory, not a symlink, owned by geteuid(), mode exactly 0700.
+/// Errors: no_such_file_or_directory, not_a_directory, permission_denied (owner or mode).
+std::error_code VerifyUcanRuntimeDir(const std::string& dir) noexcept;
+
+/// Creates `dir` (one level, mode 0700) when missing, then verifies it.
+std::error_code EnsureUcanRuntimeDir(const std::string& dir) noexcept;
+
+/// `<dir>/ucan.sock`.
+std::string UcanSocketPath(const std::string& dir);
+
+}  // namespace wheelhil::bus

@@ -1,0 +1,47 @@
+#pragma once
+/// `wheelhil bus up|down|list NAME` and `wheelhil exec [--bus NAME] -- PROGRAM ARGS...`: the
+/// userspace CAN bus daemon and running unmodified SocketCAN programs on it (LD_PRELOAD of
+/// libwheelhil_ucan.so, found at ../lib next to the wheelhil executable, or $WHEELHIL_UCAN_LIB).
+/// The runtime directory comes from the environment (bus/ucan_runtime_dir.h).
+/// Thread-compatible; exec replaces the process.
+
+#include <CLI/CLI.hpp>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace wheelhil::emulator {
+
+class BusCommands {
+ public:
+  /// Adds the `bus` and `exec` subcommands to `app` (call before parsing).
+  explicit BusCommands(CLI::App& app);
+  /// After parsing: the exit code when one of these subcommands ran, else nullopt.
+  std::optional<int> Run();
+  /// Call first thing in main(): handles `wheelhil exec ...` itself (the program's arguments
+  /// must not go through CLI11) and returns its exit code (exec replaces the process on
+  /// success); nullopt for any other command line.
+  static std::optional<int> RunExecIfRequested(int argc, char** argv);
+
+ private:
+  CLI::App* bus_ = nullptr;
+  CLI::App* up_ = nullptr;
+  CLI::App* down_ = nullptr;
+  CLI::App* list_ = nullptr;
+  CLI::App* exec_ = nullptr;
+  std::string up_name_;
+  std::string down_name_;
+  std::vector<std::string> exec_buses_;
+};
+
+/// Makes sure a daemon broker serves `runtime_dir` (starting one, detached, if none does) and
+/// that it has bus `name`. Returns the bus's interface index; throws std::runtime_error with a
+/// fixable message on failure.
+int EnsureUcanBus(const std::string& runtime_dir, const std::string& name);
+
+/// Path of libwheelhil_ucan.so for LD_PRELOAD: $WHEELHIL_UCAN_LIB, else
+/// <dir of the running executable>/../lib/libwheelhil_ucan.so.
+std::string UcanPreloadLibraryPath();
+
+}  // namespace wheelhil::emulator
