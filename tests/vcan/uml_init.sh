@@ -31,10 +31,11 @@ if [ -z "$W" ]; then
   echo "uml_init: WHEELHIL_UML_WORK not set on the kernel command line" > /dev/console
   exit 1
 fi
-{ [ -d "$W" ] || mkdir -p "$W"; } && mount -t hostfs hostfs "$W" -o "$W" || {
+[ -d "$W" ] || mkdir -p "$W"
+if ! mount -t hostfs hostfs "$W" -o "$W"; then
   echo "uml_init: cannot mount host directory $W" > /dev/console
   exit 1
-}
+fi
 exec > "$W/init.log" 2>&1
 read -r kernel < /proc/sys/kernel/osrelease
 echo "uml_init: kernel $kernel, init started at $(up) s"
@@ -78,7 +79,7 @@ mapfile -d '' -t argv < "$W/cmd"
 # PATH may lack.
 for i in "${!envs[@]}"; do
   case "${envs[$i]}" in
-    PATH=*) [[ ":${envs[$i]#PATH=}:" == *:/usr/sbin:* ]] || envs[$i]="${envs[$i]}:/usr/sbin:/sbin" ;;
+    PATH=*) [[ ":${envs[$i]#PATH=}:" == *:/usr/sbin:* ]] || envs[i]="${envs[$i]}:/usr/sbin:/sbin" ;;
   esac
 done
 cd "$cwd" || fail "cannot cd to $cwd"

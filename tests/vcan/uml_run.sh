@@ -48,7 +48,9 @@ if [ -z "$uml" ]; then
   if [ -x /usr/bin/linux.uml ]; then uml=/usr/bin/linux.uml
   else uml="$(command -v linux || true)"; fi
 fi
-[ -n "$uml" ] && [ -x "$uml" ] || skip "user-mode-linux not installed (apt-get install user-mode-linux)"
+if [ -z "$uml" ] || [ ! -x "$uml" ]; then
+  skip "user-mode-linux not installed (apt-get install user-mode-linux)"
+fi
 kver="$("$uml" --version 2>/dev/null | head -n1 | tr -d '[:space:]')"
 [ -n "$kver" ] || skip "$uml --version printed no kernel version (not a UML kernel?)"
 moddir="${WHEELHIL_UML_MODULES:-/usr/lib/uml/modules/$kver}"
@@ -61,6 +63,7 @@ command -v ip > /dev/null || command -v busybox > /dev/null || skip "no ip comma
 case "$INIT" in *[[:space:],]*) skip "path $INIT contains spaces or commas (kernel command line)" ;; esac
 
 work="$(mktemp -d "${TMPDIR:-/tmp}/wheelhil-uml.XXXXXX")"
+# shellcheck disable=SC2317  # called from the EXIT trap
 cleanup() { if [ "$keep" = 1 ]; then echo "uml_run.sh: kept $work" >&2; else rm -rf "$work"; fi; }
 trap cleanup EXIT
 case "$work" in *[[:space:],]*) skip "work directory $work contains spaces or commas" ;; esac
@@ -80,18 +83,29 @@ add_module() {  # add_module NAME [optional]
   [ -n "${loaded[$path]:-}" ] && return 0
   loaded[$path]=1
   deps="${line#*:}"
-  for dep in $(echo $deps | tr ' ' '\n' | tac); do
-    dep="$(basename "$dep")"; dep="${dep%%.ko*}"
+  local -a dep_list
+  read -ra dep_list <<< "$deps"
+  local i
+  for ((i = ${#dep_list[@]} - 1; i >= 0; i--)); do
+    dep="$(basename "${dep_list[$i]}")"; dep="${dep%%.ko*}"
     add_module "$dep" "$optional"
   done
-  local src="$moddir/$path" ko
+  local src="$moddir/$path" ko unpack=()
   case "$path" in
     *.ko) ko="$src" ;;
-    *.ko.xz) ko="$work/$(basename "$path" .xz)"; xz -dc "$src" > "$ko" || skip "cannot unpack $src (xz)" ;;
-    *.ko.zst) ko="$work/$(basename "$path" .zst)"; zstd -qdc "$src" > "$ko" || skip "cannot unpack $src (zstd)" ;;
-    *.ko.gz) ko="$work/$(basename "$path" .gz)"; gzip -dc "$src" > "$ko" || skip "cannot unpack $src (gzip)" ;;
+    *.ko.xz) ko="$work/$(basename "$path" .xz)"; unpack=(xz -dc) ;;
+    *.ko.zst) ko="$work/$(basename "$path" .zst)"; unpack=(zstd -qdc) ;;
+    *.ko.gz) ko="$work/$(basename "$path" .gz)"; unpack=(gzip -dc) ;;
   esac
-  [ -f "$ko" ] || skip "module file $ko missing"
+  if [ ${#unpack[@]} -gt 0 ] && ! "${unpack[@]}" "$src" > "$ko" 2> /dev/null; then
+    rm -f "$ko"
+    [ -n "$optional" ] && return 0
+    skip "cannot unpack $src (${unpack[0]} missing?)"
+  fi
+  if [ ! -f "$ko" ]; then
+    [ -n "$optional" ] && return 0
+    skip "module file $ko missing"
+  fi
   echo "${optional:+?}$ko" >> "$work/modules"
 }
 for m in can can-raw can-dev vcan; do add_module "$m"; done
