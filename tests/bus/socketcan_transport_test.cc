@@ -507,12 +507,14 @@ class VcanQueueFullTest : public VcanTest {
     if (qdisc_) (void)std::system(("tc qdisc del dev " + iface2_ + " root 2>/dev/null").c_str());
   }
   // Returns false (and the test should skip) when the qdisc cannot be installed.
-  bool InstallNetem(int delay_ms) {
-    const std::string cmd = "tc qdisc replace dev " + iface2_ + " root netem delay " +
-                            std::to_string(delay_ms) + "ms limit 1";
+  bool InstallQdisc(const std::string& spec) {
+    const std::string cmd = "tc qdisc replace dev " + iface2_ + " root " + spec;
     if (std::system((cmd + " 2>/dev/null").c_str()) != 0) return false;
     qdisc_ = true;
     return true;
+  }
+  bool InstallNetem(int delay_ms) {
+    return InstallQdisc("netem delay " + std::to_string(delay_ms) + "ms limit 1");
   }
   static constexpr const char* kNoNetem = "`tc qdisc ... netem` failed (needs root, tc, sch_netem)";
   bool qdisc_ = false;
@@ -547,6 +549,46 @@ TEST_F(VcanQueueFullTest, RetriesGetEveryFrameOutInOrder) {
   EXPECT_EQ(tx.stats().send_failures, 0u);
   EXPECT_EQ(tx.stats().sent, kFrames);
   EXPECT_EQ(Ids(Drain(rx)), (std::vector<std::uint32_t>{0x10, 0x11, 0x12, 0x13, 0x14}));
+}
+
+TEST_F(VcanQueueFullTest, WithoutRetriesFullSendBufferIsEagain) {
+  if (!InstallQdisc("tbf rate 16kbit burst 100 limit 10000")) {
+    GTEST_SKIP() << "`tc qdisc ... tbf` failed (needs root, tc, sch_tbf)";
+  }
+  CanTransportOptions no_retry;
+  no_retry.send_retry_limit = 0;
+  SocketCanTransport tx = SocketCanTransport::Open(iface2_, no_retry);
+  const int tiny = 1;
+  ASSERT_EQ(::setsockopt(tx.fd(), SOL_SOCKET, SO_SNDBUF, &tiny, sizeof(tiny)), 0);
+  std::error_code ec;
+  for (int i = 0; i < 100 && !ec; ++i) ec = tx.Send(CanFrame::Classic(0x4FF, {}));
+  EXPECT_EQ(ec, std::errc::resource_unavailable_try_again) << ec.message();
+  EXPECT_EQ(tx.stats().send_failures, 1u);
+}
+
+// A slow token bucket keeps frames (and the send-buffer memory they are charged to) in the
+// device queue; with the smallest SO_SNDBUF, writes fail with EAGAIN until frames leave, and
+// Send() waits for POLLOUT instead of failing.
+TEST_F(VcanQueueFullTest, FullSendBufferIsWaitedOut) {
+  if (!InstallQdisc("tbf rate 16kbit burst 100 limit 10000")) {
+    GTEST_SKIP() << "`tc qdisc ... tbf` failed (needs root, tc, sch_tbf)";
+  }
+  CanTransportOptions retry;
+  retry.send_retry_limit = 100;
+  retry.send_retry_budget_us = 2'000'000;
+  SocketCanTransport tx = SocketCanTransport::Open(iface2_, retry);
+  SocketCanTransport rx = SocketCanTransport::Open(iface2_);
+  const int tiny = 1;  // Rounded up by the kernel to its minimum, a few frames.
+  ASSERT_EQ(::setsockopt(tx.fd(), SOL_SOCKET, SO_SNDBUF, &tiny, sizeof(tiny)), 0);
+  constexpr std::uint32_t kFrames = 40;
+  std::vector<std::uint32_t> expected;
+  for (std::uint32_t i = 0; i < kFrames; ++i) {
+    ASSERT_FALSE(tx.Send(CanFrame::Classic(0x400 + i, {}))) << i;
+    expected.push_back(0x400 + i);
+  }
+  EXPECT_GT(tx.stats().send_retries, 0u);
+  EXPECT_EQ(tx.stats().send_failures, 0u);
+  EXPECT_EQ(Ids(Drain(rx, 2000)), expected);
 }
 
 }  // namespace

@@ -109,9 +109,10 @@ add_module() {  # add_module NAME [optional]
   echo "${optional:+?}$ko" >> "$work/modules"
 }
 for m in can can-raw can-dev vcan; do add_module "$m"; done
-# Optional extras (each insmod costs ~0.2 s of boot): the broadcast manager, and the netem
-# queueing discipline so tests can provoke ENOBUFS on a full device queue.
-for m in can-bcm sch_netem; do add_module "$m" optional; done
+# Optional extras (each insmod costs 0.1-0.2 s of boot): the broadcast manager, and the netem
+# and tbf queueing disciplines so tests can fill a device queue (ENOBUFS) or hold send-buffer
+# memory (EAGAIN).
+for m in can-bcm sch_netem sch_tbf; do add_module "$m" optional; done
 
 pwd -P > "$work/cwd"
 printf '%s\n' "${rw[@]+"${rw[@]}"}" > "$work/rw"
