@@ -10,6 +10,7 @@ namespace {
 constexpr std::array<std::uint8_t, 16> kDlcToLen = {0,  1,  2,  3,  4,  5,  6,  7,
                                                     8, 12, 16, 20, 24, 32, 48, 64};
 constexpr char kHex[] = "0123456789ABCDEF";
+constexpr std::uint32_t kMaxExtendedIdMask = CanFrame::kMaxExtendedId;
 }  // namespace
 
 CanFrame CanFrame::Classic(std::uint32_t id, std::span<const std::uint8_t> bytes, bool extended) {
@@ -63,7 +64,8 @@ std::size_t DlcToLength(std::uint8_t dlc, bool fd) noexcept {
 std::string ToCanUtilsString(const CanFrame& f) {
   std::string s;
   if (f.error) {
-    s = fmt::format("{:08X}#", f.id | 0x20000000u);
+    // lib.c sprint_canframe: can_id & (CAN_ERR_MASK | CAN_ERR_FLAG)
+    s = fmt::format("{:08X}#", (f.id & kMaxExtendedIdMask) | 0x20000000u);
   } else if (f.extended) {
     s = fmt::format("{:08X}#", f.id);
   } else {
@@ -71,7 +73,8 @@ std::string ToCanUtilsString(const CanFrame& f) {
   }
   if (f.rtr) {
     s += 'R';
-    if (f.len > 0) s += static_cast<char>('0' + f.len);
+    // lib.c prints the requested DLC only when it is 1..8.
+    if (f.len > 0 && f.len <= CanFrame::kMaxClassicLen) s += static_cast<char>('0' + f.len);
     return s;
   }
   if (f.fd) {
