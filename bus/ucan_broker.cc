@@ -746,7 +746,8 @@ struct UcanBroker::Impl {
       UcanBusStats s;
       s.name = name;
       s.ifindex = bus->ifindex;
-      s.clients = bus->members.size();
+      s.clients = static_cast<std::size_t>(std::count_if(
+          bus->members.begin(), bus->members.end(), [](const Client* c) { return !c->dead; }));
       s.frames = bus->frames;
       s.drops = bus->drops;
       s.bad_messages = bus->bad_messages;
