@@ -43,8 +43,9 @@ struct CanTransportOptions {
   /// 0 = none. Error frames arrive with CanFrame::error set and the class bits in `id`.
   std::uint32_t error_mask = 0;
   /// Send() retries a write that failed with ENOBUFS (device queue full) or EAGAIN (socket
-  /// send buffer full) up to this many times, sleeping send_retry_initial_us, then doubling,
-  /// and never spending more than send_retry_budget_us in total. 0 = no retry.
+  /// send buffer full) up to this many times, waiting send_retry_initial_us, then doubling
+  /// (for EAGAIN the wait is a poll for POLLOUT, which ends early when the buffer drains), and
+  /// never waiting more than send_retry_budget_us in total. 0 = no retry.
   int send_retry_limit = 8;
   int send_retry_initial_us = 100;
   int send_retry_budget_us = 20000;
