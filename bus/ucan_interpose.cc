@@ -49,6 +49,7 @@ constexpr int kSoTimestampNsOld = 35;
 constexpr int kSoTimestampNew = 63;
 constexpr int kSoTimestampNsNew = 64;
 constexpr int kSoRxqOvfl = 40;
+constexpr unsigned short kArphrdCan = 280;  // ARPHRD_CAN
 constexpr unsigned long kSiocgstampOld = 0x8906;
 constexpr unsigned long kSiocgstampNsOld = 0x8907;
 constexpr unsigned long kSiocgstampNew = _IOR(0x89, 0x06, long long[2]);
@@ -689,6 +690,23 @@ UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
     std::memcpy(name, ifr->ifr_name, sizeof(name) - 1);
     if (const int index = ResolveName(name); index > 0) {
       ifr->ifr_ifindex = index;
+      return 0;
+    }
+  } else if ((request == SIOCGIFHWADDR || request == SIOCGIFFLAGS || request == SIOCGIFMTU) &&
+             arg != nullptr) {
+    // What vcan reports: a CAN device (ARPHRD_CAN), up and running, CAN FD MTU.
+    auto* ifr = static_cast<ifreq*>(arg);
+    char name[ucan::kNameSize] = {};
+    std::memcpy(name, ifr->ifr_name, sizeof(name) - 1);
+    if (ResolveName(name) > 0) {
+      if (request == SIOCGIFHWADDR) {
+        std::memset(&ifr->ifr_hwaddr, 0, sizeof(ifr->ifr_hwaddr));
+        ifr->ifr_hwaddr.sa_family = kArphrdCan;
+      } else if (request == SIOCGIFFLAGS) {
+        ifr->ifr_flags = IFF_UP | IFF_RUNNING | IFF_NOARP;
+      } else {
+        ifr->ifr_mtu = static_cast<int>(ucan::kCanFdMtu);
+      }
       return 0;
     }
   } else if (request == SIOCGIFNAME && arg != nullptr) {
