@@ -1,0 +1,579 @@
+#include "emulator/physics/roller_vehicle.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+#include <btBulletDynamicsCommon.h>
+#include <fmt/format.h>
+
+namespace wheelhil::emulator::physics {
+
+namespace {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kAnchorGain = 0.2;     // fraction of the accumulated creep removed per step
+constexpr double kRayMargin_m = 0.02;
+constexpr std::size_t kMaxWheels = 32;
+
+Vector3d ToEigen(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
+btVector3 ToBt(const Vector3d& v) {
+  return btVector3(static_cast<btScalar>(v.x()), static_cast<btScalar>(v.y()),
+                   static_cast<btScalar>(v.z()));
+}
+
+void Require(bool ok, const std::string& where, const std::string& field, double value,
+             const char* rule) {
+  if (!ok) {
+    throw std::invalid_argument(fmt::format("{}: {} ({}) {}", where, field, value, rule));
+  }
+}
+
+// One velocity-level row of the contact/motor solve.
+struct Row {
+  Vector3d lin;   // direction of the impulse on the chassis
+  Vector3d ang;   // r x lin
+  Vector3d iang;  // Iinv * ang
+  double jw = 0;                     // coefficient on the wheel spin rate
+  int wheel = 0;
+  double inv_k = 0;                  // 1 / effective inverse mass
+  double target = 0;                 // desired row velocity
+  double lo = 0, hi = 0;             // impulse bounds (box rows)
+  double* lambda = nullptr;          // accumulated impulse (persistent, warm start)
+  int partner = -1;                  // circle-clamped pair: index of the lateral row
+  double radius = 0;                 // circle radius for the pair (impulse)
+  double lateral_scale = 1;          // ellipse: lateral bound = radius * scale
+};
+
+}  // namespace
+
+void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
+  Require(std::isfinite(s.mass_kg) && s.mass_kg > 0, where, "mass_kg", s.mass_kg,
+          "must be finite and > 0");
+  for (int k = 0; k < 3; ++k) {
+    Require(std::isfinite(s.inertia_kg_m2[k]) && s.inertia_kg_m2[k] > 0, where,
+            fmt::format("inertia_kg_m2[{}]", k), s.inertia_kg_m2[k], "must be finite and > 0");
+  }
+  Require(s.wheels.size() >= 1 && s.wheels.size() <= kMaxWheels, where, "wheels",
+          static_cast<double>(s.wheels.size()), "must list 1 to 32 wheels");
+  Require(s.slip_threshold_m_s > 0, where, "slip_threshold_m_s", s.slip_threshold_m_s, "must be > 0");
+  Require(s.stribeck_velocity_m_s > 0, where, "stribeck_velocity_m_s", s.stribeck_velocity_m_s,
+          "must be > 0");
+  Require(s.solver_iterations >= 1 && s.solver_iterations <= 1000, where, "solver_iterations",
+          s.solver_iterations, "must be in [1, 1000]");
+  for (std::size_t i = 0; i < s.wheels.size(); ++i) {
+    const WheelSpec& w = s.wheels[i];
+    const std::string f = fmt::format("wheels[{}] '{}'.", i, w.name);
+    Require(w.mount_B.allFinite(), where, f + "mount_m", 0, "must be finite");
+    Require(std::isfinite(w.radius_m) && w.radius_m > 0, where, f + "radius_m", w.radius_m,
+            "must be finite and > 0");
+    Require(std::isfinite(w.inertia_kg_m2) && w.inertia_kg_m2 > 0, where, f + "inertia_kg_m2",
+            w.inertia_kg_m2, "must be finite and > 0");
+    Require(w.rolling_resistance >= 0 && w.rolling_resistance < 1, where,
+            f + "rolling_resistance", w.rolling_resistance, "must be in [0, 1)");
+    Require(w.bearing_friction_nm >= 0, where, f + "bearing_friction_nm", w.bearing_friction_nm,
+            "must be >= 0");
+    Require(w.bearing_viscous_nm_s >= 0, where, f + "bearing_viscous_nm_s",
+            w.bearing_viscous_nm_s, "must be >= 0");
+    Require(w.lateral_mu_scale > 0, where, f + "lateral_mu_scale", w.lateral_mu_scale, "must be > 0");
+    if (w.kind == WheelKind::kMecanum || w.kind == WheelKind::kOmni ||
+        w.kind == WheelKind::kOrthogonal) {
+      Require(std::abs(std::sin(w.roller_angle_rad)) > 0.1, where, f + "roller_angle_deg",
+              w.roller_angle_rad * 180 / kPi, "must not be near 0 (a roller parallel to the axle)");
+    }
+    if (w.kind == WheelKind::kOrthogonal) {
+      Require(w.handover_dip_m >= 0 && w.handover_dip_m < 0.5 * w.radius_m, where,
+              f + "handover_dip_m", w.handover_dip_m, "must be in [0, radius/2)");
+    }
+    const SuspensionSpec& q = w.suspension;
+    Require(q.min_length_m >= 0 && q.min_length_m < q.max_length_m, where,
+            f + "suspension.min_length_m", q.min_length_m, "must be >= 0 and < max_length_m");
+    Require(q.free_length_m > 0, where, f + "suspension.free_length_m", q.free_length_m, "must be > 0");
+    Require(q.stiffness_n_m > 0, where, f + "suspension.stiffness_n_m", q.stiffness_n_m, "must be > 0");
+    Require(q.damping_n_s_m >= 0, where, f + "suspension.damping_n_s_m", q.damping_n_s_m,
+            "must be >= 0");
+    Require(q.bump_stiffness_n_m >= 0, where, f + "suspension.bump_stiffness_n_m",
+            q.bump_stiffness_n_m, "must be >= 0");
+    Require(q.hub_mass_kg > 0, where, f + "suspension.hub_mass_kg", q.hub_mass_kg, "must be > 0");
+    Require(q.tire_stiffness_n_m > 0, where, f + "suspension.tire_stiffness_n_m",
+            q.tire_stiffness_n_m, "must be > 0");
+    Require(q.tire_damping_n_s_m >= 0, where, f + "suspension.tire_damping_n_s_m",
+            q.tire_damping_n_s_m, "must be >= 0");
+    if (w.driven) {
+      Require(w.kind != WheelKind::kCaster, where, f + "motor", 0, "a caster cannot be driven");
+      const MotorSpec& m = w.motor;
+      Require(m.gear_ratio > 0, where, f + "motor.gear_ratio", m.gear_ratio, "must be > 0");
+      Require(m.torque_constant_nm_a > 0, where, f + "motor.torque_constant_nm_a",
+              m.torque_constant_nm_a, "must be > 0");
+      Require(m.max_current_a > 0, where, f + "motor.max_current_a", m.max_current_a, "must be > 0");
+      Require(m.max_torque_nm > 0, where, f + "motor.max_torque_nm", m.max_torque_nm, "must be > 0");
+      Require(m.rotor_inertia_kg_m2 >= 0, where, f + "motor.rotor_inertia_kg_m2",
+              m.rotor_inertia_kg_m2, "must be >= 0");
+      Require(m.winding_resistance_ohm >= 0, where, f + "motor.winding_resistance_ohm",
+              m.winding_resistance_ohm, "must be >= 0");
+      Require(m.supply_voltage_v > 0, where, f + "motor.supply_voltage_v", m.supply_voltage_v,
+              "must be > 0");
+      Require(m.max_accel_rad_s2 >= 0, where, f + "motor.max_accel_rad_s2", m.max_accel_rad_s2,
+              "must be >= 0");
+    }
+  }
+}
+
+RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
+                             const Eigen::Isometry3d& X_WB, const Vector3d& gravity_W)
+    : spec_(spec), terrain_(terrain), gravity_W_(gravity_W) {
+  ValidateVehicleSpec(spec_, fmt::format("vehicle '{}'", spec_.name));
+  shape_ = std::make_unique<btBoxShape>(ToBt(spec_.half_extents_m));
+  btTransform T;
+  T.setIdentity();
+  T.setOrigin(ToBt(X_WB.translation()));
+  const Eigen::Quaterniond q(X_WB.rotation());
+  T.setRotation(btQuaternion(static_cast<btScalar>(q.x()), static_cast<btScalar>(q.y()),
+                             static_cast<btScalar>(q.z()), static_cast<btScalar>(q.w())));
+  motion_state_ = std::make_unique<btDefaultMotionState>(T);
+  btRigidBody::btRigidBodyConstructionInfo info(static_cast<btScalar>(spec_.mass_kg),
+                                                motion_state_.get(), shape_.get(),
+                                                ToBt(spec_.inertia_kg_m2));
+  info.m_linearDamping = 0;
+  info.m_angularDamping = 0;
+  info.m_friction = 0;
+  body_ = std::make_unique<btRigidBody>(info);
+  body_->setActivationState(DISABLE_DEACTIVATION);
+  body_->setGravity(btVector3(0, 0, 0));  // gravity is applied in PreStep with the contacts
+  body_->setCollisionFlags(body_->getCollisionFlags() | btCollisionObject::CF_NO_CONTACT_RESPONSE);
+
+  state_.resize(spec_.wheels.size());
+  truth_.resize(spec_.wheels.size());
+  command_.assign(spec_.wheels.size(), 0.0);
+  const Matrix3d R = X_WB.rotation();
+  for (std::size_t i = 0; i < spec_.wheels.size(); ++i) {
+    const WheelSpec& w = spec_.wheels[i];
+    WheelState& st = state_[i];
+    const double rotor = w.driven ? w.motor.gear_ratio * w.motor.gear_ratio *
+                                        w.motor.rotor_inertia_kg_m2
+                                  : 0.0;
+    st.inv_inertia = 1.0 / (w.inertia_kg_m2 + rotor);
+    // Start with the hub on the floor (or hanging).
+    st.length_m = w.suspension.max_length_m;
+    double offset = 0;
+    const double r = EffectiveRadius(w, 0.0, &offset);
+    const Vector3d dir = -R.col(2);
+    const Vector3d axle = R * Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
+    const Vector3d from = X_WB * w.mount_B + axle * offset;
+    SurfaceHit hit;
+    if (terrain_ != nullptr &&
+        terrain_->Raycast(from, dir, w.suspension.max_length_m + r + kRayMargin_m, &hit)) {
+      const double c = std::max(0.5, -dir.dot(hit.normal_W));
+      st.length_m = std::clamp(hit.distance_m - r / c, 0.0, w.suspension.max_length_m);
+    }
+    truth_[i].suspension_length_m = st.length_m;
+    truth_[i].effective_radius_m = r;
+  }
+  prev_v_W_.setZero();
+  prev_w_W_.setZero();
+  body_truth_.p_WB = X_WB.translation();
+  body_truth_.q_WB = q;
+  prev_yaw_wrapped_ = std::atan2(R(1, 0), R(0, 0));
+  body_truth_.yaw_rad = prev_yaw_wrapped_;
+}
+
+RollerVehicle::~RollerVehicle() = default;
+
+bool RollerVehicle::SetWheelSpeedCommand(std::size_t i, double omega) noexcept {
+  if (i >= command_.size() || !std::isfinite(omega)) return false;
+  command_[i] = omega;
+  return true;
+}
+
+double RollerVehicle::wheel_speed_command(std::size_t i) const noexcept {
+  return i < command_.size() ? command_[i] : 0.0;
+}
+
+Eigen::Isometry3d RollerVehicle::pose() const noexcept {
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  X.linear() = body_truth_.q_WB.toRotationMatrix();
+  X.translation() = body_truth_.p_WB;
+  return X;
+}
+
+double RollerVehicle::EffectiveRadius(const WheelSpec& w, double angle,
+                                      double* lateral_offset) const noexcept {
+  *lateral_offset = 0;
+  if (w.kind != WheelKind::kOrthogonal) return w.radius_m;
+  const double seg = std::floor((angle + kPi / 4) / (kPi / 2));
+  const double phi = angle - seg * (kPi / 2);  // [-pi/4, pi/4)
+  const long long iseg = static_cast<long long>(seg);
+  const bool first_half = ((iseg % 2) + 2) % 2 == 0;
+  *lateral_offset = first_half ? w.half_offset_m : -w.half_offset_m;
+  const double x = 4 * phi / kPi;
+  return w.radius_m - w.handover_dip_m * x * x;
+}
+
+void RollerVehicle::PreStep(double dt) noexcept {
+  last_dt_s_ = dt;
+  const btTransform& T = body_->getWorldTransform();
+  Matrix3d R;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) R(r, c) = T.getBasis()[r][c];
+  }
+  const Vector3d p = ToEigen(T.getOrigin());
+  Vector3d v = ToEigen(body_->getLinearVelocity());
+  Vector3d w = ToEigen(body_->getAngularVelocity());
+  const double inv_m = body_->getInvMass();
+  const Vector3d inv_i_local = ToEigen(body_->getInvInertiaDiagLocal());
+  const Matrix3d Iinv = R * inv_i_local.asDiagonal() * R.transpose();
+  const Vector3d dir = -R.col(2);
+  const double g_dir = gravity_W_.dot(dir);
+
+  auto apply_at = [&](const Vector3d& impulse, const Vector3d& r) {
+    v += impulse * inv_m;
+    w += Iinv * r.cross(impulse);
+  };
+  v += gravity_W_ * dt;
+
+  const std::size_t n = spec_.wheels.size();
+  // Rows live on the stack for small vehicles; no allocation in the step.
+  constexpr std::size_t kMaxRows = 3 * kMaxWheels;
+  Row rows_buf[kMaxRows];
+  std::size_t nrows = 0;
+  double omega[kMaxWheels];
+  const std::size_t nw = std::min<std::size_t>(n, kMaxWheels);
+
+  // Geometry cache for the post-solve truth.
+  struct Contact {
+    Vector3d f, l, u, r_c;
+    double r_eff;
+  };
+  Contact contact[kMaxWheels];
+
+  for (std::size_t i = 0; i < nw; ++i) {
+    const WheelSpec& ws = spec_.wheels[i];
+    WheelState& st = state_[i];
+    WheelTruth& tr = truth_[i];
+    omega[i] = tr.omega_rad_s;
+    // Implicit viscous bearing.
+    if (ws.kind != WheelKind::kCaster && ws.bearing_viscous_nm_s > 0) {
+      omega[i] /= 1.0 + dt * ws.bearing_viscous_nm_s * st.inv_inertia;
+    }
+    double offset = 0;
+    const double r_eff = EffectiveRadius(ws, tr.angle_rad, &offset);
+    tr.effective_radius_m = r_eff;
+    const Vector3d axle =
+        R * Vector3d(-std::sin(ws.heading_rad), std::cos(ws.heading_rad), 0);
+    const Vector3d mount = p + R * ws.mount_B;
+    const Vector3d from = mount + axle * offset;
+    const SuspensionSpec& q = ws.suspension;
+
+    SurfaceHit hit;
+    bool ground = terrain_ != nullptr &&
+                  terrain_->Raycast(from, dir, q.max_length_m + r_eff + kRayMargin_m, &hit);
+    double c = 1;
+    double l_ground = 1e9;
+    if (ground) {
+      c = std::max(0.5, -dir.dot(hit.normal_W));
+      l_ground = hit.distance_m - r_eff / c;
+    }
+    // Unsprung hub along the suspension axis: springs explicit in the length, suspension damper
+    // and tyre spring-damper implicit in the hub's rate.
+    const double L = st.length_m;
+    const double f_spring = q.stiffness_n_m * (q.free_length_m - L);
+    const double f_bump = L < q.min_length_m ? q.bump_stiffness_n_m * (q.min_length_m - L) : 0.0;
+    const double mu_h = q.hub_mass_kg;
+    const double f_ext = f_spring + f_bump + mu_h * g_dir;
+    // The floor's rate from the ray distance alone: continuous over mesh edges, where the r/c
+    // term of l_ground jumps with the facet normal.
+    const double g_rate =
+        (ground && st.ground_valid) ? (hit.distance_m - st.ground_length_m) / dt : 0.0;
+    st.ground_valid = ground;
+    st.ground_length_m = ground ? hit.distance_m : 0.0;
+    double ldot = (mu_h * st.length_rate_m_s + dt * f_ext) / (mu_h + dt * q.damping_n_s_m);
+    double f_tire = 0;
+    if (ground && L + ldot * dt > l_ground) {
+      const double kt = q.tire_stiffness_n_m, ct = q.tire_damping_n_s_m;
+      const double ld = (mu_h * st.length_rate_m_s +
+                         dt * (f_ext - kt * (L - l_ground) + ct * g_rate)) /
+                        (mu_h + dt * (q.damping_n_s_m + ct + dt * kt));
+      const double f = kt * (L + ld * dt - l_ground) + ct * (ld - g_rate);
+      if (f > 0) {
+        ldot = ld;
+        f_tire = f;
+      }
+    }
+    const double f_damp = -q.damping_n_s_m * ldot;
+    double j_stop = 0;
+    if (L + ldot * dt > q.max_length_m) {
+      const double ld = (q.max_length_m - L) / dt;
+      j_stop = mu_h * (ld - ldot);
+      ldot = ld;
+    } else if (L + ldot * dt < 0) {
+      const double ld = -L / dt;
+      j_stop = mu_h * (ld - ldot);
+      ldot = ld;
+    }
+    st.length_m = L + ldot * dt;
+    st.length_rate_m_s = ldot;
+    tr.suspension_length_m = st.length_m;
+    // Suspension reaction on the chassis at the mount (spring, damper, bump stop, droop stop).
+    apply_at(-(dt * (f_spring + f_damp + f_bump) + j_stop) * dir, mount - p);
+
+    const double n_axis = f_tire;
+    tr.in_contact = ground && n_axis > 0;
+    if (!tr.in_contact) {
+      tr.normal_load_n = 0;
+      tr.mu = 0;
+      st.lambda_a = st.lambda_b = st.lambda_spin = 0;
+      st.anchor_a_m = st.anchor_b_m = 0;
+      st.last_slip_m_s = 0;
+      contact[i] = Contact{Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(),
+                           r_eff};
+    } else {
+      const Vector3d nrm = hit.normal_W;
+      const double n_load = n_axis / c;
+      tr.normal_load_n = n_load;
+      const Vector3d hub = from + dir * st.length_m;
+      const Vector3d cp = hub - nrm * r_eff;
+      tr.contact_point_W = cp;
+      const Vector3d r_c = cp - p;
+      // Lateral part of the normal force (sloped floor): goes to the chassis directly.
+      apply_at(dt * (n_load * nrm + n_axis * dir), r_c);
+      Vector3d f = axle.cross(nrm);
+      const double fn = f.norm();
+      f = fn > 1e-9 ? Vector3d(f / fn) : Vector3d(R.col(0));
+      const Vector3d l = nrm.cross(f);
+      const double mu = hit.friction.mu_slide +
+                        (hit.friction.mu_peak - hit.friction.mu_slide) *
+                            std::exp(-std::abs(st.last_slip_m_s) / spec_.stribeck_velocity_m_s);
+      tr.mu = mu;
+      const double lim = mu * n_load * dt;
+      const double rr = ws.rolling_resistance * n_load * dt;
+      Vector3d u = f;
+      auto add_row = [&](const Vector3d& lin, double jw, double target, double lo, double hi,
+                         double* lambda) -> Row* {
+        if (nrows >= kMaxRows) return nullptr;
+        Row& row = rows_buf[nrows++];
+        row.lin = lin;
+        row.ang = r_c.cross(lin);
+        row.iang = Iinv * row.ang;
+        row.jw = jw;
+        row.wheel = static_cast<int>(i);
+        const double k = inv_m * lin.squaredNorm() + row.ang.dot(row.iang) +
+                         jw * jw * (ws.kind == WheelKind::kCaster ? 0.0 : st.inv_inertia);
+        row.inv_k = k > 1e-12 ? 1.0 / k : 0.0;
+        row.target = target;
+        row.lo = lo;
+        row.hi = hi;
+        row.lambda = lambda;
+        row.partner = -1;
+        return &row;
+      };
+      switch (ws.kind) {
+        case WheelKind::kConventional: {
+          Row* a = add_row(f, -r_eff, -kAnchorGain * st.anchor_a_m / dt, -lim, lim, &st.lambda_a);
+          const std::size_t ia = nrows - 1;
+          add_row(l, 0.0, -kAnchorGain * st.anchor_b_m / dt, -lim * ws.lateral_mu_scale,
+                  lim * ws.lateral_mu_scale, &st.lambda_b);
+          if (a != nullptr && nrows == ia + 2) {
+            a->partner = static_cast<int>(ia + 1);
+            a->radius = lim;
+            a->lateral_scale = ws.lateral_mu_scale;
+          }
+          break;
+        }
+        case WheelKind::kMecanum:
+        case WheelKind::kOmni:
+        case WheelKind::kOrthogonal: {
+          u = std::cos(ws.roller_angle_rad) * l + std::sin(ws.roller_angle_rad) * f;
+          const Vector3d free_dir = nrm.cross(u);
+          add_row(u, -r_eff * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim,
+                  &st.lambda_a);
+          add_row(free_dir, -r_eff * f.dot(free_dir), 0.0, -rr, rr, &st.lambda_b);
+          break;
+        }
+        case WheelKind::kCaster:
+          add_row(f, 0.0, 0.0, -rr, rr, &st.lambda_a);
+          add_row(l, 0.0, 0.0, -rr, rr, &st.lambda_b);
+          break;
+      }
+      contact[i] = Contact{f, l, u, r_c, r_eff};
+    }
+    // Spin rows: motor (driven) or bearing friction (passive), no chassis coupling.
+    if (ws.kind == WheelKind::kCaster) continue;
+    if (ws.driven && nrows < kMaxRows) {
+      const MotorSpec& m = ws.motor;
+      double cmd = command_[i];
+      if (m.max_accel_rad_s2 > 0) {
+        const double step = m.max_accel_rad_s2 * dt;
+        cmd = std::clamp(cmd, st.omega_cmd_slewed - step, st.omega_cmd_slewed + step);
+      }
+      st.omega_cmd_slewed = cmd;
+      const double kt = m.torque_constant_nm_a * m.gear_ratio;  // wheel torque per amp
+      double hi = std::min(m.max_torque_nm, kt * m.max_current_a);
+      double lo = -hi;
+      if (m.winding_resistance_ohm > 0) {
+        const double emf = kt * omega[i];  // volts (k_e = k_t in SI)
+        hi = std::min(hi, kt * (m.supply_voltage_v - emf) / m.winding_resistance_ohm);
+        lo = std::max(lo, kt * (-m.supply_voltage_v - emf) / m.winding_resistance_ohm);
+        if (lo > hi) lo = hi = 0.5 * (lo + hi);
+      }
+      Row& row = rows_buf[nrows++];
+      row.partner = -1;
+      row.radius = 0;
+      row.lateral_scale = 1;
+      row.lin.setZero();
+      row.ang.setZero();
+      row.iang.setZero();
+      row.jw = 1;
+      row.wheel = static_cast<int>(i);
+      row.inv_k = 1.0 / st.inv_inertia;
+      row.target = cmd;
+      row.lo = lo * dt;
+      row.hi = hi * dt;
+      row.lambda = &st.lambda_motor;
+    } else if (!ws.driven && nrows < kMaxRows) {
+      double tau = ws.bearing_friction_nm;
+      if (ws.kind == WheelKind::kConventional && tr.in_contact) {
+        tau += ws.rolling_resistance * tr.normal_load_n * r_eff;
+      }
+      Row& row = rows_buf[nrows++];
+      row.partner = -1;
+      row.radius = 0;
+      row.lateral_scale = 1;
+      row.lin.setZero();
+      row.ang.setZero();
+      row.iang.setZero();
+      row.jw = 1;
+      row.wheel = static_cast<int>(i);
+      row.inv_k = 1.0 / st.inv_inertia;
+      row.target = 0;
+      row.lo = -tau * dt;
+      row.hi = tau * dt;
+      row.lambda = &st.lambda_spin;
+    }
+  }
+
+  auto inv_i_wheel = [&](const Row& row) {
+    return spec_.wheels[static_cast<std::size_t>(row.wheel)].kind == WheelKind::kCaster
+               ? 0.0
+               : state_[static_cast<std::size_t>(row.wheel)].inv_inertia;
+  };
+  auto apply_row = [&](const Row& row, double d) {
+    v += row.lin * (d * inv_m);
+    w += row.iang * d;
+    omega[row.wheel] += row.jw * d * inv_i_wheel(row);
+  };
+  auto row_velocity = [&](const Row& row) {
+    return row.lin.dot(v) + row.ang.dot(w) + row.jw * omega[row.wheel];
+  };
+  // Warm start with last step's impulses, clamped to this step's bounds.
+  for (std::size_t k = 0; k < nrows; ++k) {
+    Row& row = rows_buf[k];
+    double lam = std::clamp(*row.lambda, row.lo, row.hi);
+    *row.lambda = lam;
+    apply_row(row, lam);
+  }
+  for (int it = 0; it < spec_.solver_iterations; ++it) {
+    for (std::size_t k = 0; k < nrows; ++k) {
+      Row& row = rows_buf[k];
+      if (row.partner >= 0) {
+        // Conventional pair: solve both, clamp the impulse to the friction ellipse.
+        Row& lat = rows_buf[static_cast<std::size_t>(row.partner)];
+        const double la0 = *row.lambda, lb0 = *lat.lambda;
+        double la = la0 + (row.target - row_velocity(row)) * row.inv_k;
+        double lb = lb0 + (lat.target - row_velocity(lat)) * lat.inv_k;
+        const double ex = la / std::max(row.radius, 1e-300);
+        const double ey = lb / std::max(row.radius * row.lateral_scale, 1e-300);
+        const double e = std::hypot(ex, ey);
+        if (e > 1.0) {
+          la /= e;
+          lb /= e;
+        }
+        *row.lambda = la;
+        *lat.lambda = lb;
+        apply_row(row, la - la0);
+        apply_row(lat, lb - lb0);
+        ++k;  // the lateral row follows directly and was handled here
+        continue;
+      }
+      const double old = *row.lambda;
+      const double lam = std::clamp(old + (row.target - row_velocity(row)) * row.inv_k, row.lo, row.hi);
+      *row.lambda = lam;
+      apply_row(row, lam - old);
+    }
+  }
+
+  body_->setLinearVelocity(ToBt(v));
+  body_->setAngularVelocity(ToBt(w));
+
+  // Post-solve ground truth, stiction anchors and wheel angles.
+  for (std::size_t i = 0; i < nw; ++i) {
+    const WheelSpec& ws = spec_.wheels[i];
+    WheelState& st = state_[i];
+    WheelTruth& tr = truth_[i];
+    if (ws.kind == WheelKind::kCaster) omega[i] = 0;
+    tr.omega_rad_s = omega[i];
+    tr.angle_rad += omega[i] * dt;
+    const Contact& ct = contact[i];
+    tr.rim_travel_m += omega[i] * ct.r_eff * dt;
+    if (ws.driven) {
+      tr.motor_torque_nm = st.lambda_motor / dt;
+      tr.motor_current_a = tr.motor_torque_nm / (ws.motor.torque_constant_nm_a * ws.motor.gear_ratio);
+    }
+    if (!tr.in_contact) {
+      tr.slip_velocity_m_s.setZero();
+      tr.slip_speed_m_s = 0;
+      tr.slipping = false;
+      continue;
+    }
+    const Vector3d vc = v + w.cross(ct.r_c);
+    double ground_speed = 0;
+    if (ws.kind == WheelKind::kConventional) {
+      const double sa = vc.dot(ct.f) - omega[i] * ct.r_eff;
+      const double sb = vc.dot(ct.l);
+      tr.slip_velocity_m_s = Eigen::Vector2d(sa, sb);
+      ground_speed = vc.dot(ct.f);
+      const bool sat = std::hypot(st.lambda_a, st.lambda_b / ws.lateral_mu_scale) >=
+                       0.999 * tr.mu * tr.normal_load_n * dt;
+      st.anchor_a_m = sat ? 0.0 : st.anchor_a_m + sa * dt;
+      st.anchor_b_m = sat ? 0.0 : st.anchor_b_m + sb * dt;
+    } else if (ws.kind == WheelKind::kCaster) {
+      tr.slip_velocity_m_s.setZero();
+      ground_speed = vc.dot(ct.f);
+    } else {
+      const double fu = ct.f.dot(ct.u);
+      const double su = vc.dot(ct.u) - omega[i] * ct.r_eff * fu;
+      tr.slip_velocity_m_s = su * Eigen::Vector2d(fu, ct.l.dot(ct.u));
+      ground_speed = vc.dot(ct.u) / fu;
+      const bool sat = std::abs(st.lambda_a) >= 0.999 * tr.mu * tr.normal_load_n * dt;
+      st.anchor_a_m = sat ? 0.0 : st.anchor_a_m + su * dt;
+    }
+    tr.ground_travel_m += ground_speed * dt;
+    tr.slip_speed_m_s = tr.slip_velocity_m_s.norm();
+    st.last_slip_m_s = tr.slip_speed_m_s;
+    tr.slipping = tr.slip_speed_m_s > spec_.slip_threshold_m_s;
+  }
+}
+
+void RollerVehicle::updateAction(btCollisionWorld* /*world*/, btScalar /*dt*/) {
+  const btTransform& T = body_->getWorldTransform();
+  const btQuaternion q = T.getRotation();
+  body_truth_.p_WB = ToEigen(T.getOrigin());
+  body_truth_.q_WB = Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z());
+  const Vector3d v = ToEigen(body_->getLinearVelocity());
+  const Vector3d w = ToEigen(body_->getAngularVelocity());
+  body_truth_.a_WB_W = (v - prev_v_W_) / last_dt_s_;
+  body_truth_.alpha_WB_W = (w - prev_w_W_) / last_dt_s_;
+  body_truth_.v_WB_W = v;
+  body_truth_.omega_WB_W = w;
+  prev_v_W_ = v;
+  prev_w_W_ = w;
+  const Matrix3d R = body_truth_.q_WB.toRotationMatrix();
+  const double yaw = std::atan2(R(1, 0), R(0, 0));
+  body_truth_.yaw_rad += std::remainder(yaw - prev_yaw_wrapped_, 2 * kPi);
+  prev_yaw_wrapped_ = yaw;
+}
+
+}  // namespace wheelhil::emulator::physics

@@ -1,0 +1,134 @@
+#pragma once
+/// A wheeled vehicle on Bullet: one btRigidBody chassis (no contact with anything - the wheels
+/// carry it) and per wheel a raycast suspension with an unsprung hub, wheel spin with inertia,
+/// a motor (driven) or bearing friction (passive), and roller contact friction:
+///   conventional: along and across the rolling direction (friction circle/ellipse),
+///   Mecanum:      only along the roller axis u = cos(a)*axle + sin(a)*rolling (a = +-45 deg),
+///   omni/orthogonal: only along the rolling direction (a = 90 deg),
+/// free directions carry only rolling resistance c_rr*N.
+///
+/// Contact and motor forces are solved at velocity level once per fixed step, in the world's
+/// pre-tick callback (so they act in the same step): projected Gauss-Seidel over the rows
+/// "contact slip = 0" (clamped to +-mu(s)*N*dt), "wheel speed = command" (clamped to the motor's
+/// torque window * dt) and "free/rolling resistance", with warm starting and a stiction anchor
+/// (accumulated creep is fed back, so a vehicle at rest does not drift). Slip curve:
+///   mu(s) = mu_slide + (mu_peak - mu_slide) * exp(-|s| / v_stribeck)
+/// with s the contact's slip speed of the previous step. The friction reaction acts on the wheel
+/// spin: a wheel that loses traction spins up and its angle (the encoder truth) over-counts.
+///
+/// Frames: W world (z up), B body (x forward, y left, z up, origin at the chassis COM).
+/// Thread-compatible; deterministic (no clocks, no randomness).
+
+#include <memory>
+#include <vector>
+
+#include <BulletDynamics/Dynamics/btActionInterface.h>
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "emulator/physics/vehicle_spec.h"
+#include "emulator/terrain.h"
+
+class btRigidBody;
+class btCollisionShape;
+struct btDefaultMotionState;
+
+namespace wheelhil::emulator::physics {
+
+/// Per-wheel ground truth after a step.
+struct WheelTruth {
+  double angle_rad = 0;          ///< accumulated spin angle (double), the encoder's truth
+  double omega_rad_s = 0;        ///< spin rate, positive rolls along the heading
+  bool in_contact = false;
+  double normal_load_n = 0;      ///< >= 0, zero off the floor
+  Eigen::Vector2d slip_velocity_m_s = Eigen::Vector2d::Zero();  ///< (rolling, lateral) of the
+                                 ///< constrained slip: contact point against the rim
+  double slip_speed_m_s = 0;     ///< |slip_velocity_m_s|
+  bool slipping = false;         ///< slip_speed_m_s > VehicleSpec::slip_threshold_m_s
+  double rim_travel_m = 0;       ///< integral of omega * effective radius
+  double ground_travel_m = 0;    ///< integral of the rim speed the ground motion implies
+  double suspension_length_m = 0;
+  double effective_radius_m = 0;
+  double motor_torque_nm = 0;    ///< wheel side (driven only)
+  double motor_current_a = 0;
+  Eigen::Vector3d contact_point_W = Eigen::Vector3d::Zero();
+  double mu = 0;                 ///< friction limit used in the step
+};
+
+/// Body ground truth after a step.
+struct BodyTruth {
+  Eigen::Vector3d p_WB = Eigen::Vector3d::Zero();  ///< COM position
+  Eigen::Quaterniond q_WB = Eigen::Quaterniond::Identity();
+  double yaw_rad = 0;  ///< unwrapped heading (continuous, accumulates turns)
+  Eigen::Vector3d v_WB_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d omega_WB_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d a_WB_W = Eigen::Vector3d::Zero();      ///< linear acceleration (no gravity)
+  Eigen::Vector3d alpha_WB_W = Eigen::Vector3d::Zero();  ///< angular acceleration
+};
+
+class RollerVehicle : public btActionInterface {
+ public:
+  /// Builds the chassis resting its wheels at the given pose (X_WB: COM pose). Validates the
+  /// spec (throws std::invalid_argument "vehicle 'name': wheels[i].field: problem").
+  RollerVehicle(const VehicleSpec& spec, const Terrain* terrain, const Eigen::Isometry3d& X_WB,
+                const Eigen::Vector3d& gravity_W);
+  ~RollerVehicle() override;
+  RollerVehicle(const RollerVehicle&) = delete;
+  RollerVehicle& operator=(const RollerVehicle&) = delete;
+
+  [[nodiscard]] btRigidBody* chassis() noexcept { return body_.get(); }
+  [[nodiscard]] const VehicleSpec& spec() const noexcept { return spec_; }
+
+  /// Commanded wheel speed (rad/s) of driven wheel i; ignored for passive wheels. Returns false
+  /// for a bad index or a non-finite value.
+  bool SetWheelSpeedCommand(std::size_t i, double omega_rad_s) noexcept;
+  [[nodiscard]] double wheel_speed_command(std::size_t i) const noexcept;
+
+  /// Called by PhysicsWorld before Bullet integrates the step (pre-tick).
+  void PreStep(double dt_s) noexcept;
+  /// btActionInterface: called after Bullet integrated the step; records the body truth.
+  void updateAction(btCollisionWorld* world, btScalar dt) override;
+  void debugDraw(btIDebugDraw*) override {}
+
+  [[nodiscard]] const BodyTruth& body_truth() const noexcept { return body_truth_; }
+  [[nodiscard]] const std::vector<WheelTruth>& wheel_truth() const noexcept { return truth_; }
+  [[nodiscard]] Eigen::Isometry3d pose() const noexcept;
+
+ private:
+  struct WheelState {
+    double length_m = 0;
+    double length_rate_m_s = 0;
+    double ground_length_m = 0;    // last step's ray distance to the floor, for its rate
+    bool ground_valid = false;
+    double omega_cmd_slewed = 0;
+    double lambda_motor = 0;       // warm start, impulses
+    double lambda_spin = 0;
+    double lambda_a = 0;           // constrained row 1 (rolling or roller axis)
+    double lambda_b = 0;           // row 2 (lateral for conventional, free for rollers)
+    double anchor_a_m = 0;         // stiction anchors: accumulated creep while stuck
+    double anchor_b_m = 0;
+    double last_slip_m_s = 0;
+    double inv_inertia = 0;        // 1 / (wheel + reflected rotor inertia)
+  };
+  double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
+
+  VehicleSpec spec_;
+  const Terrain* terrain_;
+  Eigen::Vector3d gravity_W_;
+  std::unique_ptr<btCollisionShape> shape_;
+  std::unique_ptr<btDefaultMotionState> motion_state_;
+  std::unique_ptr<btRigidBody> body_;
+  std::vector<WheelState> state_;
+  std::vector<WheelTruth> truth_;
+  std::vector<double> command_;
+  BodyTruth body_truth_;
+  Eigen::Vector3d prev_v_W_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d prev_w_W_ = Eigen::Vector3d::Zero();
+  double prev_yaw_wrapped_ = 0;
+  double last_dt_s_ = 1e-3;
+};
+
+/// Validates a vehicle spec; throws std::invalid_argument naming the field.
+void ValidateVehicleSpec(const VehicleSpec& spec, const std::string& where);
+
+}  // namespace wheelhil::emulator::physics

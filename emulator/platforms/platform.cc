@@ -1,0 +1,370 @@
+#include "emulator/platforms/platform.h"
+
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+namespace wheelhil::emulator::platforms {
+
+namespace {
+
+using physics::WheelKind;
+using physics::WheelSpec;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
+                         const std::string& problem) const {
+    const int line = node.IsDefined() ? node.Mark().line + 1 : 0;
+    throw std::invalid_argument(fmt::format("{}:{}: {}: {}", file_, line, field, problem));
+  }
+
+  void CheckKeys(const YAML::Node& map, const std::string& field,
+                 const std::set<std::string>& allowed) const {
+    if (!map.IsMap()) Fail(map, field, "must be a mapping");
+    for (const auto& kv : map) {
+      const auto key = kv.first.as<std::string>();
+      if (allowed.count(key) == 0) Fail(kv.first, field + "." + key, "unknown key");
+    }
+  }
+
+  // Looks a key up in `node`, then in `fallback` (defaults); required unless def given.
+  YAML::Node Find(const YAML::Node& node, const YAML::Node& fallback, const std::string& key) const {
+    if (node.IsDefined() && node.IsMap() && node[key]) return node[key];
+    if (fallback.IsDefined() && fallback.IsMap() && fallback[key]) return fallback[key];
+    return YAML::Node(YAML::NodeType::Undefined);
+  }
+
+  double Number(const YAML::Node& node, const std::string& field) const {
+    if (!node.IsScalar()) Fail(node, field, "must be a number");
+    double v = 0;
+    try {
+      v = node.as<double>();
+    } catch (const YAML::Exception&) {
+      Fail(node, field, fmt::format("'{}' is not a number", node.Scalar()));
+    }
+    if (!std::isfinite(v)) Fail(node, field, "must be finite");
+    return v;
+  }
+
+  double Get(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
+             const std::string& prefix, double min, double max, const double* def = nullptr) const {
+    const YAML::Node n = Find(parent, fallback, key);
+    const std::string field = prefix + key;
+    if (!n.IsDefined()) {
+      if (def != nullptr) return *def;
+      Fail(parent, field, "missing");
+    }
+    const double v = Number(n, field);
+    if (v < min || v > max) Fail(n, field, fmt::format("{} is outside [{}, {}]", v, min, max));
+    return v;
+  }
+  double GetOr(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
+               const std::string& prefix, double min, double max, double def) const {
+    return Get(parent, fallback, key, prefix, min, max, &def);
+  }
+
+  Eigen::Vector3d Vec3(const YAML::Node& n, const std::string& field) const {
+    if (!n.IsDefined()) Fail(n, field, "missing");
+    if (!n.IsSequence() || n.size() != 3) Fail(n, field, "must be a list of 3 numbers");
+    return {Number(n[0], field + "[0]"), Number(n[1], field + "[1]"), Number(n[2], field + "[2]")};
+  }
+
+  std::string String(const YAML::Node& n, const std::string& field) const {
+    if (!n.IsDefined()) Fail(n, field, "missing");
+    if (!n.IsScalar()) Fail(n, field, "must be a string");
+    return n.Scalar();
+  }
+
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
+const std::set<std::string> kWheelKeys = {
+    "name", "kind", "mount_m", "heading_deg", "radius_m", "inertia_kg_m2", "roller_angle_deg",
+    "rolling_resistance", "bearing_friction_nm", "bearing_viscous_nm_s", "lateral_mu_scale",
+    "handover_dip_m", "half_offset_m", "encoder", "suspension", "motor"};
+const std::set<std::string> kSuspensionKeys = {"free_length_m",      "min_length_m",
+                                               "max_length_m",       "stiffness_n_m",
+                                               "damping_n_s_m",      "bump_stiffness_n_m",
+                                               "hub_mass_kg",        "tire_stiffness_n_m",
+                                               "tire_damping_n_s_m"};
+const std::set<std::string> kMotorKeys = {"gear_ratio",          "torque_constant_nm_a",
+                                          "max_current_a",       "max_torque_nm",
+                                          "rotor_inertia_kg_m2", "supply_voltage_v",
+                                          "winding_resistance_ohm", "max_accel_rad_s2"};
+
+WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& defaults,
+                     const std::string& prefix, bool* encoder) {
+  rd.CheckKeys(n, prefix.substr(0, prefix.size() - 1), kWheelKeys);
+  WheelSpec w;
+  w.name = rd.String(n["name"], prefix + "name");
+  const YAML::Node kind_node = rd.Find(n, defaults, "kind");
+  const std::string kind = rd.String(kind_node, prefix + "kind");
+  if (kind == "conventional") {
+    w.kind = WheelKind::kConventional;
+  } else if (kind == "mecanum") {
+    w.kind = WheelKind::kMecanum;
+  } else if (kind == "omni") {
+    w.kind = WheelKind::kOmni;
+  } else if (kind == "orthogonal") {
+    w.kind = WheelKind::kOrthogonal;
+  } else if (kind == "caster") {
+    w.kind = WheelKind::kCaster;
+  } else {
+    rd.Fail(kind_node, prefix + "kind",
+            fmt::format("'{}' is not one of conventional, mecanum, omni, orthogonal, caster", kind));
+  }
+  w.mount_B = rd.Vec3(n["mount_m"], prefix + "mount_m");
+  w.heading_rad = rd.GetOr(n, defaults, "heading_deg", prefix, -360, 360, 0) * kDeg;
+  w.radius_m = rd.Get(n, defaults, "radius_m", prefix, 1e-3, 2);
+  w.inertia_kg_m2 = rd.Get(n, defaults, "inertia_kg_m2", prefix, 1e-9, 100);
+  const double def_roller = w.kind == WheelKind::kMecanum ? 45.0 : 90.0;
+  w.roller_angle_rad =
+      rd.GetOr(n, defaults, "roller_angle_deg", prefix, -90, 90, def_roller) * kDeg;
+  if (w.kind == WheelKind::kMecanum && std::abs(std::abs(w.roller_angle_rad) - 0.25 * std::numbers::pi) > 0.35) {
+    rd.Fail(n, prefix + "roller_angle_deg", "a Mecanum roller angle must be near +-45");
+  }
+  w.rolling_resistance = rd.GetOr(n, defaults, "rolling_resistance", prefix, 0, 0.5, 0.01);
+  w.bearing_friction_nm = rd.GetOr(n, defaults, "bearing_friction_nm", prefix, 0, 100, 0.001);
+  w.bearing_viscous_nm_s = rd.GetOr(n, defaults, "bearing_viscous_nm_s", prefix, 0, 100, 0.0);
+  w.lateral_mu_scale = rd.GetOr(n, defaults, "lateral_mu_scale", prefix, 0.01, 10, 1.0);
+  w.handover_dip_m = rd.GetOr(n, defaults, "handover_dip_m", prefix, 0, 0.1, 0.0);
+  w.half_offset_m = rd.GetOr(n, defaults, "half_offset_m", prefix, 0, 0.2, 0.0);
+  const YAML::Node enc = rd.Find(n, defaults, "encoder");
+  *encoder = false;
+  if (enc.IsDefined()) {
+    if (!enc.IsScalar() || (enc.Scalar() != "true" && enc.Scalar() != "false")) {
+      rd.Fail(enc, prefix + "encoder", "must be true or false");
+    }
+    *encoder = enc.Scalar() == "true";
+  }
+
+  const YAML::Node susp = n["suspension"];
+  const YAML::Node dsusp = defaults.IsDefined() && defaults.IsMap() ? defaults["suspension"]
+                                                                    : YAML::Node();
+  if (susp.IsDefined()) rd.CheckKeys(susp, prefix + "suspension", kSuspensionKeys);
+  if (!susp.IsDefined() && !dsusp.IsDefined()) rd.Fail(n, prefix + "suspension", "missing");
+  const std::string sp = prefix + "suspension.";
+  auto& q = w.suspension;
+  q.free_length_m = rd.Get(susp, dsusp, "free_length_m", sp, 1e-4, 2);
+  q.min_length_m = rd.Get(susp, dsusp, "min_length_m", sp, 0, 2);
+  q.max_length_m = rd.Get(susp, dsusp, "max_length_m", sp, 1e-4, 2);
+  if (q.min_length_m >= q.max_length_m) {
+    rd.Fail(susp.IsDefined() ? susp : n, sp + "min_length_m", "must be below max_length_m");
+  }
+  q.stiffness_n_m = rd.Get(susp, dsusp, "stiffness_n_m", sp, 1e-3, 1e8);
+  q.damping_n_s_m = rd.Get(susp, dsusp, "damping_n_s_m", sp, 0, 1e6);
+  q.bump_stiffness_n_m = rd.GetOr(susp, dsusp, "bump_stiffness_n_m", sp, 0, 1e9, 10 * q.stiffness_n_m);
+  q.hub_mass_kg = rd.Get(susp, dsusp, "hub_mass_kg", sp, 1e-4, 100);
+  q.tire_stiffness_n_m = rd.GetOr(susp, dsusp, "tire_stiffness_n_m", sp, 1, 1e9, q.tire_stiffness_n_m);
+  q.tire_damping_n_s_m = rd.GetOr(susp, dsusp, "tire_damping_n_s_m", sp, 0, 1e6, q.tire_damping_n_s_m);
+
+  const YAML::Node motor = n["motor"];
+  w.driven = motor.IsDefined() && !motor.IsNull();
+  if (w.driven) {
+    rd.CheckKeys(motor, prefix + "motor", kMotorKeys);
+    const YAML::Node dmotor = defaults.IsDefined() && defaults.IsMap() ? defaults["motor"]
+                                                                       : YAML::Node();
+    const std::string mp = prefix + "motor.";
+    auto& m = w.motor;
+    m.gear_ratio = rd.Get(motor, dmotor, "gear_ratio", mp, 1e-3, 1e4);
+    m.torque_constant_nm_a = rd.Get(motor, dmotor, "torque_constant_nm_a", mp, 1e-6, 100);
+    m.max_current_a = rd.Get(motor, dmotor, "max_current_a", mp, 1e-6, 1e4);
+    m.max_torque_nm = rd.GetOr(motor, dmotor, "max_torque_nm", mp, 1e-6, 1e6, 1e6);
+    m.rotor_inertia_kg_m2 = rd.GetOr(motor, dmotor, "rotor_inertia_kg_m2", mp, 0, 10, 0);
+    m.supply_voltage_v = rd.GetOr(motor, dmotor, "supply_voltage_v", mp, 1e-3, 1e4, 24);
+    m.winding_resistance_ohm = rd.GetOr(motor, dmotor, "winding_resistance_ohm", mp, 0, 1e4, 0);
+    m.max_accel_rad_s2 = rd.GetOr(motor, dmotor, "max_accel_rad_s2", mp, 0, 1e6, 0);
+    if (w.kind == WheelKind::kCaster) rd.Fail(motor, prefix + "motor", "a caster cannot be driven");
+  }
+  return w;
+}
+
+}  // namespace
+
+double Platform::parameter(const std::string& key) const {
+  for (const auto& [k, v] : parameters) {
+    if (k == key) return v;
+  }
+  throw std::invalid_argument(fmt::format("{}: kinematics.{}: missing", source_file, key));
+}
+
+std::size_t Platform::wheel_index(const std::string& wheel_name) const {
+  for (std::size_t i = 0; i < vehicle.wheels.size(); ++i) {
+    if (vehicle.wheels[i].name == wheel_name) return i;
+  }
+  throw std::invalid_argument(fmt::format("{}: wheel '{}' not found", source_file, wheel_name));
+}
+
+Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
+  Reader rd(file);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw std::invalid_argument(
+        fmt::format("{}:{}: (document): YAML syntax error: {}", file, e.mark.line + 1, e.msg));
+  }
+  if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
+  rd.CheckKeys(root, "(document)",
+               {"name", "description", "paper", "chassis", "wheel_defaults", "wheels",
+                "kinematics", "sensors", "solver"});
+  Platform p;
+  p.source_file = file;
+  p.name = rd.String(root["name"], "name");
+  if (root["description"]) p.description = rd.String(root["description"], "description");
+  auto& v = p.vehicle;
+  v.name = p.name;
+
+  const YAML::Node ch = root["chassis"];
+  if (!ch.IsDefined()) rd.Fail(root, "chassis", "missing");
+  rd.CheckKeys(ch, "chassis", {"mass_kg", "inertia_kg_m2", "half_extents_m", "mesh"});
+  const YAML::Node none;
+  v.mass_kg = rd.Get(ch, none, "mass_kg", "chassis.", 1e-3, 1e5);
+  v.inertia_kg_m2 = rd.Vec3(ch["inertia_kg_m2"], "chassis.inertia_kg_m2");
+  for (int k = 0; k < 3; ++k) {
+    if (!(v.inertia_kg_m2[k] > 0)) {
+      rd.Fail(ch["inertia_kg_m2"], fmt::format("chassis.inertia_kg_m2[{}]", k), "must be > 0");
+    }
+  }
+  v.half_extents_m = rd.Vec3(ch["half_extents_m"], "chassis.half_extents_m");
+  if (ch["mesh"]) p.chassis_mesh = rd.String(ch["mesh"], "chassis.mesh");
+
+  if (const YAML::Node s = root["solver"]; s.IsDefined()) {
+    rd.CheckKeys(s, "solver", {"slip_threshold_m_s", "stribeck_velocity_m_s", "iterations"});
+    v.slip_threshold_m_s = rd.GetOr(s, none, "slip_threshold_m_s", "solver.", 1e-6, 10, v.slip_threshold_m_s);
+    v.stribeck_velocity_m_s =
+        rd.GetOr(s, none, "stribeck_velocity_m_s", "solver.", 1e-6, 10, v.stribeck_velocity_m_s);
+    v.solver_iterations =
+        static_cast<int>(rd.GetOr(s, none, "iterations", "solver.", 1, 1000, v.solver_iterations));
+  }
+
+  const YAML::Node defaults = root["wheel_defaults"];
+  const YAML::Node wheels = root["wheels"];
+  if (!wheels.IsDefined()) rd.Fail(root, "wheels", "missing");
+  if (!wheels.IsSequence() || wheels.size() == 0) rd.Fail(wheels, "wheels", "must be a non-empty list");
+  if (wheels.size() > 32) rd.Fail(wheels, "wheels", "at most 32 wheels");
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < wheels.size(); ++i) {
+    bool encoder = false;
+    const std::string prefix = fmt::format("wheels[{}].", i);
+    WheelSpec w = ParseWheel(rd, wheels[i], defaults, prefix, &encoder);
+    if (!names.insert(w.name).second) {
+      rd.Fail(wheels[i]["name"], prefix + "name", fmt::format("duplicate wheel name '{}'", w.name));
+    }
+    if (encoder || w.driven) p.encoder_wheels.push_back(i);
+    if (w.driven) p.drive_wheels.push_back(i);
+    v.wheels.push_back(std::move(w));
+  }
+
+  const YAML::Node kin = root["kinematics"];
+  if (!kin.IsDefined()) rd.Fail(root, "kinematics", "missing");
+  if (!kin.IsMap()) rd.Fail(kin, "kinematics", "must be a mapping");
+  const std::string type = rd.String(kin["type"], "kinematics.type");
+  if (type == "diff_drive") {
+    p.kinematics = KinematicsKind::kDiffDrive;
+  } else if (type == "mecanum4") {
+    p.kinematics = KinematicsKind::kMecanum4;
+  } else if (type == "omni3") {
+    p.kinematics = KinematicsKind::kOmni3;
+  } else {
+    rd.Fail(kin["type"], "kinematics.type", fmt::format("'{}' is not one of diff_drive, mecanum4, omni3", type));
+  }
+  for (const auto& kv : kin) {
+    const auto key = kv.first.as<std::string>();
+    if (key == "type") continue;
+    p.parameters.emplace_back(key, rd.Number(kv.second, "kinematics." + key));
+  }
+  const std::size_t expected_drive = p.kinematics == KinematicsKind::kDiffDrive ? 2
+                                     : p.kinematics == KinematicsKind::kMecanum4 ? 4
+                                                                                 : 3;
+  if (p.drive_wheels.size() != expected_drive) {
+    rd.Fail(kin["type"], "kinematics.type",
+            fmt::format("{} needs {} driven wheels (with a motor:), found {}", type,
+                        expected_drive, p.drive_wheels.size()));
+  }
+
+  if (const YAML::Node sensors = root["sensors"]; sensors.IsDefined()) {
+    if (!sensors.IsSequence()) rd.Fail(sensors, "sensors", "must be a list");
+    for (std::size_t i = 0; i < sensors.size(); ++i) {
+      const std::string prefix = fmt::format("sensors[{}].", i);
+      rd.CheckKeys(sensors[i], prefix + "(entry)", {"name", "kind", "mount_m", "axis"});
+      SensorMount s;
+      s.name = rd.String(sensors[i]["name"], prefix + "name");
+      s.kind = rd.String(sensors[i]["kind"], prefix + "kind");
+      s.position_B = rd.Vec3(sensors[i]["mount_m"], prefix + "mount_m");
+      if (sensors[i]["axis"]) {
+        s.axis_B = rd.Vec3(sensors[i]["axis"], prefix + "axis");
+        if (s.axis_B.norm() < 1e-9) rd.Fail(sensors[i]["axis"], prefix + "axis", "must be non-zero");
+        s.axis_B.normalize();
+      }
+      p.sensors.push_back(s);
+    }
+  }
+  try {
+    physics::ValidateVehicleSpec(v, file);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("{}:0: {}", file, e.what()));
+  }
+  return p;
+}
+
+Platform LoadPlatformFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::invalid_argument(fmt::format("{}:0: (file): cannot open platform file", path));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return LoadPlatformYaml(ss.str(), path);
+}
+
+double WheelSpeedForTwist(const WheelSpec& w, const BodyTwist& t) noexcept {
+  const double px = w.mount_B.x(), py = w.mount_B.y();
+  const double vx = t.vx_m_s - t.wz_rad_s * py;
+  const double vy = t.vy_m_s + t.wz_rad_s * px;
+  const double fx = std::cos(w.heading_rad), fy = std::sin(w.heading_rad);
+  const double ax = -fy, ay = fx;
+  switch (w.kind) {
+    case WheelKind::kConventional:
+      return (vx * fx + vy * fy) / w.radius_m;
+    case WheelKind::kMecanum:
+    case WheelKind::kOmni:
+    case WheelKind::kOrthogonal: {
+      const double ca = std::cos(w.roller_angle_rad), sa = std::sin(w.roller_angle_rad);
+      const double ux = ca * ax + sa * fx, uy = ca * ay + sa * fy;
+      return (vx * ux + vy * uy) / (w.radius_m * sa);
+    }
+    case WheelKind::kCaster:
+      return 0.0;
+  }
+  return 0.0;
+}
+
+double RimSpeedForTwist(const WheelSpec& w, const BodyTwist& t) noexcept {
+  return WheelSpeedForTwist(w, t) * w.radius_m;
+}
+
+std::vector<double> InverseKinematics(const Platform& p, const BodyTwist& t) {
+  std::vector<double> out(p.vehicle.wheels.size(), 0.0);
+  for (std::size_t i : p.drive_wheels) out[i] = WheelSpeedForTwist(p.vehicle.wheels[i], t);
+  return out;
+}
+
+void CommandTwist(physics::RollerVehicle& vehicle, const Platform& p, const BodyTwist& t) noexcept {
+  for (std::size_t i : p.drive_wheels) {
+    (void)vehicle.SetWheelSpeedCommand(i, WheelSpeedForTwist(p.vehicle.wheels[i], t));
+  }
+}
+
+}  // namespace wheelhil::emulator::platforms

@@ -1,0 +1,226 @@
+#include "emulator/terrain.h"
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <Eigen/Geometry>
+#include <btBulletCollisionCommon.h>
+#include <fmt/format.h>
+
+namespace wheelhil::emulator {
+
+namespace {
+
+btVector3 ToBt(const Eigen::Vector3d& v) {
+  return btVector3(static_cast<btScalar>(v.x()), static_cast<btScalar>(v.y()),
+                   static_cast<btScalar>(v.z()));
+}
+Eigen::Vector3d ToEigen(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
+
+bool InsidePolygon(const std::vector<Eigen::Vector2d>& poly, double x, double y) {
+  bool inside = false;
+  const std::size_t n = poly.size();
+  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+    const auto& a = poly[i];
+    const auto& b = poly[j];
+    if ((a.y() > y) != (b.y() > y) && x < (b.x() - a.x()) * (y - a.y()) / (b.y() - a.y()) + a.x()) {
+      inside = !inside;
+    }
+  }
+  return inside;
+}
+
+}  // namespace
+
+void ValidateFriction(const Friction& f, const std::string& where) {
+  if (!(std::isfinite(f.mu_peak) && f.mu_peak >= 0 && f.mu_peak <= 10)) {
+    throw std::invalid_argument(
+        fmt::format("{}: mu_peak ({}) must be finite and in [0, 10]", where, f.mu_peak));
+  }
+  if (!(std::isfinite(f.mu_slide) && f.mu_slide >= 0 && f.mu_slide <= f.mu_peak)) {
+    throw std::invalid_argument(
+        fmt::format("{}: mu_slide ({}) must be finite and in [0, mu_peak={}]", where, f.mu_slide,
+                    f.mu_peak));
+  }
+}
+
+Terrain::Terrain() = default;
+
+Terrain::~Terrain() {
+  if (world_) {
+    for (auto& m : meshes_) world_->removeCollisionObject(m.object.get());
+  }
+}
+
+void Terrain::AddPlane(const Eigen::Vector3d& normal_W, const Eigen::Vector3d& point_W,
+                       const Friction& friction) {
+  ValidateFriction(friction, "plane");
+  const double norm = normal_W.norm();
+  if (!(norm > 1e-9) || !std::isfinite(norm)) {
+    throw std::invalid_argument("plane: normal: must be a finite non-zero vector");
+  }
+  Plane p{normal_W / norm, 0.0, friction};
+  p.d = p.n.dot(point_W);
+  planes_.push_back(p);
+}
+
+void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
+                           const std::vector<std::array<int, 3>>& triangles,
+                           const Friction& friction, const std::string& name) {
+  ValidateFriction(friction, name);
+  if (triangles.empty()) {
+    throw std::invalid_argument(fmt::format("{}: mesh: contains no triangles", name));
+  }
+  if (!world_) {
+    config_ = std::make_unique<btDefaultCollisionConfiguration>();
+    dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
+    broadphase_ = std::make_unique<btDbvtBroadphase>();
+    world_ = std::make_unique<btCollisionWorld>(dispatcher_.get(), broadphase_.get(),
+                                                config_.get());
+  }
+  Mesh mesh;
+  mesh.friction = friction;
+  mesh.triangles = std::make_unique<btTriangleMesh>(/*use32bitIndices=*/true,
+                                                    /*use4componentVertices=*/false);
+  const int nv = static_cast<int>(vertices_W.size());
+  for (const auto& t : triangles) {
+    for (int k : t) {
+      if (k < 0 || k >= nv) {
+        throw std::invalid_argument(
+            fmt::format("{}: mesh: triangle index {} out of range [0, {})", name, k, nv));
+      }
+    }
+    mesh.triangles->addTriangle(ToBt(vertices_W[t[0]]), ToBt(vertices_W[t[1]]),
+                                ToBt(vertices_W[t[2]]), /*removeDuplicateVertices=*/false);
+  }
+  mesh.shape = std::make_unique<btBvhTriangleMeshShape>(mesh.triangles.get(), true, true);
+  mesh.object = std::make_unique<btCollisionObject>();
+  mesh.object->setCollisionShape(mesh.shape.get());
+  mesh.object->setUserIndex(static_cast<int>(meshes_.size()));
+  world_->addCollisionObject(mesh.object.get());
+  world_->updateAabbs();
+  triangle_count_ += triangles.size();
+  meshes_.push_back(std::move(mesh));
+}
+
+void Terrain::AddMesh(const std::string& path, const MeshOptions& options) {
+  if (!std::filesystem::exists(path)) {
+    throw std::invalid_argument(fmt::format("{}: mesh: file not found", path));
+  }
+  if (!(std::isfinite(options.scale) && options.scale > 0)) {
+    throw std::invalid_argument(
+        fmt::format("{}: scale ({}) must be finite and > 0", path, options.scale));
+  }
+  if (options.up_axis != 'y' && options.up_axis != 'z') {
+    throw std::invalid_argument(
+        fmt::format("{}: up_axis ('{}') must be 'y' or 'z'", path, options.up_axis));
+  }
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile(
+      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices);
+  if (scene == nullptr || scene->mRootNode == nullptr) {
+    throw std::invalid_argument(
+        fmt::format("{}: mesh: cannot be read: {}", path, importer.GetErrorString()));
+  }
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<std::array<int, 3>> triangles;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    const int base = static_cast<int>(vertices.size());
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
+      const aiVector3D& p = mesh->mVertices[v];
+      Eigen::Vector3d q(p.x, p.y, p.z);
+      if (!q.allFinite()) {
+        throw std::invalid_argument(
+            fmt::format("{}: mesh {}: vertex {} is not finite", path, m, v));
+      }
+      q *= options.scale;
+      // y-up files: (x, y, z) -> (x, -z, y) keeps right-handedness with z up.
+      if (options.up_axis == 'y') q = Eigen::Vector3d(q.x(), -q.z(), q.y());
+      vertices.push_back(q + options.offset_W);
+    }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines from the importer
+      triangles.push_back({base + static_cast<int>(face.mIndices[0]),
+                           base + static_cast<int>(face.mIndices[1]),
+                           base + static_cast<int>(face.mIndices[2])});
+    }
+  }
+  AddTriangles(vertices, triangles, options.friction, path);
+}
+
+void Terrain::AddPatch(const FrictionPatch& patch) {
+  const std::string where = fmt::format("patch '{}'", patch.name);
+  if (patch.polygon_W.size() < 3) {
+    throw std::invalid_argument(fmt::format("{}: polygon: needs at least 3 vertices, has {}",
+                                            where, patch.polygon_W.size()));
+  }
+  for (const auto& v : patch.polygon_W) {
+    if (!v.allFinite()) throw std::invalid_argument(where + ": polygon: vertex is not finite");
+  }
+  ValidateFriction(patch.friction, where);
+  patches_.push_back(patch);
+}
+
+Friction Terrain::FrictionAt(const Eigen::Vector3d& p, const Friction& base) const noexcept {
+  for (auto it = patches_.rbegin(); it != patches_.rend(); ++it) {
+    if (InsidePolygon(it->polygon_W, p.x(), p.y())) return it->friction;
+  }
+  return base;
+}
+
+bool Terrain::Raycast(const Eigen::Vector3d& from, const Eigen::Vector3d& dir, double max_dist,
+                      SurfaceHit* hit) const noexcept {
+  bool found = false;
+  double best = max_dist;
+  for (const Plane& p : planes_) {
+    const double denom = p.n.dot(dir);
+    if (denom >= -1e-12) continue;  // parallel or from below
+    const double t = (p.d - p.n.dot(from)) / denom;
+    if (t < 0 || t > best) continue;
+    best = t;
+    found = true;
+    hit->distance_m = t;
+    hit->point_W = from + t * dir;
+    hit->normal_W = p.n;
+    hit->friction = p.friction;
+  }
+  if (world_ && !meshes_.empty()) {
+    const btVector3 a = ToBt(from);
+    const btVector3 b = ToBt(from + dir * best);
+    btCollisionWorld::ClosestRayResultCallback cb(a, b);
+    world_->rayTest(a, b, cb);
+    if (!cb.hasHit()) {
+      // A ray along a shared triangle edge can slip through in single precision; look again
+      // 50 um to the side before calling it a gap.
+      const Eigen::Vector3d side = dir.unitOrthogonal() * 5e-5;
+      const btVector3 a2 = ToBt(from + side);
+      const btVector3 b2 = ToBt(from + side + dir * best);
+      cb = btCollisionWorld::ClosestRayResultCallback(a2, b2);
+      world_->rayTest(a2, b2, cb);
+    }
+    if (cb.hasHit()) {
+      const double t = best * cb.m_closestHitFraction;
+      if (!found || t < best) {
+        found = true;
+        hit->distance_m = t;
+        hit->point_W = from + t * dir;
+        Eigen::Vector3d n = ToEigen(cb.m_hitNormalWorld).normalized();
+        if (n.dot(dir) > 0) n = -n;  // facing the ray origin
+        hit->normal_W = n;
+        hit->friction = meshes_[static_cast<std::size_t>(cb.m_collisionObject->getUserIndex())]
+                            .friction;
+      }
+    }
+  }
+  if (found && !patches_.empty()) hit->friction = FrictionAt(hit->point_W, hit->friction);
+  return found;
+}
+
+}  // namespace wheelhil::emulator

@@ -1,0 +1,266 @@
+// Physics acceptance tests: kinematics of the three platforms, follower rim speeds (paper 001
+// eq 2), rest without drift, slip on a low-mu patch, suspension over a bump, determinism.
+
+#include <cmath>
+#include <numbers>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/emulator/physics_test_util.h"
+
+namespace wheelhil::emulator {
+namespace {
+
+using physics::BodyTruth;
+using physics::WheelTruth;
+using testing::LoadShipped;
+using testing::Rig;
+using testing::SourcePath;
+
+// Planar displacement of the body, expressed in the body frame at the start.
+struct Planar {
+  double fwd, left, dyaw;
+};
+Planar Displacement(const BodyTruth& a, const BodyTruth& b) {
+  const Eigen::Vector3d d = b.p_WB - a.p_WB;
+  const double c = std::cos(a.yaw_rad), s = std::sin(a.yaw_rad);
+  return {c * d.x() + s * d.y(), -s * d.x() + c * d.y(), b.yaw_rad - a.yaw_rad};
+}
+
+// Runs twist for duration, then zero command for 1.5 s; returns the displacement.
+Planar RunMotion(Rig& rig, double vx, double vy, double wz, double duration_s) {
+  rig.world.StepFor(1.0);  // settle on the suspension
+  const BodyTruth start = rig.vehicle->body_truth();
+  rig.Command(vx, vy, wz);
+  rig.world.StepFor(duration_s);
+  rig.Command(0, 0, 0);
+  rig.world.StepFor(1.5);
+  return Displacement(start, rig.vehicle->body_truth());
+}
+
+TEST(MecanumOmni3, ForwardReachesCommandedDistance) {
+  Rig rig("mecanum4_omni3");
+  const Planar d = RunMotion(rig, 0.3, 0, 0, 5.0);
+  EXPECT_NEAR(d.fwd, 1.5, 0.03 * 1.5);
+  EXPECT_LT(std::abs(d.left), 0.02 * 1.5);
+  EXPECT_LT(std::abs(d.dyaw), 0.02);
+}
+
+TEST(MecanumOmni3, SidewaysRightReachesCommandedDistance) {
+  Rig rig("mecanum4_omni3");
+  const Planar d = RunMotion(rig, 0, -0.3, 0, 5.0);
+  EXPECT_NEAR(d.left, -1.5, 0.03 * 1.5);
+  EXPECT_LT(std::abs(d.fwd), 0.02 * 1.5);
+  EXPECT_LT(std::abs(d.dyaw), 0.02);
+}
+
+TEST(MecanumOmni3, ClockwiseSpinReachesCommandedAngle) {
+  Rig rig("mecanum4_omni3");
+  const Planar d = RunMotion(rig, 0, 0, -0.5, 5.0);
+  EXPECT_NEAR(d.dyaw, -2.5, 0.03 * 2.5);
+  // Drift of the centre: under 2 % of the distance a wheel travels (2.5 rad * 0.32 m).
+  EXPECT_LT(std::hypot(d.fwd, d.left), 0.02 * 2.5 * std::hypot(0.25, 0.20));
+}
+
+TEST(MecanumOmni3, Diagonal45ReachesCommandedDisplacement) {
+  Rig rig("mecanum4_omni3");
+  const double v = 0.3, c = std::sqrt(0.5);
+  const Planar d = RunMotion(rig, v * c, -v * c, 0, 5.0);  // forward-right at 45 deg
+  const double along = (d.fwd - d.left) * c;
+  const double across = (d.fwd + d.left) * c;
+  EXPECT_NEAR(along, 1.5, 0.03 * 1.5);
+  EXPECT_LT(std::abs(across), 0.02 * 1.5);
+  EXPECT_LT(std::abs(d.dyaw), 0.02);
+}
+
+// Paper 001 eq 2 in the paper's frame (X right, Y forward): rim speeds of front, left, right.
+Eigen::Vector3d Eq2(double vx_b, double vy_b, double wz, double d) {
+  const double X = -vy_b, Y = vx_b;
+  return {-X + d * wz, 0.5 * X - std::sqrt(3.0) / 2 * Y + d * wz,
+          0.5 * X + std::sqrt(3.0) / 2 * Y + d * wz};
+}
+
+TEST(MecanumOmni3, FollowerRimSpeedsMatchPaperEq2) {
+  struct Case {
+    double vx, vy, wz;
+  };
+  for (const Case c : {Case{0.3, 0, 0}, Case{0, -0.3, 0}, Case{0, 0, -0.5}, Case{0.2, 0.1, 0.3}}) {
+    Rig rig("mecanum4_omni3");
+    const double d = rig.platform.parameter("follower_radius_d_m");
+    const std::size_t f0 = rig.platform.wheel_index("follower_front");
+    rig.world.StepFor(1.0);
+    rig.Command(c.vx, c.vy, c.wz);
+    rig.world.StepFor(1.0);  // steady state
+    Eigen::Vector3d sum_rim = Eigen::Vector3d::Zero(), sum_eq = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 1000; ++k) {
+      rig.world.Step();
+      const BodyTruth& b = rig.vehicle->body_truth();
+      const Eigen::Matrix3d R = b.q_WB.toRotationMatrix();
+      const Eigen::Vector3d v_B = R.transpose() * b.v_WB_W;
+      const double wz = (R.transpose() * b.omega_WB_W).z();
+      sum_eq += Eq2(v_B.x(), v_B.y(), wz, d);
+      for (int j = 0; j < 3; ++j) {
+        const auto& t = rig.vehicle->wheel_truth()[f0 + static_cast<std::size_t>(j)];
+        sum_rim[j] += t.omega_rad_s * t.effective_radius_m;
+      }
+    }
+    const double scale = sum_eq.cwiseAbs().maxCoeff();
+    for (int j = 0; j < 3; ++j) {
+      EXPECT_NEAR(sum_rim[j], sum_eq[j], 0.01 * scale)
+          << "follower " << j << " twist " << c.vx << " " << c.vy << " " << c.wz;
+    }
+  }
+}
+
+TEST(Diff2, StraightTenMetresDriftsUnderFiveMillimetres) {
+  Rig rig("diff2");
+  const Planar d = RunMotion(rig, 0.25, 0, 0, 40.0);
+  EXPECT_NEAR(d.fwd, 10.0, 0.03 * 10.0);
+  EXPECT_LT(std::abs(d.left), 0.005);
+}
+
+TEST(Diff2, ArcsMatchKinematicRadius) {
+  for (const double radius : {0.5, 1.0, -2.0}) {
+    Rig rig("diff2");
+    rig.world.StepFor(1.0);
+    const double v = 0.25;
+    rig.Command(v, 0, v / radius);
+    rig.world.StepFor(2.0);
+    // Fit: speed / yaw rate averaged over 4 s of steady motion.
+    double s = 0, yaw = 0;
+    const BodyTruth a = rig.vehicle->body_truth();
+    Eigen::Vector3d prev = a.p_WB;
+    for (int k = 0; k < 4000; ++k) {
+      rig.world.Step();
+      s += (rig.vehicle->body_truth().p_WB - prev).norm();
+      prev = rig.vehicle->body_truth().p_WB;
+    }
+    yaw = rig.vehicle->body_truth().yaw_rad - a.yaw_rad;
+    EXPECT_NEAR(s / yaw, radius, 0.01 * std::abs(radius)) << "radius " << radius;
+  }
+}
+
+void ExpectRestWithoutDrift(const std::string& platform, double slope_deg, double yaw) {
+  Rig rig(platform, 0.8, 0.7, slope_deg, yaw);
+  rig.world.StepFor(2.0);  // settle
+  const BodyTruth a = rig.vehicle->body_truth();
+  rig.world.StepFor(10.0);
+  const BodyTruth b = rig.vehicle->body_truth();
+  EXPECT_LT((b.p_WB - a.p_WB).norm(), 1e-3) << platform << " slope " << slope_deg;
+  EXPECT_LT(std::abs(b.yaw_rad - a.yaw_rad), 1e-3) << platform << " slope " << slope_deg;
+  for (const auto& w : rig.vehicle->wheel_truth()) {
+    if (rig.platform.vehicle.wheels.size() > 0 && w.normal_load_n > 0) {
+      EXPECT_LT(w.slip_speed_m_s, 1e-3);
+    }
+  }
+}
+
+TEST(Rest, FlatFloorNoDrift) {
+  ExpectRestWithoutDrift("diff2", 0, 0);
+  ExpectRestWithoutDrift("mecanum4_omni3", 0, 0);
+  ExpectRestWithoutDrift("ortho3", 0, 0);
+}
+
+TEST(Rest, FiveDegreeRampNoDrift) {
+  ExpectRestWithoutDrift("diff2", 5, 0);
+  ExpectRestWithoutDrift("diff2", 5, M_PI / 2);
+  ExpectRestWithoutDrift("mecanum4_omni3", 5, 0);
+  ExpectRestWithoutDrift("mecanum4_omni3", 5, M_PI / 2);
+  ExpectRestWithoutDrift("ortho3", 5, 0.3);
+}
+
+TEST(Slip, LowMuPatchMakesDriveWheelSlipAndRecoverOffIt) {
+  Rig rig("diff2");
+  // mu = 0.05 patch under the start position, up to x = 0.6 m.
+  rig.world.terrain().AddPatch(
+      FrictionPatch{"oil", {{-1, -1}, {0.6, -1}, {0.6, 1}, {-1, 1}}, Friction{0.05, 0.04}});
+  rig.world.StepFor(1.0);
+  const std::size_t left = rig.platform.wheel_index("left");
+  const WheelTruth w0 = rig.vehicle->wheel_truth()[left];
+  rig.Command(0.25, 0, 0);
+  bool slipped = false;
+  for (int k = 0; k < 300; ++k) {
+    rig.world.Step();
+    slipped = slipped || rig.vehicle->wheel_truth()[left].slipping;
+  }
+  EXPECT_TRUE(slipped);
+  const WheelTruth& w1 = rig.vehicle->wheel_truth()[left];
+  EXPECT_GT((w1.rim_travel_m - w0.rim_travel_m) - (w1.ground_travel_m - w0.ground_travel_m), 0.01);
+  // Leave the patch, then no slip for the rest of the run.
+  while (rig.vehicle->body_truth().p_WB.x() < 1.2) rig.world.Step();
+  const WheelTruth w2 = rig.vehicle->wheel_truth()[left];
+  for (int k = 0; k < 2000; ++k) {
+    rig.world.Step();
+    EXPECT_FALSE(rig.vehicle->wheel_truth()[left].slipping) << "step " << k;
+    if (rig.vehicle->wheel_truth()[left].slipping) break;
+  }
+  const WheelTruth& w3 = rig.vehicle->wheel_truth()[left];
+  EXPECT_NEAR(w3.rim_travel_m - w2.rim_travel_m, w3.ground_travel_m - w2.ground_travel_m, 1e-3);
+}
+
+TEST(Suspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
+  platforms::Platform p = LoadShipped("mecanum4_omni3");
+  const std::size_t weak = p.wheel_index("follower_left");
+  // Too weak a follower spring (with its slider's damping): it cannot follow the floor down.
+  p.vehicle.wheels[weak].suspension.stiffness_n_m = 20;
+  p.vehicle.wheels[weak].suspension.free_length_m = 0.06;
+  p.vehicle.wheels[weak].suspension.damping_n_s_m = 40;
+  physics::PhysicsWorld world;
+  world.terrain().AddMesh(SourcePath("meshes/bump.obj"), MeshOptions{});
+  auto& v = world.AddVehicle(p.vehicle, 0, 0, 0);
+  world.StepFor(1.0);
+  platforms::CommandTwist(v, p, platforms::BodyTwist{0.3, 0, 0});
+  int drive_lost = 0, weak_lost = 0, strong_lost = 0;
+  const std::size_t strong = p.wheel_index("follower_front");
+  const double x_end = 2.0;
+  while (v.body_truth().p_WB.x() < x_end && world.time_s() < 12) {
+    world.Step();
+    for (std::size_t i : p.drive_wheels) drive_lost += v.wheel_truth()[i].in_contact ? 0 : 1;
+    weak_lost += v.wheel_truth()[weak].in_contact ? 0 : 1;
+    strong_lost += v.wheel_truth()[strong].in_contact ? 0 : 1;
+  }
+  EXPECT_GT(v.body_truth().p_WB.x(), x_end - 0.01);
+  EXPECT_EQ(drive_lost, 0);
+  EXPECT_EQ(strong_lost, 0);
+  EXPECT_GT(weak_lost, 20);  // > 20 ms off the floor
+}
+
+TEST(Determinism, SameInputsGiveBitIdenticalTrajectories) {
+  auto run = [] {
+    Rig rig("mecanum4_omni3");
+    rig.world.terrain().AddPatch(
+        FrictionPatch{"wet", {{0.3, -1}, {0.8, -1}, {0.8, 1}, {0.3, 1}}, Friction{0.2, 0.15}});
+    rig.Command(0.3, 0.1, 0.2);
+    rig.world.StepFor(3.0);
+    std::vector<double> out;
+    const auto& b = rig.vehicle->body_truth();
+    out = {b.p_WB.x(), b.p_WB.y(), b.p_WB.z(), b.yaw_rad};
+    for (const auto& w : rig.vehicle->wheel_truth()) out.push_back(w.angle_rad);
+    return out;
+  };
+  const auto a = run();
+  const auto b = run();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i], b[i]) << i;
+}
+
+TEST(Ortho3, HandoverDisturbsBodyPeriodically) {
+  Rig rig("ortho3");
+  rig.world.StepFor(1.0);
+  rig.Command(0.1, 0, 0);
+  rig.world.StepFor(1.0);
+  double zmin = 1e9, zmax = -1e9;
+  for (int k = 0; k < 2000; ++k) {
+    rig.world.Step();
+    const double z = rig.vehicle->body_truth().p_WB.z();
+    zmin = std::min(zmin, z);
+    zmax = std::max(zmax, z);
+  }
+  EXPECT_GT(zmax - zmin, 2e-4);  // the radius dip bounces the body
+  const Planar d{rig.vehicle->body_truth().p_WB.x(), 0, 0};
+  EXPECT_GT(d.fwd, 0.25);
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator
