@@ -70,6 +70,11 @@ CanopenEncoderNode::CanopenEncoderNode(const Cia406NodeConfig& config,
         "encoder_node.speed_time_base_s ({}) must be finite and > 0", config.speed_time_base_s));
   }
   if (!codec_) throw std::invalid_argument("encoder_node: a frame codec is required");
+  if (!codec_->SupportsNode(config.node_id)) {
+    throw std::invalid_argument(fmt::format(
+        "encoder_node.node_id ({}): the frame codec (DBC) has no messages for this node",
+        config.node_id));
+  }
   ResetApplication();
   ResetCommunication();
   ScheduleBoot(power_on_ns + config.power_on_delay_ns);
@@ -133,7 +138,8 @@ void CanopenEncoderNode::EmitTpdo(std::int64_t due_ns, std::vector<NodeFrame>& o
   if (tpdo1_cob_id_ & kCobIdInvalid) return;
   bus::CanFrame f;
   const std::uint32_t position = ReportedPosition();
-  Emit(codec_->EncodeTpdo1(tpdo1_cob_id_ & 0x7FF, position, ReportedSpeed(), f), f, due_ns, out);
+  Emit(codec_->EncodeTpdo1(config_.node_id, tpdo1_cob_id_ & 0x7FF, position, ReportedSpeed(), f), f,
+       due_ns, out);
   have_last_tpdo_position_ = true;
   last_tpdo_position_ = position;
 }

@@ -32,7 +32,8 @@
 /// EMCY on 0x080+id when a device fault is raised (error code, error register 0x1001) and an
 /// error-reset EMCY (code 0x0000) when it clears; not sent in stopped.
 /// Responses to SYNC and SDO requests are due response_delay_ns after the request.
-/// Frames are built by a Cia406Codec (the DBC codec in production). Thread-compatible.
+/// Frames are built and read by a Cia406Codec: DbcCia406Codec, over bus/dbc/cia406_encoder.dbc.
+/// Thread-compatible.
 
 #include <cstdint>
 #include <memory>

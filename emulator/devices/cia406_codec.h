@@ -24,12 +24,16 @@ class Cia406Codec {
  public:
   virtual ~Cia406Codec() = default;
 
+  /// True when the codec can build every frame of this node id.
+  virtual bool SupportsNode(std::uint8_t node_id) const = 0;
+
   /// NMT error-control frame on 0x700 + node_id: boot-up (state 0) or heartbeat.
   virtual bool EncodeNmtState(std::uint8_t node_id, std::uint8_t state,
                               bus::CanFrame& out) const = 0;
-  /// TPDO1: position value 0x6004 (u32 counts) and speed value 0x6030.1 (int16), on cob_id.
-  virtual bool EncodeTpdo1(std::uint32_t cob_id, std::uint32_t position, std::int16_t speed,
-                           bus::CanFrame& out) const = 0;
+  /// TPDO1 of node_id: position value 0x6004 (u32 counts) and speed value 0x6030.1 (int16),
+  /// sent on cob_id (11 bit; 0x180 + node_id unless reconfigured through 0x1800:1).
+  virtual bool EncodeTpdo1(std::uint8_t node_id, std::uint32_t cob_id, std::uint32_t position,
+                           std::int16_t speed, bus::CanFrame& out) const = 0;
   /// EMCY on 0x080 + node_id: error code, error register (0x1001), manufacturer field zero.
   virtual bool EncodeEmcy(std::uint8_t node_id, std::uint16_t error_code,
                           std::uint8_t error_register, bus::CanFrame& out) const = 0;

@@ -15,6 +15,8 @@
 #include "bus/can_frame.h"
 #include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/canopen_encoder_node.h"
+#include "emulator/devices/dbc_cia406_codec.h"
+#include "emulator/sensors/encoder_model.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -244,55 +246,12 @@ TEST(CanBusModel, RejectsBadConfigurationAndFrames) {
   EXPECT_EQ(bus.frames_dropped(), 3u);
 }
 
-// Test-only codec: the CiA 301 byte layout written out by hand, independent of the DBC files,
-// so the node's logic can be checked against the golden traces on its own.
-class HandLayoutCodecForTest final : public Cia406Codec {
- public:
-  bool EncodeNmtState(std::uint8_t node_id, std::uint8_t state, CanFrame& out) const override {
-    out = Std(0x700u + node_id, {state});
-    return true;
-  }
-  bool EncodeTpdo1(std::uint32_t cob_id, std::uint32_t position, std::int16_t speed,
-                   CanFrame& out) const override {
-    const auto s = static_cast<std::uint16_t>(speed);
-    out = Std(cob_id, {Byte(position, 0), Byte(position, 1), Byte(position, 2), Byte(position, 3),
-                       Byte(s, 0), Byte(s, 1)});
-    return true;
-  }
-  bool EncodeEmcy(std::uint8_t node_id, std::uint16_t code, std::uint8_t reg,
-                  CanFrame& out) const override {
-    out = Std(0x080u + node_id, {Byte(code, 0), Byte(code, 1), reg, 0, 0, 0, 0, 0});
-    return true;
-  }
-  bool EncodeSdoResponse(std::uint8_t node_id, const SdoFields& s, CanFrame& out) const override {
-    out =
-        Std(0x580u + node_id, {s.command, Byte(s.index, 0), Byte(s.index, 1), s.subindex,
-                               Byte(s.data, 0), Byte(s.data, 1), Byte(s.data, 2), Byte(s.data, 3)});
-    return true;
-  }
-  bool DecodeNmt(const CanFrame& f, std::uint8_t& command, std::uint8_t& node) const override {
-    if (f.len != 2) return false;
-    command = f.data[0];
-    node = f.data[1];
-    return true;
-  }
-  bool DecodeSdoRequest(const CanFrame& f, SdoFields& s) const override {
-    if (f.len != 8) return false;
-    s.command = f.data[0];
-    s.index = static_cast<std::uint16_t>(f.data[1] | f.data[2] << 8);
-    s.subindex = f.data[3];
-    s.data = static_cast<std::uint32_t>(f.data[4] | f.data[5] << 8 | f.data[6] << 16 |
-                                        static_cast<std::uint32_t>(f.data[7]) << 24);
-    return true;
-  }
-
- private:
-  static std::uint8_t Byte(std::uint32_t v, int i) {
-    return static_cast<std::uint8_t>((v >> (8 * i)) & 0xFF);
-  }
-};
-
-std::shared_ptr<const Cia406Codec> Codec() { return std::make_shared<HandLayoutCodecForTest>(); }
+// Every frame of the node goes through bus/dbc/cia406_encoder.dbc.
+std::shared_ptr<const Cia406Codec> Codec() {
+  static const auto codec =
+      DbcCia406Codec::FromFile(std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc/cia406_encoder.dbc");
+  return codec;
+}
 
 // ---------------------------------------------------------------------------------------------
 // CANopen CiA 406 encoder node against hand-written golden candump traces.
@@ -546,6 +505,34 @@ TEST(CanopenEncoderNode, AcyclicSyncTypeAndCobIdRules) {
   EXPECT_EQ(send("604#4001100000000000", Ms(15)), "584#4F01100005000000");
 }
 
+// Same seed -> same frames, end to end: a seeded encoder with missed counts and glitches read
+// by the node, TPDO1 on every SYNC.
+std::vector<std::string> EncoderTrace(std::uint64_t seed) {
+  EncoderModel enc(
+      {.lines_per_rev = 512, .missed_count_prob = 0.01, .glitch_prob = 0.05, .seed = seed});
+  CanopenEncoderNode node({.node_id = 1, .power_on_delay_ns = 0, .tpdo1_transmission_type = 1},
+                          Codec());
+  node.Poll(0);
+  node.OnFrame(ParseCanUtils("000#0101"), Ms(1));
+  std::vector<std::string> lines;
+  for (int k = 1; k <= 200; ++k) {
+    const std::int64_t t = Ms(1) + k * Ms(1);
+    const double angle_rad = 12.0 * 1e-3 * k;  // 12 rad/s
+    node.SetMeasurement(enc.Sample(angle_rad), 12.0 * enc.counts_per_rev() / (2.0 * 3.14159265));
+    for (const auto& f : node.OnFrame(ParseCanUtils("080#"), t)) {
+      lines.push_back(CandumpLine(f.due_ns, f.frame));
+    }
+  }
+  return lines;
+}
+
+TEST(CanopenEncoderNode, SameSeedSameFrames) {
+  const auto a = EncoderTrace(21), b = EncoderTrace(21), c = EncoderTrace(22);
+  ASSERT_EQ(a.size(), 200u);
+  EXPECT_EQ(a, b);
+  EXPECT_NE(a, c);
+}
+
 TEST(CanopenEncoderNode, CodeSequenceInvertsPositionAndSpeed) {
   CanopenEncoderNode node({.node_id = 2, .power_on_delay_ns = 0}, Codec());
   node.Poll(0);
@@ -560,11 +547,11 @@ TEST(CanopenEncoderNode, CodeSequenceInvertsPositionAndSpeed) {
 }
 
 TEST(CanopenEncoderNode, IgnoresForeignAndMalformedFramesWithoutCrashing) {
-  CanopenEncoderNode node({.node_id = 9, .power_on_delay_ns = 0, .heartbeat_ms = 10}, Codec());
+  CanopenEncoderNode node({.node_id = 8, .power_on_delay_ns = 0, .heartbeat_ms = 10}, Codec());
   node.Poll(0);
   EXPECT_TRUE(node.OnFrame(ParseCanUtils("000#01"), Ms(1)).empty());                // short NMT
-  EXPECT_TRUE(node.OnFrame(ParseCanUtils("609#4000"), Ms(1)).empty());              // short SDO
-  EXPECT_TRUE(node.OnFrame(ParseCanUtils("608#4000100000000000"), Ms(1)).empty());  // not ours
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("608#4000"), Ms(1)).empty());              // short SDO
+  EXPECT_TRUE(node.OnFrame(ParseCanUtils("607#4000100000000000"), Ms(1)).empty());  // not ours
   EXPECT_TRUE(node.OnFrame(ParseCanUtils("12345678#00"), Ms(1)).empty());           // extended
   EXPECT_EQ(node.rejected_frames(), 2u);
   EXPECT_EQ(node.state(), CanopenEncoderNode::NmtState::kPreOperational);
@@ -574,6 +561,32 @@ TEST(CanopenEncoderNode, IgnoresForeignAndMalformedFramesWithoutCrashing) {
   EXPECT_EQ(frames[0].due_ns, Ms(10));
   EXPECT_EQ(frames[2].due_ns, Ms(30));
   EXPECT_EQ(node.NextEventNs(), Ms(40));
+}
+
+TEST(DbcCia406Codec, CoversNodes1To8FromTheDbcAndValidatesFrames) {
+  const auto codec =
+      DbcCia406Codec::FromFile(std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc/cia406_encoder.dbc");
+  for (std::uint8_t id = 1; id <= 8; ++id) EXPECT_TRUE(codec->SupportsNode(id)) << int{id};
+  EXPECT_FALSE(codec->SupportsNode(0));
+  EXPECT_FALSE(codec->SupportsNode(9));
+  EXPECT_THAT([&] { CanopenEncoderNode({.node_id = 9}, codec); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("no messages for this node")));
+  CanFrame f;
+  ASSERT_TRUE(codec->EncodeTpdo1(2, 0x2A2, 0xDEADBEEF, -2, f));  // reconfigured COB-ID
+  EXPECT_EQ(bus::ToCanUtilsString(f), "2A2#EFBEADDEFEFF");
+  EXPECT_FALSE(codec->EncodeTpdo1(2, 0x800, 0, 0, f));
+  ASSERT_TRUE(codec->EncodeEmcy(8, 0x7305, 0x81, f));
+  EXPECT_EQ(bus::ToCanUtilsString(f), "088#0573810000000000");
+  std::uint8_t cs = 0, node = 0;
+  EXPECT_TRUE(codec->DecodeNmt(ParseCanUtils("000#8207"), cs, node));
+  EXPECT_EQ(cs, 0x82);
+  EXPECT_EQ(node, 7);
+  EXPECT_FALSE(codec->DecodeNmt(ParseCanUtils("000#820700"), cs, node));  // DLC 3
+  SdoFields sdo;
+  EXPECT_TRUE(codec->DecodeSdoRequest(ParseCanUtils("605#2B17100032000000"), sdo));
+  EXPECT_EQ(sdo, (SdoFields{0x2B, 0x1017, 0, 0x32}));
+  EXPECT_FALSE(codec->DecodeSdoRequest(ParseCanUtils("605#2B171000320000"), sdo));    // DLC 7
+  EXPECT_FALSE(codec->DecodeSdoRequest(ParseCanUtils("60A#2B17100032000000"), sdo));  // node 10
 }
 
 TEST(CanopenEncoderNode, RejectsBadConfiguration) {
