@@ -1,32 +1,169 @@
 // `wheelhil-fw --can IFACE --config FILE.yaml`: the reference estimator firmware. It talks plain
-// SocketCAN only; nothing of emulator/ is linked in.
+// SocketCAN only (bus/socketcan_transport.h); nothing of emulator/ is linked in, so it runs
+// unchanged on vcan0, can0 or a userspace bus under `wheelhil exec`.
+//
+// Exit codes: 0 clean stop (SIGINT/SIGTERM), 1 the interface cannot be opened (the transport's
+// message is printed), 2 bad command line, config or DBC files (file:line: field: problem).
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
+#include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <memory>
+#include <optional>
 #include <stdexcept>
+#include <system_error>
 
+#include "bus/candump_log.h"
+#include "bus/socketcan_transport.h"
+#include "firmware_stub/fw_app.h"
 #include "firmware_stub/fw_config.h"
+#include "firmware_stub/fw_protocol.h"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+extern "C" void OnSignal(int) { g_stop.store(true); }
+
+std::int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string ExeDir() {
+  std::error_code ec;
+  const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string(".") : p.parent_path().string();
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"wheelhil-fw - reference estimator firmware over SocketCAN"};
+  using namespace wheelhil;
+  CLI::App app{"wheelhil-fw - reference estimator firmware (CANopen master) over SocketCAN"};
   std::string iface;
   std::string config_path;
+  std::string dbc_dir;
+  std::string log_path;
+  bool quiet = false;
   app.add_option("--can", iface, "CAN interface (vcan0, can0, ucan0, ...)")->required();
   app.add_option("--config", config_path, "Firmware config YAML")->required();
+  app.add_option("--dbc-dir", dbc_dir,
+                 "Directory with the protocol DBC files (default: config dbc_dir, "
+                 "$WHEELHIL_DBC_DIR, <exe>/../../bus/dbc, <exe>/../share/wheelhil/dbc)");
+  app.add_option("--log", log_path, "Write every frame received and sent (candump -L format)");
+  app.add_flag("--quiet", quiet, "No start-up / summary messages on stderr");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);
     return code == 0 ? 0 : 2;
   }
+
+  fw::FwConfig cfg;
+  std::unique_ptr<fw::FwProtocol> protocol;
+  std::unique_ptr<fw::FwApp> fwapp;
   try {
-    const auto cfg = wheelhil::fw::LoadFwConfig(config_path);
-    fmt::print(stderr, "wheelhil-fw: estimator {} on {}: the estimator loop is not built yet\n",
-               wheelhil::fw::EstimatorName(cfg.estimator), iface);
-    return 1;
+    cfg = fw::LoadFwConfig(config_path);
+    const std::string dir = fw::FwProtocol::FindDbcDir(dbc_dir.empty() ? cfg.dbc_dir : dbc_dir,
+                                                       ExeDir());
+    if (dir.empty()) {
+      throw std::invalid_argument(
+          "no DBC directory: set dbc_dir in the config, --dbc-dir or WHEELHIL_DBC_DIR "
+          "(searched <exe>/../../bus/dbc and <exe>/../share/wheelhil/dbc)");
+    }
+    std::vector<int> ids;
+    for (const auto& n : cfg.encoder_nodes()) ids.push_back(n.node_id);
+    protocol = std::make_unique<fw::FwProtocol>(fw::FwProtocol::LoadDir(
+        dir, ids, cfg.imu.enabled ? cfg.imu.yaw_frame_id : 0,
+        cfg.accel.enabled ? cfg.accel.frame_id : 0));
+    fwapp = std::make_unique<fw::FwApp>(cfg, *protocol);
+    if (!quiet) {
+      fmt::print(stderr, "wheelhil-fw: estimator {}, SYNC {} every {} s, DBC {}\n",
+                 fw::EstimatorName(cfg.estimator), cfg.sync.produce ? "produced" : "followed",
+                 cfg.sync.period_s, dir);
+      for (const auto& s : protocol->unbound_output_signals()) {
+        fmt::print(stderr, "wheelhil-fw: note: output signal {} is not filled (sent as 0)\n", s);
+      }
+    }
   } catch (const std::invalid_argument& e) {
     fmt::print(stderr, "wheelhil-fw: {}\n", e.what());
     return 2;
   }
+
+  std::optional<bus::SocketCanTransport> can;
+  try {
+    bus::CanTransportOptions options;
+    can.emplace(bus::SocketCanTransport::Open(iface, options));
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "wheelhil-fw: {}\n", e.what());
+    return 1;
+  }
+  std::unique_ptr<bus::CandumpWriter> log;
+  if (!log_path.empty()) {
+    try {
+      log = std::make_unique<bus::CandumpWriter>(log_path,
+                                                 bus::CandumpWriter::FlushPolicy::kEveryLine);
+    } catch (const std::invalid_argument& e) {
+      fmt::print(stderr, "wheelhil-fw: {}\n", e.what());
+      return 2;
+    }
+  }
+
+  struct sigaction sa {};
+  sa.sa_handler = OnSignal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = 0;  // No SA_RESTART: a signal ends the wait at once.
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
+  const std::int64_t t0 = NowNs();
+  std::vector<bus::CanFrame> out;
+  std::uint64_t send_errors = 0;
+  auto flush = [&](std::int64_t t) {
+    for (const auto& f : out) {
+      if (can->Send(f)) {
+        ++send_errors;
+      } else if (log) {
+        (void)log->Write(t - t0, iface, f);
+      }
+    }
+    out.clear();
+  };
+  fwapp->Start(t0, out);
+  flush(t0);
+  while (!g_stop.load()) {
+    const std::int64_t now = NowNs();
+    const std::int64_t next = fwapp->NextEventNs();
+    const std::int64_t wait_ns = next <= now ? 0 : std::min<std::int64_t>(next - now, 50'000'000);
+    bus::ReceivedFrame rx;
+    const std::error_code ec = can->Receive(rx, static_cast<int>((wait_ns + 999'999) / 1'000'000));
+    const std::int64_t t = NowNs();
+    if (!ec) {
+      if (log) (void)log->Write(t - t0, iface, rx.frame);
+      fwapp->OnFrame(rx.frame, t, out);
+    } else if (ec != std::errc::timed_out && ec != std::errc::resource_unavailable_try_again &&
+               ec != std::errc::bad_message && ec != std::errc::interrupted) {
+      fmt::print(stderr, "wheelhil-fw: receive on {}: {}\n", iface, ec.message());
+      if (ec == std::errc::network_down || ec == std::errc::no_such_device) break;
+    }
+    fwapp->Poll(t, out);
+    flush(t);
+  }
+  if (!quiet) {
+    const auto& s = fwapp->stats();
+    fmt::print(stderr,
+               "wheelhil-fw: stopped: {} frames in ({} bad, {} unknown ids), {} out ({} send "
+               "errors), {} cycles, {} steps, {} skipped, faults 0x{:X}\n",
+               s.frames_in, s.bad_frames, s.unknown_frames, s.frames_out, send_errors, s.cycles,
+               s.steps, s.skipped_steps, fwapp->last_faults());
+  }
+  return 0;
 }

@@ -20,7 +20,17 @@ std::string WriteTemp(const std::string& name, const std::string& text) {
 }
 
 TEST(FwConfig, ReadsEstimator) {
-  const auto path = WriteTemp("fw_ok.yaml", "estimator: paper001\n");
+  const auto path = WriteTemp("fw_ok.yaml", R"(estimator: paper001
+sync: {period_s: 0.01}
+paper001:
+  mount_radius_m: 0.2
+  follower_radius_m: 0.024
+  counts_per_rev: 4096
+  followers:
+    - {node_id: 1, angle_deg: 90}
+    - {node_id: 2, angle_deg: 210}
+    - {node_id: 3, angle_deg: 330}
+)");
   EXPECT_EQ(LoadFwConfig(path).estimator, EstimatorKind::kPaper001FollowerOdometry);
 }
 

@@ -1,0 +1,127 @@
+#pragma once
+/// The reference firmware without its sockets: CANopen master + cycle assembler + the estimator
+/// the config selects + the output frames of bus/dbc/wheelhil_fw.dbc. Frames in (OnFrame), frames
+/// out (appended to `out`), time in integer ns of any monotonic clock; the program
+/// (wheelhil_fw_main.cc) adds only the SocketCAN transport and the clock, so tests drive exactly
+/// what runs on the bus.
+///
+/// Per closed cycle (cycle_assembler.h) the app steps the estimator once and sends, in this
+/// order, the estimate frames of the estimator (paper000: FW_Pose, FW_PoseRaw, FW_SlipStatus,
+/// FW_Velocity; paper001: FW_Pose, FW_Velocity; paper002: FW_Pose, FW_Velocity,
+/// FW_VelocityOdom, FW_VelocityAccel), then FW_Status last; all carry the cycle counter
+/// (mod 256). Time steps are the configured SYNC period times the SYNC intervals a step spans
+/// (not receive times), so the output depends only on the frames, never on scheduling.
+/// Degrading, not dying: a cycle with an encoder missing skips the estimator step (the next
+/// complete cycle spans the gap: counters are absolute, gyro and accelerometer samples carry
+/// over); a source silent for lost_after_cycles cycles is flagged lost; bad frames are counted.
+/// Thread-compatible.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "bus/can_frame.h"
+#include "firmware_stub/canopen_master.h"
+#include "firmware_stub/cycle_assembler.h"
+#include "firmware_stub/encoder_counter.h"
+#include "firmware_stub/fw_config.h"
+#include "firmware_stub/fw_protocol.h"
+#include "firmware_stub/paper000_slip_estimator.h"
+#include "firmware_stub/paper001_follower_odometry.h"
+#include "firmware_stub/paper002_velocity_fusion.h"
+
+namespace wheelhil::fw {
+
+/// Status_State values (VAL_ of FW_Status in wheelhil_fw.dbc).
+enum class FwState : std::uint8_t {
+  kBoot = 0, kWaitingForNodes = 1, kCalibrating = 2, kRunning = 3, kDegraded = 4, kFault = 5
+};
+
+struct FwAppStats {
+  std::uint64_t frames_in = 0;
+  std::uint64_t bad_frames = 0;      ///< Wrong DLC / checksum / undecodable known frames.
+  std::uint64_t unknown_frames = 0;  ///< Ids the protocol does not know (also bad_frames).
+  std::uint64_t foreign_frames = 0;  ///< Valid CANopen traffic of nodes we do not use.
+  std::uint64_t cycles = 0;          ///< Cycles closed.
+  std::uint64_t steps = 0;           ///< Estimator steps done.
+  std::uint64_t skipped_steps = 0;   ///< Cycles without a step (inputs missing).
+  std::uint64_t frames_out = 0;
+  std::uint64_t accel_duplicates = 0;  ///< Accel frames repeating the previous counter.
+  std::uint64_t accel_gaps = 0;        ///< Accel samples lost (counter jumps).
+};
+
+class FwApp {
+ public:
+  /// Cycles without a sample after which the IMU / accelerometer is reported lost.
+  static constexpr int kLostAfterCycles = 3;
+
+  /// Builds the estimator; throws std::invalid_argument "config-file: section: problem" when
+  /// the estimator rejects the configuration. `protocol` must outlive the app.
+  FwApp(const FwConfig& config, const FwProtocol& protocol);
+
+  void Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
+  /// One frame off the bus (never throws on its content).
+  void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, std::vector<bus::CanFrame>& out);
+  /// Timed work (master timers, SYNC production, cycle deadlines).
+  void Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
+  std::int64_t NextEventNs() const;
+
+  const CanopenMaster& master() const { return master_; }
+  const CycleAssembler& assembler() const { return assembler_; }
+  const FwAppStats& stats() const { return stats_; }
+  FwState state() const { return state_; }
+  /// OR of FaultBit of the last status frame.
+  std::uint32_t last_faults() const { return last_faults_; }
+
+ private:
+  void OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out);
+  void Send(OutMessage m, const OutValues& v, std::vector<bus::CanFrame>& out);
+  void Step000(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
+  void Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
+  void Step002(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
+  void HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
+                        std::vector<bus::CanFrame>& out);
+
+  FwConfig config_;
+  const FwProtocol& protocol_;
+  CanopenMaster master_;
+  CycleAssembler assembler_;
+  std::vector<EncoderNode> nodes_;
+  std::int64_t period_ns_ = 0;
+
+  std::optional<SlipCorrectingOdometry> p000_;
+  std::optional<FollowerOdometry> p001_;
+  std::optional<VelocityFusion> p002_;
+  FollowerGeometry p002_geometry_;
+  std::array<double, 3> p002_odometry_{};  // Accumulated body-frame displacement (x, y, th).
+  Pose2 p002_pose_;
+  std::array<double, 3> vel_{};  // Body velocity of the last step (x fwd, y left, yaw) [SI].
+
+  // Inputs carried over cycles that could not be stepped.
+  std::array<bool, AssembledCycle::kMaxNodes> primed_{};
+  std::array<std::uint32_t, AssembledCycle::kMaxNodes> last_position_{};
+  std::uint64_t last_step_cycle_ = 0;
+  bool have_step_cycle_ = false;
+  double carry_dth_gyro_rad_ = 0.0;
+  double last_yaw_rate_rad_s_ = 0.0;
+  std::array<double, 4> last_accel_m_s2_{};
+  int last_accel_counter_ = -1;
+  int imu_silent_cycles_ = 0;
+  int accel_silent_cycles_ = 0;
+
+  // Per-status-frame event faults.
+  std::uint32_t event_faults_ = 0;
+  std::uint8_t last_emcy_node_ = 0;
+  std::uint64_t heartbeat_ = 0;
+  std::uint32_t last_faults_ = 0;
+  FwState state_ = FwState::kBoot;
+  FwAppStats stats_;
+};
+
+/// Master and assembler settings derived from a firmware config (also used by tests).
+CanopenMasterConfig MasterConfigFrom(const FwConfig& config);
+CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config);
+
+}  // namespace wheelhil::fw

@@ -1,0 +1,449 @@
+#include "firmware_stub/fw_app.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include "tests/firmware_stub/fw_test_devices.h"
+
+namespace wheelhil::fw {
+namespace {
+
+using testing::Devices;
+
+constexpr std::int64_t kMs = 1'000'000;
+
+const char* kPaper000 = R"(
+estimator: paper000
+canopen: {boot_timeout_s: 0.5, heartbeat_period_s: 0.1, heartbeat_timeout_s: 0.35}
+sync: {period_s: 0.25, deadline_s: 0.2}
+imu: {yaw_frame_id: 0x174}
+paper000:
+  track_width_m: 0.5
+  wheel_radius_m: 0.075
+  counts_per_rev: 2000
+  counter_bits: 32
+  left: {node_id: 1}
+  right: {node_id: 2}
+  residual_mean_rad: 0.0
+  residual_sigma_rad: 0.002
+)";
+
+const char* kPaper002 = R"(
+estimator: paper002
+canopen: {boot_timeout_s: 0.5, heartbeat_period_s: 0.1, heartbeat_timeout_s: 0.35}
+sync: {period_s: 0.001}
+accel: {frame_id: 0x170}
+paper002:
+  wheel_radius_m: 0.05
+  wheel_mount_radius_m: 0.2
+  counts_per_rev: 4096
+  wheels:
+    - {node_id: 1, angle_deg: 0}
+    - {node_id: 2, angle_deg: 120}
+    - {node_id: 3, angle_deg: 240}
+  accel_mount_radius_m: 0.15
+)";
+
+/// The app on a simulated bus: encoder nodes that boot, answer SDOs, start on NMT, send TPDO1
+/// on SYNC and beat; the IMU / accelerometers send what the test sets. All in virtual time.
+class Bench {
+ public:
+  explicit Bench(const std::string& yaml, int beat_ms = 100)
+      : config_(ParseFwConfig(yaml, "test.yaml")),
+        protocol_(FwProtocol::LoadDir(testing::DbcDir(), NodeIds(config_),
+                                      config_.imu.enabled ? config_.imu.yaw_frame_id : 0,
+                                      config_.accel.enabled ? config_.accel.frame_id : 0)),
+        app_(config_, protocol_),
+        beat_ms_(beat_ms) {
+    for (int id : NodeIds(config_)) alive_[id] = true;
+  }
+
+  static std::vector<int> NodeIds(const FwConfig& c) {
+    std::vector<int> ids;
+    for (const auto& n : c.encoder_nodes()) ids.push_back(n.node_id);
+    return ids;
+  }
+
+  /// Boot-ups at 10 ms, then runs until the master has started every node.
+  void StartUp() {
+    std::vector<bus::CanFrame> out;
+    app_.Start(0, out);
+    Deliver(out, 0);
+    t_ = 10 * kMs;
+    for (const auto& [id, on] : alive_) {
+      if (on) Feed(dev_.Boot(id));
+    }
+    ASSERT_TRUE(app_.master().started());
+  }
+
+  /// Runs until the app has sent the next SYNC: the IMU (every 10 ms) and heartbeats are fed in
+  /// time order on the way, the accelerometers once just before the SYNC, and the nodes answer
+  /// the SYNC with `positions` (node id -> counts). Returns the output frames the app sent
+  /// meanwhile (estimates and status; those of a cycle closed by its deadline included).
+  std::vector<bus::CanFrame> Cycle(const std::map<int, std::uint32_t>& positions,
+                                   double yaw_rate_rad_s = 0.0,
+                                   std::array<double, 4> accel = {0, 0, 0, 0}) {
+    positions_ = positions;
+    outputs_.clear();
+    sync_seen_ = false;
+    while (!sync_seen_) {
+      const std::int64_t next = std::max(t_, app_.NextEventNs());
+      for (;;) {  // Device events before `next`, in time order.
+        const std::int64_t imu = config_.imu.enabled && imu_on_ ? next_imu_ : kNever;
+        const std::int64_t beat = next_beat_;
+        const std::int64_t ev = std::min(imu, beat);
+        if (ev >= next) break;
+        t_ = std::max(t_, ev);
+        if (ev == imu) {
+          Feed(dev_.Yaw(yaw_rate_rad_s));
+          next_imu_ += 10 * kMs;
+        } else {
+          for (const auto& [id, on] : alive_) {
+            if (on && started_[id]) Feed(dev_.State(id, 0x05));
+          }
+          next_beat_ += beat_ms_ * kMs;
+        }
+      }
+      t_ = next;
+      if (config_.accel.enabled && accel_on_ && app_.master().started() &&
+          app_.NextEventNs() <= t_ && !accel_sent_) {
+        Feed(dev_.Accel(accel, accel_counter_++));
+        accel_sent_ = true;
+      }
+      std::vector<bus::CanFrame> out;
+      app_.Poll(t_, out);
+      Deliver(out, t_);
+    }
+    accel_sent_ = false;
+    return outputs_;
+  }
+
+  void Feed(const bus::CanFrame& f) {
+    std::vector<bus::CanFrame> out;
+    app_.OnFrame(f, t_, out);
+    Deliver(out, t_);
+  }
+
+  /// Decodes the last output frame `m` among `frames` (fails the test when absent).
+  OutValues Out(const std::vector<bus::CanFrame>& frames, OutMessage m) const {
+    for (auto it = frames.rbegin(); it != frames.rend(); ++it) {
+      OutValues v;
+      if (protocol_.DecodeOutput(m, *it, v)) return v;
+    }
+    ADD_FAILURE() << OutMessageName(m) << " not sent";
+    return {};
+  }
+
+  FwApp& app() { return app_; }
+  const FwProtocol& protocol() const { return protocol_; }
+  const Devices& dev() const { return dev_; }
+  std::map<int, bool> alive_;           ///< Node answers and beats.
+  std::map<int, bool> drop_next_tpdo_;  ///< Node skips its next TPDO.
+  std::map<int, int> repeat_next_tpdo_; ///< Node sends its next TPDO this many times more.
+  bool accel_on_ = true;
+  bool imu_on_ = true;
+  std::int64_t t_ = 0;
+  std::vector<OutValues> statuses_;  ///< Every FW_Status the app sent.
+
+ private:
+  /// Plays the devices' side for every frame the app sent.
+  void Deliver(const std::vector<bus::CanFrame>& frames, std::int64_t t) {
+    for (const auto& f : frames) {
+      if (f.id >= 0x601 && f.id <= 0x67F) {
+        const int id = static_cast<int>(f.id - 0x600);
+        if (alive_[id]) Feed(dev_.SdoAnswer(f));
+      } else if (f.id == 0x000 && f.len == 2 && f.data[0] == 0x01) {
+        started_[f.data[1]] = true;
+      } else if (f.id == 0x080) {
+        sync_seen_ = true;
+        for (const auto& [id, pos] : positions_) {
+          if (!alive_[id] || !started_[id]) continue;
+          if (drop_next_tpdo_[id]) {
+            drop_next_tpdo_[id] = false;
+            continue;
+          }
+          const int copies = 1 + repeat_next_tpdo_[id];
+          repeat_next_tpdo_[id] = 0;
+          for (int i = 0; i < copies; ++i) Feed(dev_.Tpdo(id, pos));
+        }
+      } else if (f.id >= 0x680 && f.id <= 0x686) {
+        outputs_.push_back(f);
+        OutValues v;
+        if (protocol_.DecodeOutput(OutMessage::kStatus, f, v)) statuses_.push_back(v);
+      }
+    }
+    (void)t;
+  }
+
+  Devices dev_;
+  FwConfig config_;
+  FwProtocol protocol_;
+  FwApp app_;
+  int beat_ms_;
+  static constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
+  std::int64_t next_beat_ = 110 * kMs;
+  std::int64_t next_imu_ = 20 * kMs;
+  std::map<int, bool> started_;
+  std::map<int, std::uint32_t> positions_;
+  bool sync_seen_ = false;
+  bool accel_sent_ = false;
+  int accel_counter_ = 0;
+  std::vector<bus::CanFrame> outputs_;
+};
+
+/// Counts for `metres` of wheel travel (r = 0.075 m, 2000 counts/rev).
+std::uint32_t Counts000(double metres) {
+  return static_cast<std::uint32_t>(std::llround(metres / (2 * M_PI * 0.075) * 2000));
+}
+
+TEST(FwApp, Paper000StraightLineOutputsOnceEveryCycleWithTheCycleCounter) {
+  Bench b(kPaper000);
+  b.StartUp();
+  double travel = 0.0;
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 20; ++k) {
+    frames = b.Cycle({{1, Counts000(travel)}, {2, Counts000(travel)}});
+    // Order: estimates, then the status frame last.
+    ASSERT_EQ(frames.size(), 5u) << "cycle " << k;
+    EXPECT_EQ(frames.back().id, 0x686u);
+    for (OutMessage m : {OutMessage::kPose, OutMessage::kPoseRaw, OutMessage::kSlipStatus,
+                         OutMessage::kVelocity, OutMessage::kStatus}) {
+      EXPECT_EQ(b.Out(frames, m).Get(OutField::kCycle), k) << OutMessageName(m);
+    }
+    EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), k);
+    travel += 0.0625;  // 0.25 m/s for 0.25 s.
+  }
+  const OutValues pose = b.Out(frames, OutMessage::kPose);
+  // 19 steps of 0.0625 m (the first cycle primes the counters); 0.5 mm LSB, quantised counts.
+  EXPECT_NEAR(pose.Get(OutField::kX), 19 * 0.0625, 1e-3);
+  EXPECT_NEAR(pose.Get(OutField::kY), 0.0, 1e-3);
+  EXPECT_NEAR(b.Out(frames, OutMessage::kVelocity).Get(OutField::kVx), 0.25, 2e-3);
+  const OutValues st = b.Out(frames, OutMessage::kStatus);
+  EXPECT_EQ(st.Get(OutField::kState), static_cast<double>(FwState::kRunning));
+  EXPECT_EQ(st.Get(OutField::kFaultBadFrame), 0);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc1), 0);
+  EXPECT_EQ(b.app().stats().steps, 19u);
+  EXPECT_EQ(b.app().last_faults(), 0u);
+}
+
+TEST(FwApp, Paper000SlipOfTheRightWheelIsFlaggedAndCorrected) {
+  Bench b(kPaper000);
+  b.StartUp();
+  double left = 0, right = 0;
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 8; ++k) {
+    const bool spin = k == 5;
+    frames = b.Cycle({{1, Counts000(left)}, {2, Counts000(right)}});
+    if (k == 6) {  // The cycle whose interval contained the spin.
+      const OutValues s = b.Out(frames, OutMessage::kSlipStatus);
+      EXPECT_EQ(s.Get(OutField::kSlipRight), 1);
+      EXPECT_EQ(s.Get(OutField::kSlipLeft), 0);
+      EXPECT_GT(s.Get(OutField::kResidual), s.Get(OutField::kBandHigh));
+      EXPECT_NEAR(s.Get(OutField::kBandHigh), 1.96 * 0.002, 2e-6);
+    }
+    left += 0.0625;
+    right += 0.0625 + (spin ? 0.02 : 0.0);  // 20 mm spin, gyro says straight.
+  }
+  const OutValues pose = b.Out(frames, OutMessage::kPose);
+  const OutValues raw = b.Out(frames, OutMessage::kPoseRaw);
+  EXPECT_NEAR(pose.Get(OutField::kTheta), 0.0, 2e-3);  // Corrected: still straight.
+  EXPECT_NEAR(raw.Get(OutField::kTheta), 0.02 / 0.5, 2e-3);  // Encoders: turned 40 mrad.
+}
+
+TEST(FwApp, EncoderCounterWrapIsSeamless) {
+  Bench b(kPaper000);
+  b.StartUp();
+  const std::uint32_t start = 0xFFFFFFFFu - Counts000(0.3);  // Wraps after ~5 cycles.
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 12; ++k) {
+    const std::uint32_t c = start + Counts000(k * 0.0625);  // Unsigned wrap.
+    frames = b.Cycle({{1, c}, {2, c}});
+  }
+  EXPECT_NEAR(b.Out(frames, OutMessage::kPose).Get(OutField::kX), 11 * 0.0625, 1e-3);
+  EXPECT_EQ(b.app().last_faults(), 0u);
+}
+
+TEST(FwApp, OutputCycleCounterWrapsAt256) {
+  Bench b(kPaper002);
+  b.StartUp();
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 258; ++k) frames = b.Cycle({{1, 0}, {2, 0}, {3, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kPose).Get(OutField::kCycle), 257 % 256);
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kCycle), 1);
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), 1);
+  EXPECT_EQ(b.app().stats().cycles, 258u);
+}
+
+// A dropped TPDO skips the step; the next complete cycle spans the gap with the absolute
+// counters, so the pose ends where the run without drops ends. Duplicates change nothing.
+TEST(FwApp, MissingAndDuplicatedTpdosDegradeButLoseNoTravel) {
+  auto run = [](bool faults) {
+    Bench b(kPaper000);
+    b.StartUp();
+    std::vector<bus::CanFrame> frames;
+    double travel = 0.0;
+    for (int k = 0; k < 16; ++k) {
+      if (faults && k == 4) b.drop_next_tpdo_[2] = true;
+      if (faults && k == 9) b.repeat_next_tpdo_[1] = 2;
+      frames = b.Cycle({{1, Counts000(travel)}, {2, Counts000(travel * 1.01)}});
+      travel += 0.05;
+    }
+    int degraded = 0;
+    for (const auto& st : b.statuses_) {
+      degraded += st.Get(OutField::kState) == static_cast<double>(FwState::kDegraded);
+    }
+    EXPECT_EQ(degraded, faults ? 2 : 0);  // The incomplete cycle and the one with duplicates.
+    EXPECT_EQ(b.app().stats().skipped_steps, faults ? 1u : 0u);
+    EXPECT_EQ(b.app().assembler().duplicates(), faults ? 2u : 0u);
+    return b.Out(frames, OutMessage::kPose);
+  };
+  const OutValues clean = run(false);
+  const OutValues degraded = run(true);
+  EXPECT_NEAR(degraded.Get(OutField::kX), clean.Get(OutField::kX), 1e-3);
+  EXPECT_NEAR(degraded.Get(OutField::kY), clean.Get(OutField::kY), 1e-3);
+  EXPECT_NEAR(degraded.Get(OutField::kTheta), clean.Get(OutField::kTheta), 2e-4);
+}
+
+TEST(FwApp, BadTrafficIsCountedFlaggedAndSurvived) {
+  Bench b(kPaper000);
+  b.StartUp();
+  b.Cycle({{1, 0}, {2, 0}});
+  b.Feed(testing::Frame("181#0102"));                 // TPDO1 with DLC 2.
+  b.Feed(testing::Frame("174#00"));                   // IMU with DLC 1.
+  b.Feed(testing::Frame("321#DEADBEEF"));             // Unknown id.
+  b.Feed(testing::Frame("20000004#0000000000000000"));  // Error frame.
+  auto frames = b.Cycle({{1, 100}, {2, 100}});
+  const OutValues st = b.Out(frames, OutMessage::kStatus);
+  EXPECT_EQ(st.Get(OutField::kFaultBadFrame), 1);
+  EXPECT_EQ(st.Get(OutField::kBadFrameCount), 4);
+  EXPECT_EQ(b.app().stats().unknown_frames, 2u);
+  // Still running: the next cycle steps and the bad-frame bit is this cycle's only.
+  frames = b.Cycle({{1, 200}, {2, 200}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kFaultBadFrame), 0);
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kBadFrameCount), 4);
+  EXPECT_EQ(b.app().stats().steps, 2u);
+}
+
+TEST(FwApp, LostNodeSetsItsBitAndTheFirmwareKeepsPublishing) {
+  Bench b(kPaper000);
+  b.StartUp();
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 4; ++k) frames = b.Cycle({{1, 0}, {2, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kNodeLostEnc2), 0);
+  b.alive_[2] = false;  // Node 2 dies: no heartbeat, no TPDO.
+  for (int k = 0; k < 3; ++k) frames = b.Cycle({{1, 0}, {2, 0}});
+  const OutValues st = b.Out(frames, OutMessage::kStatus);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc2), 1);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc1), 0);
+  EXPECT_EQ(st.Get(OutField::kState), static_cast<double>(FwState::kDegraded));
+  EXPECT_EQ(b.app().last_faults() & kFaultNodeLost, kFaultNodeLost);
+  EXPECT_EQ(b.app().last_faults() & kFaultCycleIncomplete, kFaultCycleIncomplete);
+}
+
+TEST(FwApp, EmcyIsReportedWithItsNode) {
+  Bench b(kPaper000);
+  b.StartUp();
+  b.Cycle({{1, 0}, {2, 0}});
+  b.Feed(b.dev().Emcy(2, 0x7305, 0x81));
+  auto frames = b.Cycle({{1, 0}, {2, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kFaultEmcy), 1);
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kEmcyNodeId), 2);
+  b.Feed(b.dev().Emcy(2, 0, 0));
+  frames = b.Cycle({{1, 0}, {2, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kFaultEmcy), 0);
+}
+
+TEST(FwApp, SilentImuIsReportedLostAfterThreeCycles) {
+  Bench b(R"(
+estimator: paper000
+sync: {period_s: 0.005}
+imu: {}
+paper000: {track_width_m: 0.5, wheel_radius_m: 0.075, counts_per_rev: 2000,
+           left: {node_id: 1}, right: {node_id: 2}, residual_sigma_rad: 0.002}
+)");  // 5 ms cycle: the 10 ms IMU is silent in every other cycle, never three in a row.
+  b.StartUp();
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 10; ++k) frames = b.Cycle({{1, 0}, {2, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kNodeLostImu), 0);
+  b.imu_on_ = false;
+  frames = b.Cycle({{1, 0}, {2, 0}});  // Silent for 1 or 2 cycles now: not yet lost.
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kNodeLostImu), 0);
+  for (int k = 0; k < 3; ++k) frames = b.Cycle({{1, 0}, {2, 0}});
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kNodeLostImu), 1);
+  EXPECT_EQ(b.app().last_faults() & kFaultNodeLost, kFaultNodeLost);
+}
+
+TEST(FwApp, Paper002ConstantVelocityFusesToTheOdometry) {
+  Bench b(kPaper002);
+  b.StartUp();
+  // vx = 0.1 m/s forward: wheel j at angle beta_j rolls along (-sin b, cos b): rim speed
+  // -sin(b) * vx. Per 1 ms: -sin(b) * 0.1 mm.
+  const double cpr = 4096, r = 0.05;
+  std::vector<bus::CanFrame> frames;
+  for (int k = 0; k < 600; ++k) {
+    std::map<int, std::uint32_t> pos;
+    for (int j = 0; j < 3; ++j) {
+      const double beta = j * 2.0 * M_PI / 3.0;
+      const double rim_m = -std::sin(beta) * 0.1 * k * 1e-3;
+      pos[j + 1] = static_cast<std::uint32_t>(
+          static_cast<std::int64_t>(std::llround(rim_m / (2 * M_PI * r) * cpr)));
+    }
+    frames = b.Cycle(pos, 0.0, {0, 0, 0, 0});
+  }
+  ASSERT_EQ(frames.size(), 5u);
+  const OutValues fused = b.Out(frames, OutMessage::kVelocity);
+  const OutValues odom = b.Out(frames, OutMessage::kVelocityOdom);
+  EXPECT_NEAR(odom.Get(OutField::kVx), 0.1, 3e-3);
+  EXPECT_NEAR(fused.Get(OutField::kVx), 0.1, 3e-3);
+  EXPECT_NEAR(fused.Get(OutField::kVy), 0.0, 3e-3);
+  EXPECT_NEAR(b.Out(frames, OutMessage::kVelocityAccel).Get(OutField::kVx), 0.0, 1e-3);
+  EXPECT_NEAR(b.Out(frames, OutMessage::kPose).Get(OutField::kX), 0.1 * 0.599, 1e-3);
+  EXPECT_EQ(b.app().stats().accel_duplicates, 0u);
+  EXPECT_EQ(b.app().last_faults(), 0u);
+}
+
+TEST(FwApp, AccelDuplicateAndBadChecksumAreRejected) {
+  Bench b(kPaper002);
+  b.StartUp();
+  b.Cycle({{1, 0}, {2, 0}, {3, 0}});
+  b.Feed(b.dev().Accel({1, 0, 0, -1}, 0));  // Repeats the counter the bench just sent.
+  EXPECT_EQ(b.app().stats().accel_duplicates, 1u);
+  bus::CanFrame corrupt = b.dev().Accel({1, 0, 0, -1}, 3);
+  corrupt.data[2] ^= 0x10;
+  b.Feed(corrupt);
+  EXPECT_EQ(b.app().stats().bad_frames, 1u);
+}
+
+TEST(FwApp, SameInputsGiveTheSameOutputs) {
+  auto run = [] {
+    Bench b(kPaper000);
+    b.StartUp();
+    std::vector<std::string> all;
+    for (int k = 0; k < 30; ++k) {
+      const double t = 0.0625 * k;
+      const auto frames = b.Cycle({{1, Counts000(t)}, {2, Counts000(t * 1.02 + 0.001 * k)}},
+                                  0.01 * std::sin(k));
+      for (const auto& s : testing::Strings(frames)) all.push_back(s);
+    }
+    return all;
+  };
+  const auto first = run();
+  EXPECT_EQ(first.size(), 150u);
+  EXPECT_EQ(first, run());
+}
+
+TEST(FwApp, BadEstimatorParametersNameTheFile) {
+  FwConfig c = ParseFwConfig(kPaper002, "p2.yaml");
+  c.paper002.angles_rad = {0.0, 0.0, 0.0};  // Singular wheel geometry.
+  const FwProtocol p = FwProtocol::LoadDir(testing::DbcDir(), {1, 2, 3}, 0, 0x170);
+  EXPECT_THAT([&] { FwApp(c, p); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  ::testing::HasSubstr("p2.yaml: paper002: wheels")));
+}
+
+}  // namespace
+}  // namespace wheelhil::fw
