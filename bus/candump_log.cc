@@ -10,6 +10,8 @@ namespace wheelhil::bus {
 namespace {
 
 constexpr std::uint32_t kCanErrFlag = 0x20000000;  // CAN_ERR_FLAG in linux/can.h
+// Largest whole second whose nanosecond count (plus a fraction) fits an int64 (year 2262).
+constexpr std::int64_t kMaxSeconds = 9'223'372'035LL;
 
 int HexValue(char c) noexcept {
   if (c >= '0' && c <= '9') return c - '0';
@@ -139,10 +141,11 @@ CandumpLineStatus ParseCandumpLine(std::string_view line, std::size_t line_numbe
   std::int64_t seconds = 0;
   std::size_t digits = 0;
   for (; i < line.size() && line[i] >= '0' && line[i] <= '9'; ++i, ++digits) {
-    if (seconds > 9'000'000'000LL) return fail("timestamp seconds out of range");
+    if (seconds > kMaxSeconds) break;  // reported below; stops before any overflow
     seconds = seconds * 10 + (line[i] - '0');
   }
   if (digits == 0) return fail("timestamp must be '(<seconds>.<fraction>)'");
+  if (seconds > kMaxSeconds) return fail("timestamp seconds out of range (int64 nanoseconds)");
   if (i >= line.size() || line[i] != '.') return fail("timestamp lacks the '.' before the fraction");
   ++i;
   std::int64_t fraction_ns = 0;

@@ -249,13 +249,22 @@ class DbcParser {
     }
   }
 
-  // NS_ : followed by indented keyword names; ends at the first name in column 0.
+  // NS_ : followed by keyword names (usually indented); ends before BS_, BU_ or BO_, which
+  // never appear in the list.
   void SkipNamespaceBlock() {
     Expect(':');
     for (;;) {
       SkipSpace();
-      if (AtEnd() || pos_ == line_start_) return;
-      (void)Ident();
+      if (AtEnd()) return;
+      const std::size_t save_pos = pos_, save_start = line_start_;
+      const int save_line = line_;
+      const std::string_view name = Ident();
+      if (name == "BS_" || name == "BU_" || name == "BO_") {
+        pos_ = save_pos;
+        line_start_ = save_start;
+        line_ = save_line;
+        return;
+      }
     }
   }
 

@@ -161,7 +161,7 @@ bool EncodeSignal(const DbcSignal& sig, double physical, std::span<std::uint8_t>
   std::uint64_t raw = 0;
   bool exact = true;
   if (sig.is_signed) {
-    const double limit = std::ldexp(1.0, sig.length - 1);  // 2^(n-1)
+    const double limit = static_cast<double>(std::uint64_t{1} << (sig.length - 1));  // 2^(n-1)
     if (r < -limit) {
       raw = std::uint64_t{1} << (sig.length - 1);  // 100..0: the most negative raw value
       exact = false;
@@ -172,7 +172,8 @@ bool EncodeSignal(const DbcSignal& sig, double physical, std::span<std::uint8_t>
       raw = static_cast<std::uint64_t>(static_cast<std::int64_t>(r));
     }
   } else {
-    const double limit = std::ldexp(1.0, sig.length);  // 2^n
+    const double limit = sig.length == 64 ? 18446744073709551616.0  // 2^n
+                                          : static_cast<double>(std::uint64_t{1} << sig.length);
     if (r < 0) {
       raw = 0;
       exact = false;

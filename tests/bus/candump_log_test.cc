@@ -183,6 +183,7 @@ TEST(CandumpParseTest, RejectsMalformedLinesWithLineNumber) {
       {"(1,5) can0 123#00", "lacks the '.'"},
       {"(1.0000000001) can0 123#00", "more than 9 digits"},
       {"(99999999999999999999.0) can0 123#00", "out of range"},
+      {"(9223372036.0) can0 123#00", "out of range"},
       {"(1.0)", "missing interface"},
       {"(1.0) can0", "missing frame"},
       {"(1.0)can0 123#00", "missing interface"},
@@ -212,6 +213,39 @@ TEST(CandumpParseTest, RejectsMalformedLinesWithLineNumber) {
     EXPECT_THAT(err, StartsWith("line 17: ")) << line;
     EXPECT_THAT(err, HasSubstr(problem)) << line;
   }
+}
+
+// Random truncations and byte mutations of valid lines: every outcome is a status, never a
+// crash (the ASan/UBSan build runs this too).
+TEST(CandumpParseTest, MutatedLinesNeverCrash) {
+  std::mt19937 rng(1234);
+  std::vector<std::string> lines;
+  for (const auto& f : AllKinds()) lines.push_back(FormatCandumpLine(9'223'372'035'999'999'999LL, "vcan0", f) + " R");
+  int records = 0, errors = 0;
+  for (int i = 0; i < 20000; ++i) {
+    std::string l = lines[rng() % lines.size()];
+    l.resize(rng() % (l.size() + 1));
+    for (int k = rng() % 4; k > 0 && !l.empty(); --k) {
+      l[rng() % l.size()] = "0123456789ABCDEFrR#._() \t\xff"[rng() % 27];
+    }
+    CandumpRecord r;
+    std::string err;
+    switch (ParseCandumpLine(l, 1, r, &err)) {
+      case CandumpLineStatus::kRecord:
+        ++records;
+        EXPECT_TRUE(r.frame.IsValid()) << l;
+        EXPECT_GE(r.timestamp_ns, 0) << l;
+        break;
+      case CandumpLineStatus::kError:
+        ++errors;
+        EXPECT_THAT(err, StartsWith("line 1: ")) << l;
+        break;
+      case CandumpLineStatus::kSkipped:
+        break;
+    }
+  }
+  EXPECT_GT(records, 100);
+  EXPECT_GT(errors, 100);
 }
 
 TEST(CandumpReaderTest, StreamingGoesOnAfterBadLines) {

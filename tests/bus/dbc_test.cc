@@ -312,6 +312,14 @@ VAL_ 100 Flag 1 "Set" 0 "Clear" ;
   EXPECT_EQ(db.FindMessage("Nope"), nullptr);
 }
 
+TEST(DbcParseTest, NamespaceBlockWithoutIndentation) {
+  const auto db = DbcDatabase::Parse("VERSION \"\"\nNS_ :\nCM_\nBA_DEF_\nVAL_TABLE_\nBS_:\nBU_: A\n"
+                                     "BO_ 1 M: 1 A\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" A\n",
+                                     "ns.dbc");
+  EXPECT_THAT(db.nodes(), ElementsAre("A"));
+  ASSERT_NE(db.FindMessage("M"), nullptr);
+}
+
 TEST(DbcParseTest, ExtendedIdsAndIndependentSignals) {
   constexpr std::string_view kText = R"(VERSION ""
 BU_: A
