@@ -227,6 +227,8 @@ struct UcanBroker::Impl {
   Fd listen_fd;
   Fd epoll_fd;
   Fd wake_fd;
+  Fd spare_fd;  // released to refuse a connection when the process is out of fds
+  std::uint64_t refused_connections = 0;
 
   mutable std::mutex mu;
   std::condition_variable stopped_cv;
@@ -280,6 +282,7 @@ struct UcanBroker::Impl {
     ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, listen_fd.get(), &ev);
     ev.data.u64 = kWakeTag;
     ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, wake_fd.get(), &ev);
+    spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
     thread = std::thread([this] { Loop(); });
   }
 
@@ -382,7 +385,16 @@ struct UcanBroker::Impl {
   void AcceptAll() {
     for (;;) {
       const int fd = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-      if (fd < 0) return;  // EAGAIN, or out of fds: the client's connect stays pending
+      if (fd < 0 && (errno == EMFILE || errno == ENFILE) && spare_fd.get() >= 0) {
+        // Out of fds: refuse this connection (else the listen fd stays ready and we spin).
+        spare_fd.Reset();
+        const int refused = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_CLOEXEC);
+        if (refused >= 0) ::close(refused);
+        spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
+        ++refused_connections;
+        continue;
+      }
+      if (fd < 0) return;  // EAGAIN
       auto c = std::make_unique<Client>();
       c->fd = Fd(fd);
       c->id = next_id++;

@@ -22,6 +22,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <stdarg.h>
+#include <linux/close_range.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -642,6 +643,32 @@ UCAN_EXPORT int close(int fd) {
     UnlockTable();
   }
   return real_close()(fd);
+}
+
+UCAN_EXPORT int close_range(unsigned first, unsigned last, int flags) {
+  using Fn = int (*)(unsigned, unsigned, int);
+  static Fn real = nullptr;
+  Fn f = Resolve(real, "close_range");
+  const int rc = f != nullptr ? f(first, last, flags) : static_cast<int>(Fail(ENOSYS));
+  if (rc == 0 && !(flags & CLOSE_RANGE_CLOEXEC)) {
+    LockTable();
+    for (unsigned fd = first; fd <= last && fd < static_cast<unsigned>(kMaxFds); ++fd) {
+      DetachLocked(static_cast<int>(fd));
+    }
+    UnlockTable();
+  }
+  return rc;
+}
+
+UCAN_EXPORT void closefrom(int lowfd) {
+  using Fn = void (*)(int);
+  static Fn real = nullptr;
+  if (Fn f = Resolve(real, "closefrom")) f(lowfd);
+  LockTable();
+  for (int fd = lowfd < 0 ? 0 : lowfd; fd < kMaxFds; ++fd) {
+    if (g_sockets[fd] != nullptr) DetachLocked(fd);
+  }
+  UnlockTable();
 }
 
 UCAN_EXPORT int dup(int fd) {

@@ -6,6 +6,7 @@
 #include "bus/ucan_broker.h"
 
 #include <fcntl.h>
+#include <linux/close_range.h>
 #include <linux/can/error.h>
 #include <linux/sockios.h>
 #include <sys/epoll.h>
@@ -538,9 +539,13 @@ TEST_F(UcanBusTest, DupSharesTheSocketAndCloseForgetsIt) {
   EXPECT_EQ(domain, AF_CAN);
   ::close(copy);
   ::close(copy2);
-  // A plain pipe that lands on a recycled fd number is not taken for a CAN socket.
+  // A plain pipe that lands on a recycled fd number is not taken for a CAN socket, also when
+  // the socket went away through close_range().
+  const int gone = OpenCan("ucan0");
+  ASSERT_EQ(::close_range(static_cast<unsigned>(gone), static_cast<unsigned>(gone), 0), 0);
   int p[2];
   ASSERT_EQ(::pipe(p), 0);
+  EXPECT_EQ(p[0], gone);
   ASSERT_EQ(::write(p[1], "xy", 2), 2);
   char buf[4] = {};
   EXPECT_EQ(::read(p[0], buf, sizeof(buf)), 2);
