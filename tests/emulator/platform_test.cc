@@ -1,1 +1,130 @@
+// Platform files: the three shipped platforms load, their inverse kinematics equal the papers'
+// closed forms (paper 001 eq 1, differential drive, 3-wheel omni), and bad files fail with the
+// file, line and field in the message.
 
+#include "emulator/platforms/platform.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <numbers>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/emulator/physics_test_util.h"
+
+namespace wheelhil::emulator::platforms {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+using wheelhil::emulator::testing::LoadShipped;
+using wheelhil::emulator::testing::SourcePath;
+
+TEST(Platform, ShippedPlatformsLoadWithTheirParts) {
+  const Platform diff2 = LoadShipped("diff2");
+  EXPECT_EQ(diff2.kinematics, KinematicsKind::kDiffDrive);
+  EXPECT_EQ(diff2.drive_wheels.size(), 2u);
+  EXPECT_EQ(diff2.vehicle.wheels.size(), 4u);
+  EXPECT_EQ(diff2.sensors.size(), 1u);
+  const Platform m = LoadShipped("mecanum4_omni3");
+  EXPECT_EQ(m.drive_wheels.size(), 4u);
+  EXPECT_EQ(m.encoder_wheels.size(), 7u);
+  const Platform o = LoadShipped("ortho3");
+  EXPECT_EQ(o.drive_wheels.size(), 3u);
+  EXPECT_EQ(o.sensors.size(), 4u);
+  for (const Platform* p : {&diff2, &m, &o}) {
+    std::ifstream mesh(SourcePath(p->chassis_mesh));
+    EXPECT_TRUE(mesh.good()) << p->chassis_mesh;
+  }
+}
+
+TEST(Platform, MecanumInverseKinematicsIsPaper001Eq1) {
+  const Platform p = LoadShipped("mecanum4_omni3");
+  const double l1 = p.parameter("l1_m"), l2 = p.parameter("l2_m");
+  const double R = p.parameter("wheel_radius_m");
+  const double a = p.parameter("roller_angle_deg") * std::numbers::pi / 180;
+  const double k = (l1 * std::tan(a) + l2) / std::tan(a);
+  for (const BodyTwist t : {BodyTwist{0.3, 0, 0}, BodyTwist{0, -0.3, 0}, BodyTwist{0, 0, -0.5},
+                            BodyTwist{0.2, 0.1, 0.3}}) {
+    // Paper frame: X right, Y forward.
+    const double X = -t.vy_m_s, Y = t.vx_m_s, th = t.wz_rad_s;
+    const double w1 = (X / std::tan(a) + Y - k * th) / R;
+    const double w2 = (-X / std::tan(a) + Y + k * th) / R;
+    const double w3 = (-X / std::tan(a) + Y - k * th) / R;
+    const double w4 = (X / std::tan(a) + Y + k * th) / R;
+    const auto w = InverseKinematics(p, t);
+    EXPECT_NEAR(w[p.wheel_index("front_left")], w1, 1e-9);
+    EXPECT_NEAR(w[p.wheel_index("front_right")], w2, 1e-9);
+    EXPECT_NEAR(w[p.wheel_index("rear_left")], w3, 1e-9);
+    EXPECT_NEAR(w[p.wheel_index("rear_right")], w4, 1e-9);
+    EXPECT_EQ(w[p.wheel_index("follower_front")], 0.0);  // passive
+  }
+}
+
+TEST(Platform, DiffDriveInverseKinematics) {
+  const Platform p = LoadShipped("diff2");
+  const double B = p.parameter("track_m"), r = p.parameter("wheel_radius_m");
+  const BodyTwist t{0.25, 0, 0.4};
+  const auto w = InverseKinematics(p, t);
+  EXPECT_NEAR(w[p.wheel_index("left")], (0.25 - 0.4 * B / 2) / r, 1e-9);
+  EXPECT_NEAR(w[p.wheel_index("right")], (0.25 + 0.4 * B / 2) / r, 1e-9);
+}
+
+TEST(Platform, Omni3InverseKinematics) {
+  const Platform p = LoadShipped("ortho3");
+  const double L = p.parameter("base_radius_m"), r = p.parameter("wheel_radius_m");
+  const BodyTwist t{0.1, -0.2, 0.3};
+  const auto w = InverseKinematics(p, t);
+  for (int i = 0; i < 3; ++i) {
+    const double th = i * 2 * std::numbers::pi / 3;
+    const double expected = (-std::sin(th) * t.vx_m_s + std::cos(th) * t.vy_m_s + L * t.wz_rad_s) / r;
+    EXPECT_NEAR(w[static_cast<std::size_t>(i)], expected, 1e-5) << i;  // mounts have 6 digits
+  }
+}
+
+TEST(Platform, MissingFileNamesTheFile) {
+  EXPECT_THAT([] { LoadPlatformFile("/nonexistent/robot.yaml"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/robot.yaml")));
+}
+
+std::string Shipped(const std::string& name) {
+  std::ifstream in(SourcePath("scenarios/platforms/" + name + ".yaml"));
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST(Platform, BadFieldNamesFileLineAndField) {
+  std::string text = Shipped("diff2");
+  const auto pos = text.find("radius_m: 0.075");
+  ASSERT_NE(pos, std::string::npos);
+  text.replace(pos, 15, "radius_m: -0.075");
+  EXPECT_THAT([&] { LoadPlatformYaml(text, "bad.yaml"); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("bad.yaml:"), HasSubstr("radius_m"), HasSubstr("outside"))));
+  std::string typo = Shipped("diff2");
+  typo.replace(typo.find("heading_deg"), 11, "headin_deg");
+  EXPECT_THAT([&] { LoadPlatformYaml(typo, "typo.yaml"); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("typo.yaml:"), HasSubstr("headin_deg"), HasSubstr("unknown key"))));
+  std::string nan = Shipped("mecanum4_omni3");
+  nan.replace(nan.find("mass_kg: 25.0"), 13, "mass_kg: abc");
+  EXPECT_THAT([&] { LoadPlatformYaml(nan, "nan.yaml"); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("nan.yaml:"), HasSubstr("chassis.mass_kg"))));
+  EXPECT_THAT([&] { LoadPlatformYaml("name: [unclosed", "syntax.yaml"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("syntax.yaml:")));
+}
+
+TEST(Platform, LineNumberPointsAtTheBadValue) {
+  const std::string text =
+      "name: x\nchassis:\n  mass_kg: 1\n  inertia_kg_m2: [1, 1, 1]\n"
+      "  half_extents_m: [0.1, 0.1, 0.1]\nwheels:\n  - name: a\n    kind: squircle\n";
+  EXPECT_THAT([&] { LoadPlatformYaml(text, "k.yaml"); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("k.yaml:8:"), HasSubstr("wheels[0].kind"))));
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::platforms

@@ -1,1 +1,121 @@
+// Terrain: analytic planes, meshes through assimp in four formats with scale/up-axis options,
+// friction patches, and clear errors for missing or malformed meshes.
 
+#include "emulator/terrain.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/emulator/physics_test_util.h"
+
+namespace wheelhil::emulator {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+using testing::SourcePath;
+
+TEST(Terrain, PlaneRaycast) {
+  Terrain t;
+  t.AddPlane(Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, 0.1), Friction{0.8, 0.7});
+  SurfaceHit hit;
+  ASSERT_TRUE(t.Raycast(Eigen::Vector3d(1, 2, 1), -Eigen::Vector3d::UnitZ(), 2.0, &hit));
+  EXPECT_NEAR(hit.distance_m, 0.9, 1e-12);
+  EXPECT_NEAR(hit.normal_W.z(), 1.0, 1e-12);
+  EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.8);
+  EXPECT_FALSE(t.Raycast(Eigen::Vector3d(1, 2, 1), -Eigen::Vector3d::UnitZ(), 0.5, &hit));
+}
+
+TEST(Terrain, MeshesInFourFormats) {
+  struct Case {
+    const char* file;
+    char up;
+  };
+  for (const Case c : {Case{"meshes/formats/tile.stl", 'z'}, Case{"meshes/formats/tile.ply", 'z'},
+                       Case{"meshes/formats/tile.gltf", 'y'}, Case{"meshes/floor_flat.obj", 'z'}}) {
+    Terrain t;
+    MeshOptions o;
+    o.up_axis = c.up;
+    o.scale = 2.0;
+    o.offset_W = Eigen::Vector3d(0, 0, 0.05);
+    t.AddMesh(SourcePath(c.file), o);
+    SurfaceHit hit;
+    ASSERT_TRUE(t.Raycast(Eigen::Vector3d(0.5, 0.5, 1), -Eigen::Vector3d::UnitZ(), 2.0, &hit))
+        << c.file;
+    EXPECT_NEAR(hit.point_W.z(), 0.05, 1e-5) << c.file;
+    EXPECT_NEAR(hit.normal_W.z(), 1.0, 1e-5) << c.file;
+    // Scale 2: the 1 m tiles reach x = 1.9 m.
+    EXPECT_TRUE(t.Raycast(Eigen::Vector3d(1.9, 1.9, 1), -Eigen::Vector3d::UnitZ(), 2.0, &hit))
+        << c.file;
+  }
+}
+
+TEST(Terrain, ShippedMeshesHaveTheirFeatures) {
+  Terrain bump;
+  bump.AddMesh(SourcePath("meshes/bump.obj"), MeshOptions{});
+  SurfaceHit hit;
+  ASSERT_TRUE(bump.Raycast(Eigen::Vector3d(1.0, 0, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
+  EXPECT_NEAR(hit.point_W.z(), 0.020, 1e-4);
+  Terrain ramp;
+  ramp.AddMesh(SourcePath("meshes/ramp.obj"), MeshOptions{});
+  ASSERT_TRUE(ramp.Raycast(Eigen::Vector3d(2.0, 0, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
+  EXPECT_NEAR(hit.point_W.z(), std::tan(5.0 * M_PI / 180), 1e-4);
+  EXPECT_NEAR(std::acos(hit.normal_W.z()), 5.0 * M_PI / 180, 1e-4);
+  Terrain door;
+  door.AddMesh(SourcePath("meshes/door_threshold.obj"), MeshOptions{});
+  ASSERT_TRUE(door.Raycast(Eigen::Vector3d(1.02, 0, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
+  EXPECT_NEAR(hit.point_W.z(), 0.012, 1e-4);
+  Terrain tiles;
+  tiles.AddMesh(SourcePath("meshes/uneven_tiles.obj"), MeshOptions{});
+  double zmin = 1, zmax = -1;
+  for (int i = 0; i < 40; ++i) {
+    ASSERT_TRUE(tiles.Raycast(Eigen::Vector3d(-1.5 + 0.0743 * i, 0.11, 1), -Eigen::Vector3d::UnitZ(),
+                              2, &hit));
+    zmin = std::min(zmin, hit.point_W.z());
+    zmax = std::max(zmax, hit.point_W.z());
+  }
+  EXPECT_GT(zmax - zmin, 5e-4);
+  EXPECT_LT(zmax - zmin, 6e-3);
+}
+
+TEST(Terrain, PatchOverridesFriction) {
+  Terrain t;
+  t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.7});
+  t.AddPatch(FrictionPatch{"oil", {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, Friction{0.05, 0.04}});
+  SurfaceHit hit;
+  ASSERT_TRUE(t.Raycast(Eigen::Vector3d(0.5, 0.5, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
+  EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.05);
+  ASSERT_TRUE(t.Raycast(Eigen::Vector3d(1.5, 0.5, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
+  EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.8);
+}
+
+TEST(Terrain, ErrorsNameFileAndField) {
+  Terrain t;
+  EXPECT_THAT([&] { t.AddMesh("/nonexistent/floor.obj", MeshOptions{}); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("/nonexistent/floor.obj"), HasSubstr("not found"))));
+  const auto bad = std::filesystem::temp_directory_path() / "wheelhil_bad_mesh.stl";
+  {
+    std::ofstream out(bad);
+    out << "solid x\n facet normal 0 0 1\n outer loop\n vertex 0 0\n";
+  }
+  EXPECT_THAT([&] { t.AddMesh(bad.string(), MeshOptions{}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(bad.string())));
+  std::remove(bad.string().c_str());
+  MeshOptions o;
+  o.up_axis = 'x';
+  EXPECT_THAT([&] { t.AddMesh(SourcePath("meshes/floor_flat.obj"), o); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("up_axis")));
+  EXPECT_THAT([&] { t.AddPatch(FrictionPatch{"p", {{0, 0}, {1, 0}}, Friction{}}); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("'p'"), HasSubstr("polygon"))));
+  EXPECT_THAT([&] { t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.5, 0.9}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("mu_slide")));
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator
