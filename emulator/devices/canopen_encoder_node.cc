@@ -394,10 +394,10 @@ std::vector<NodeFrame> CanopenEncoderNode::Poll(std::int64_t t_ns) {
     } else if (next == next_heartbeat_ns_) {
       Emit(codec_->EncodeNmtState(config_.node_id, static_cast<std::uint8_t>(state_), f), f, next,
            out);
-      next_heartbeat_ns_ = next + heartbeat_ms_ * kNsPerMs;
+      next_heartbeat_ns_ = heartbeat_ms_ > 0 ? next + heartbeat_ms_ * kNsPerMs : kNever;
     } else {
       EmitTpdo(next, out);
-      next_tpdo_ns_ = next + cyclic_timer_ms_ * kNsPerMs;
+      next_tpdo_ns_ = cyclic_timer_ms_ > 0 ? next + cyclic_timer_ms_ * kNsPerMs : kNever;
     }
   }
   now_ns_ = t_ns;
