@@ -9,6 +9,7 @@
 #include "emulator/sensors/accelerometer_model.h"
 #include "emulator/sensors/encoder_model.h"
 #include "emulator/sensors/gyro_model.h"
+#include "emulator/sensors/sample_schedule.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -295,6 +296,36 @@ TEST(AccelerometerModel, RejectsBadParameters) {
         AccelerometerModel({.bias_m_s2 = {1.0, 2.0}});
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr("bias_m_s2")));
+}
+
+TEST(SampleSchedule, InstantsAndInterpolationWeightsPerPhysicsStep) {
+  // 400 Hz sensor (2.5 ms) on a 1 kHz physics step: samples fall between steps.
+  SampleSchedule s(2'500'000);
+  EXPECT_TRUE(s.InStep(0, 1'000'000).empty());
+  EXPECT_TRUE(s.InStep(1'000'000, 2'000'000).empty());
+  const auto in = s.InStep(2'000'000, 3'000'000);
+  ASSERT_EQ(in.size(), 1u);
+  EXPECT_EQ(in[0].t_ns, 2'500'000);
+  EXPECT_DOUBLE_EQ(in[0].alpha, 0.5);
+  // A step that divides the period: every sample lands on a step, alpha = 1.
+  SampleSchedule fast(1'000'000, 0);
+  for (std::int64_t t = 0; t < 10'000'000; t += 500'000) {
+    for (const auto& i : fast.InStep(t, t + 500'000)) {
+      EXPECT_EQ(i.t_ns, t + 500'000);
+      EXPECT_DOUBLE_EQ(i.alpha, 1.0);
+    }
+  }
+  // A long step holds several samples; the phase shifts them.
+  SampleSchedule phased(1'000'000, 250'000);
+  const auto many = phased.InStep(0, 3'000'000);
+  ASSERT_EQ(many.size(), 3u);
+  EXPECT_EQ(many[0].t_ns, 250'000);
+  EXPECT_EQ(many[2].t_ns, 2'250'000);
+  EXPECT_EQ(phased.FirstAfter(250'000), 1'250'000);
+  EXPECT_EQ(phased.FirstAfter(-1'000'000), -750'000);
+  EXPECT_THAT([] { SampleSchedule(0); }, ThrowsMessage<std::invalid_argument>(HasSubstr("period")));
+  EXPECT_THAT([] { SampleSchedule(10, 10); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("phase")));
 }
 
 }  // namespace
