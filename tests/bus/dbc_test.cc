@@ -409,6 +409,16 @@ TEST(ProjectDbcTest, EveryFileLoadsAndIdsAreUniqueOnTheBus) {
       EXPECT_TRUE(ids.insert({m.id, m.extended}).second)
           << path << ": id 0x" << std::hex << m.id << " also used by another file";
       EXPECT_LE(m.length, 8) << m.name << ": the wheelhil bus is classic CAN";
+      // No two signals share a bit (the project files are not multiplexed).
+      std::array<std::uint8_t, 8> used{};
+      for (const auto& sig : m.signals) {
+        std::array<std::uint8_t, 8> bits{};
+        ASSERT_TRUE(InsertRaw(sig, ~std::uint64_t{0}, std::span(bits).first(m.length)));
+        for (int b = 0; b < 8; ++b) {
+          EXPECT_EQ(used[b] & bits[b], 0) << m.name << "." << sig.name << " overlaps in byte " << b;
+          used[b] |= bits[b];
+        }
+      }
       EXPECT_FALSE(m.comment.empty() && m.name.rfind("Enc", 0) != 0 && m.name != "SYNC")
           << m.name << " has no comment";
     }
@@ -529,7 +539,7 @@ TEST(ProjectDbcTest, Accel4AndFirmwareLayouts) {
   EXPECT_THAT(v.at("Pose_Theta"), DoubleNear(-3.14159, 0.00005 + 1e-12));
   EXPECT_EQ(v.at("Pose_Cycle"), 200);
   const auto& slip = Msg(fw, "FW_SlipStatus");
-  ASSERT_TRUE(EncodeMessage(slip, {{"Slip_Residual", -0.004321}, {"Slip_BandLower", -0.00335},
+  ASSERT_TRUE(EncodeMessage(slip, {{"Slip_Residual", -0.004321}, {"Slip_BandLower", -0.00335}, {"Slip_OutOfBand", 1},
                                    {"Slip_BandUpper", 0.00328}, {"Slip_Left", 1}},
                             f));
   v = DecodeMessage(slip, f);
@@ -537,6 +547,9 @@ TEST(ProjectDbcTest, Accel4AndFirmwareLayouts) {
   EXPECT_THAT(v.at("Slip_BandLower"), DoubleNear(-0.00335, 1e-12));
   EXPECT_EQ(v.at("Slip_Left"), 1);
   EXPECT_EQ(v.at("Slip_Right"), 0);
+  EXPECT_EQ(v.at("Slip_OutOfBand"), 1);
+  EXPECT_EQ(v.at("Slip_Calibrated"), 0);
+  EXPECT_FALSE(EncodeMessage(slip, {{"Slip_Residual", 0.3}}, f));  // beyond +-0.262143 rad
   for (const char* name : {"FW_Velocity", "FW_VelocityOdom", "FW_VelocityAccel"}) {
     const auto& vel = Msg(fw, name);
     EXPECT_EQ(vel.signals.size(), 4u) << name;
