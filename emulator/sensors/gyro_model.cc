@@ -39,6 +39,10 @@ GyroModel::GyroModel(const GyroParams& params)
   RequireNonNegative(params.noise_density_rad_s_sqrt_hz, "noise_density_rad_s_sqrt_hz");
   RequireNonNegative(params.resolution_rad_s, "resolution_rad_s");
   RequireNonNegative(params.bandwidth_hz, "bandwidth_hz");
+  if (params.delay_samples < 0) {
+    throw std::invalid_argument(
+        fmt::format("gyro.delay_samples ({}) must be >= 0", params.delay_samples));
+  }
   if (!(params.range_rad_s > 0.0)) {
     throw std::invalid_argument(
         fmt::format("gyro.range_rad_s ({}) must be > 0", params.range_rad_s));
@@ -69,6 +73,13 @@ double GyroModel::SampleRate(double true_rate_rad_s) {
   out = std::clamp(out, -params_.range_rad_s, params_.range_rad_s);
   if (params_.resolution_rad_s > 0.0) {
     out = std::round(out / params_.resolution_rad_s) * params_.resolution_rad_s;
+  }
+  if (params_.delay_samples > 0) {
+    if (delay_line_.empty())
+      delay_line_.assign(static_cast<std::size_t>(params_.delay_samples), out);
+    delay_line_.push_back(out);
+    out = delay_line_.front();
+    delay_line_.pop_front();
   }
   return out;
 }

@@ -8,6 +8,8 @@
 ///           the filter starts at the first input, without a start-up transient)
 ///   b_k   = b_{k-1} + bias_random_walk * sqrt(dt) * N(0,1)   (b_0 = bias_rad_s)
 ///   out_k = quantise(saturate(y_k + b_k + noise_density * sqrt(rate_hz) * N(0,1)))
+/// The output is then delayed by `delay_samples` whole samples (a pure latency on top of the
+/// filter's group delay; the first output fills the delay line).
 /// The white-noise density is specified at the output, as datasheets do (rad/s/sqrt(Hz));
 /// the discrete noise std is density * sqrt(rate_hz). Saturation clips to +-range_rad_s;
 /// quantisation rounds to the nearest multiple of resolution_rad_s (0 = none).
@@ -18,6 +20,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <random>
 
@@ -33,6 +36,7 @@ struct GyroParams {
   double resolution_rad_s = 0.0;               ///< Quantisation step (LSB) [rad/s]; 0 = none.
   double range_rad_s = std::numeric_limits<double>::infinity();  ///< Saturation [rad/s], > 0.
   double bandwidth_hz = 0.0;  ///< First-order -3 dB bandwidth [Hz]; 0 = no filter.
+  int delay_samples = 0;      ///< Pure output latency in samples (data ready late), >= 0.
   std::uint64_t seed = 0;     ///< RNG seed.
 };
 
@@ -61,6 +65,7 @@ class GyroModel {
   bool filter_started_ = false;
   double filtered_rad_s_ = 0.0;
   double bias_rad_s_;
+  std::deque<double> delay_line_;
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
 };

@@ -176,6 +176,15 @@ TEST(GyroModel, FirstOrderStepResponse) {
   EXPECT_NEAR(y, 1.0 - std::exp(-1.0), 0.005);
 }
 
+TEST(GyroModel, PureDelayShiftsTheOutputByWholeSamples) {
+  GyroModel gyro({.rate_hz = 100.0, .delay_samples = 3});
+  std::vector<double> out;
+  for (double in : {0.0, 0.0, 1.0, 2.0, 3.0, 4.0, 5.0}) out.push_back(gyro.SampleRate(in));
+  EXPECT_THAT(out, ::testing::ElementsAre(0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0));
+  EXPECT_THAT([] { GyroModel({.delay_samples = -1}); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("delay_samples")));
+}
+
 TEST(GyroModel, SameSeedSameSamples) {
   const GyroParams p{.rate_hz = 200.0,
                      .bias_random_walk_rad_s_sqrt_s = 1e-3,
