@@ -293,6 +293,10 @@ struct UcanBroker::Impl {
     for (auto& [id, c] : clients) c->fd.Reset();
     clients.clear();
     if (!sock_path.empty() && listen_fd.get() >= 0) ::unlink(sock_path.c_str());
+    if (options.remove_runtime_dir && lock_fd.get() >= 0) {
+      ::unlink((dir + "/" + ucan::kLockName).c_str());
+      ::rmdir(dir.c_str());  // only when empty
+    }
   }
 
   void RequestStop() {

@@ -32,6 +32,9 @@ struct UcanBrokerOptions {
   std::size_t client_queue_limit = 8192;
   /// Stop the broker when the last bus is removed through a kRemoveBus request (daemon mode).
   bool exit_when_empty = false;
+  /// On destruction also remove the lock file and the (then empty) runtime directory: for a
+  /// private directory from CreateTempUcanRuntimeDir().
+  bool remove_runtime_dir = false;
 };
 
 struct UcanBusStats {

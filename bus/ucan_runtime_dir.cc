@@ -5,6 +5,8 @@
 
 #include <cerrno>
 #include <cstdlib>
+#include <system_error>
+#include <vector>
 
 #include "bus/ucan_protocol.h"
 
@@ -39,5 +41,17 @@ std::error_code EnsureUcanRuntimeDir(const std::string& dir) noexcept {
 }
 
 std::string UcanSocketPath(const std::string& dir) { return dir + "/" + ucan::kSocketName; }
+
+std::string CreateTempUcanRuntimeDir(const std::string& prefix) {
+  const char* tmp = std::getenv("TMPDIR");
+  std::string tmpl = (tmp != nullptr && tmp[0] != '\0' ? std::string(tmp) : std::string("/tmp")) +
+                     "/" + prefix + "XXXXXX";
+  std::vector<char> buf(tmpl.begin(), tmpl.end());
+  buf.push_back('\0');
+  if (::mkdtemp(buf.data()) == nullptr) {
+    throw std::system_error(errno, std::generic_category(), "mkdtemp " + tmpl);
+  }
+  return std::string(buf.data());
+}
 
 }  // namespace wheelhil::bus

@@ -135,12 +135,9 @@ int RunExec(const std::vector<std::string>& buses, const std::vector<std::string
     fmt::print(stderr, "wheelhil exec: {} not found (build target wheelhil_ucan)\n", lib);
     return 1;
   }
-  std::string preload = lib;
-  if (const char* old = std::getenv("LD_PRELOAD"); old != nullptr && old[0] != '\0') {
-    preload += ":" + std::string(old);
+  for (const auto& [key, value] : UcanChildEnvironment(dir)) {
+    ::setenv(key.c_str(), value.c_str(), 1);
   }
-  ::setenv("LD_PRELOAD", preload.c_str(), 1);
-  ::setenv("WHEELHIL_UCAN_DIR", dir.c_str(), 1);
   std::vector<char*> argv;
   for (const auto& a : command) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
@@ -166,6 +163,15 @@ int EnsureUcanBus(const std::string& runtime_dir, const std::string& name) {
   }
   if (ec) throw std::runtime_error(fmt::format("adding bus {}: {}", name, ec.message()));
   return index;
+}
+
+std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
+    const std::string& runtime_dir) {
+  std::string preload = UcanPreloadLibraryPath();
+  if (const char* old = std::getenv("LD_PRELOAD"); old != nullptr && old[0] != '\0') {
+    preload += ":" + std::string(old);
+  }
+  return {{"LD_PRELOAD", preload}, {"WHEELHIL_UCAN_DIR", runtime_dir}};
 }
 
 std::string UcanPreloadLibraryPath() {

@@ -9,6 +9,7 @@
 
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace wheelhil::emulator {
@@ -39,6 +40,12 @@ class BusCommands {
 /// that it has bus `name`. Returns the bus's interface index; throws std::runtime_error with a
 /// fixable message on failure.
 int EnsureUcanBus(const std::string& runtime_dir, const std::string& name);
+
+/// Environment for a child process that must see the buses of `runtime_dir` through the plain
+/// SocketCAN API: {"LD_PRELOAD", lib[:old LD_PRELOAD]}, {"WHEELHIL_UCAN_DIR", runtime_dir}.
+/// Set these in the child before exec (what `wheelhil exec` does).
+std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
+    const std::string& runtime_dir);
 
 /// Path of libwheelhil_ucan.so for LD_PRELOAD: $WHEELHIL_UCAN_LIB, else
 /// <dir of the running executable>/../lib/libwheelhil_ucan.so.

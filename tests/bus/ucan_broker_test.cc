@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "bus/ucan_protocol.h"
+#include "bus/ucan_runtime_dir.h"
 #include "tests/bus/ucan_test_util.h"
 
 namespace wheelhil::bus {
@@ -574,6 +575,20 @@ TEST(UcanBroker, RefusesAnUnsafeRuntimeDirAndASecondBroker) {
   ASSERT_EQ(::chmod(dir.path().c_str(), 0750), 0);
   EXPECT_EQ(if_nametoindex("ucan0"), 0u);
   ASSERT_EQ(::chmod(dir.path().c_str(), 0700), 0);
+}
+
+TEST(UcanBroker, PrivateRuntimeDirIsRemovedWithTheBroker) {
+  const std::string dir = CreateTempUcanRuntimeDir();
+  ASSERT_FALSE(VerifyUcanRuntimeDir(dir));  // mode 0700, ours
+  {
+    UcanBrokerOptions options;
+    options.runtime_dir = dir;
+    options.remove_runtime_dir = true;
+    UcanBroker broker(options);
+    broker.AddBus("ucan0");
+    EXPECT_EQ(broker.runtime_dir(), dir);
+  }
+  EXPECT_EQ(VerifyUcanRuntimeDir(dir), std::errc::no_such_file_or_directory);
 }
 
 TEST(UcanBroker, ControlRequestsListAddRemove) {
