@@ -104,6 +104,29 @@ void BM_UcanFanOut(benchmark::State& state) {
 }
 BENCHMARK(BM_UcanFanOut)->Arg(1)->Arg(4)->UseRealTime()->Unit(benchmark::kMicrosecond);
 
+// Baseline: what this kernel charges for one AF_UNIX SOCK_SEQPACKET message (send + receive of
+// 40 bytes, one thread, no wakeups). A ucan frame costs two of these (writer -> broker ->
+// reader), so 1 / (2 x this time) per core bounds the bus whatever the broker does.
+void BM_KernelSeqpacketMessage(benchmark::State& state) {
+  int sv[2];
+  if (::socketpair(AF_UNIX, SOCK_SEQPACKET, 0, sv) != 0) {
+    state.SkipWithError("socketpair failed");
+    return;
+  }
+  char buf[40] = {};
+  for (auto _ : state) {
+    if (::send(sv[0], buf, sizeof(buf), 0) != sizeof(buf) ||
+        ::recv(sv[1], buf, sizeof(buf), 0) != sizeof(buf)) {
+      state.SkipWithError("send/recv failed");
+      break;
+    }
+  }
+  state.SetItemsProcessed(state.iterations());
+  ::close(sv[0]);
+  ::close(sv[1]);
+}
+BENCHMARK(BM_KernelSeqpacketMessage)->UseRealTime()->Unit(benchmark::kMicrosecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();
