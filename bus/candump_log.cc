@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <istream>
 #include <ostream>
 #include <stdexcept>
@@ -189,14 +190,68 @@ CandumpLineStatus ParseCandumpLine(std::string_view line, std::size_t line_numbe
   return CandumpLineStatus::kRecord;
 }
 
+std::size_t FormatCandumpLine(std::int64_t timestamp_ns, std::string_view interface,
+                              const CanFrame& f, char* buf, std::size_t capacity) noexcept {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  if (capacity < MaxCandumpLineLength(interface.size())) return 0;
+  if (timestamp_ns < 0) timestamp_ns = 0;
+  const auto ns = static_cast<std::uint64_t>(timestamp_ns);
+  std::uint64_t sec = ns / 1'000'000'000ULL;
+  std::uint64_t usec = (ns % 1'000'000'000ULL) / 1000ULL;
+  // candump.c: "(%010llu.%06llu) %*s %s%s\n"; seconds < 1e10 up to the year 2286, 20 digits max.
+  char digits[20];
+  int nd = 0;
+  do {
+    digits[nd++] = static_cast<char>('0' + sec % 10);
+    sec /= 10;
+  } while (sec != 0);
+  char* p = buf;
+  *p++ = '(';
+  for (int pad = nd; pad < 10; ++pad) *p++ = '0';
+  while (nd > 0) *p++ = digits[--nd];
+  *p++ = '.';
+  for (int k = 5; k >= 0; --k) {
+    p[k] = static_cast<char>('0' + usec % 10);
+    usec /= 10;
+  }
+  p += 6;
+  *p++ = ')';
+  *p++ = ' ';
+  for (char c : interface) *p++ = c;
+  *p++ = ' ';
+  // lib.c sprint_canframe (bus::ToCanUtilsString writes the same text).
+  auto put_id = [&p](std::uint32_t id, int n) {
+    for (int k = n - 1; k >= 0; --k) *p++ = kHex[(id >> (4 * k)) & 0xF];
+  };
+  if (f.error) {
+    put_id((f.id & CanFrame::kMaxExtendedId) | kCanErrFlag, 8);
+  } else if (f.extended) {
+    put_id(f.id, 8);
+  } else {
+    put_id(f.id, 3);
+  }
+  *p++ = '#';
+  if (f.rtr) {
+    *p++ = 'R';
+    if (f.len > 0 && f.len <= CanFrame::kMaxClassicLen) *p++ = static_cast<char>('0' + f.len);
+    return static_cast<std::size_t>(p - buf);
+  }
+  if (f.fd) {
+    *p++ = '#';
+    *p++ = kHex[f.fd_flags & 0x0F];
+  }
+  const std::size_t len = std::min<std::size_t>(f.len, CanFrame::kMaxFdLen);
+  for (std::size_t i = 0; i < len; ++i) {
+    *p++ = kHex[f.data[i] >> 4];
+    *p++ = kHex[f.data[i] & 0x0F];
+  }
+  return static_cast<std::size_t>(p - buf);
+}
+
 std::string FormatCandumpLine(std::int64_t timestamp_ns, std::string_view interface,
                               const CanFrame& frame) {
-  if (timestamp_ns < 0) timestamp_ns = 0;
-  const auto ns = static_cast<unsigned long long>(timestamp_ns);
-  // candump.c: "(%010llu.%06llu) %*s %s%s\n"
-  std::string line = fmt::format("({:010}.{:06}) {} ", ns / 1'000'000'000ULL,
-                                 (ns % 1'000'000'000ULL) / 1000ULL, interface);
-  line += ToCanUtilsString(frame);
+  std::string line(MaxCandumpLineLength(interface.size()), '\0');
+  line.resize(FormatCandumpLine(timestamp_ns, interface, frame, line.data(), line.size()));
   return line;
 }
 
@@ -220,9 +275,11 @@ bool CandumpWriter::Write(std::int64_t timestamp_ns, std::string_view interface,
   for (char c : interface) {
     if (IsSpace(c) || c == '\n' || c == '\r') return false;
   }
-  std::string line = FormatCandumpLine(timestamp_ns, interface, frame);
-  line += '\n';
-  out_->write(line.data(), static_cast<std::streamsize>(line.size()));
+  if (interface.size() > 64) return false;
+  char line[MaxCandumpLineLength(64) + 1];
+  std::size_t n = FormatCandumpLine(timestamp_ns, interface, frame, line, sizeof line);
+  line[n++] = '\n';
+  out_->write(line, static_cast<std::streamsize>(n));
   if (policy_ == FlushPolicy::kEveryLine) out_->flush();
   if (!*out_) return false;
   ++lines_written_;

@@ -60,11 +60,23 @@ bool ParseCanUtilsFrame(std::string_view text, CanFrame& out, std::string* error
 std::string FormatCandumpLine(std::int64_t timestamp_ns, std::string_view interface,
                               const CanFrame& frame);
 
+/// Longest line FormatCandumpLine can produce for an interface name of `interface_len` chars
+/// (an FD frame with 64 bytes), without '\n'.
+constexpr std::size_t MaxCandumpLineLength(std::size_t interface_len) {
+  return 20 /* (ssssssssss.uuuuuu) */ + 1 + interface_len + 1 + 8 + 2 + 1 + 2 * 64;
+}
+
+/// Allocation-free form: writes the line (without '\n', not NUL-terminated) into `buf` and
+/// returns its length, or 0 when `capacity` is too small (MaxCandumpLineLength is enough).
+std::size_t FormatCandumpLine(std::int64_t timestamp_ns, std::string_view interface,
+                              const CanFrame& frame, char* buf, std::size_t capacity) noexcept;
+
 /// Writes candump -L lines to a stream or file. Flush policy: kEveryLine flushes after each
 /// line (a crash or a concurrent `tail -f` sees every frame; costs a write(2) per line);
 /// kBuffered leaves it to the stream buffer, Flush() and the destructor (file mode). Write()
-/// returns false when the frame is invalid (!frame.IsValid()), the interface name is empty or
-/// contains whitespace, or the stream failed; it never throws. Thread-compatible.
+/// returns false when the frame is invalid (!frame.IsValid()), the interface name is empty,
+/// longer than 64 characters or contains whitespace, or the stream failed; it never throws
+/// and does not allocate. Thread-compatible.
 class CandumpWriter {
  public:
   enum class FlushPolicy { kEveryLine, kBuffered };

@@ -83,6 +83,16 @@ TEST(CandumpFormatTest, MatchesCandumpDashL) {
   EXPECT_EQ(FormatCandumpLine(0, "can0", Fd(0x123, 0x1, 2)), "(0000000000.000000) can0 123##10001");
 }
 
+TEST(CandumpFormatTest, BufferFormIsBoundedAndAllocationFree) {
+  const CanFrame f = Fd(0x1FFFFFFF, 3, 64, true);
+  std::string buf(MaxCandumpLineLength(6), '\0');
+  const std::size_t n = FormatCandumpLine(9'223'372'036'854'775'807LL, "vcan10", f, buf.data(),
+                                          buf.size());
+  EXPECT_EQ(n, buf.size() - 1);  // 10-digit seconds: one char under the bound
+  EXPECT_THAT(buf.substr(0, n), StartsWith("(9223372036.854775) vcan10 1FFFFFFF##3000102"));
+  EXPECT_EQ(FormatCandumpLine(0, "vcan10", f, buf.data(), buf.size() - 1), 0u);
+}
+
 TEST(CandumpFormatTest, CanUtilsStringFollowsLibC) {
   // lib.c sprint_canframe prints an RTR length digit only for 1..8 and masks error ids.
   EXPECT_EQ(ToCanUtilsString(Rtr(0x123, 0)), "123#R");
@@ -133,6 +143,9 @@ TEST(CandumpRoundTripTest, RandomFramesRoundTrip) {
     if (f.rtr) f.data.fill(0);
     const std::int64_t t = static_cast<std::int64_t>(rng() % 4'000'000'000u) * 1000;
     written.push_back({t, "can0", f, 0});
+    // The allocation-free formatter writes the frame exactly as ToCanUtilsString does.
+    const std::string line = FormatCandumpLine(t, "can0", f);
+    ASSERT_EQ(line.substr(line.find(" can0 ") + 6), ToCanUtilsString(f));
     ASSERT_TRUE(writer.Write(written.back()));
   }
   CandumpReader reader(log);
