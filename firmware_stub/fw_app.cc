@@ -324,7 +324,11 @@ void FwApp::OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out) {
     slip.Set(OutField::kSlipRight, r.slip_right ? 1 : 0);
     slip.Set(OutField::kSlipUnattributed, r.slip_unattributed ? 1 : 0);
     slip.Set(OutField::kOutOfBand, r.out_of_band ? 1 : 0);
-    slip.Set(OutField::kCalibrated, r.calibrated ? 1 : 0);
+    // "Calibrated": the band is known and, when it came from a calibration window, that window
+    // passed the normality test (configured statistics count as accepted).
+    const auto& normality = p000_->calibration_normality();
+    const bool accepted = !normality || normality->accepted;
+    slip.Set(OutField::kCalibrated, p000_->calibrated() && accepted ? 1 : 0);
     slip.Set(OutField::kResidual, r.residual_rad);
     slip.Set(OutField::kBandLow, r.band_low_rad);
     slip.Set(OutField::kBandHigh, r.band_high_rad);

@@ -134,11 +134,15 @@ TEST(FwProgramConfig, ProtocolBindsEveryOutputSignalOfTheDbc) {
                                        OutField::kFaultConfig, OutField::kNodeLostEnc1,
                                        OutField::kNodeLostEnc8, OutField::kNodeLostImu,
                                        OutField::kNodeLostAccel, OutField::kEmcyNodeId,
-                                       OutField::kBadFrameCount, OutField::kCycle}));
+                                       OutField::kBadFrameCount, OutField::kCycle,
+                                       OutField::kFaultSdo, OutField::kFaultBootTimeout,
+                                       OutField::kFaultCycleIncomplete,
+                                       OutField::kFaultLateFrame, OutField::kFaultEstimator}));
   EXPECT_THAT(p.OutputFields(OutMessage::kSlipStatus),
-              ::testing::UnorderedElementsAre(OutField::kCycle, OutField::kSlipLeft,
-                                              OutField::kSlipRight, OutField::kResidual,
-                                              OutField::kBandLow, OutField::kBandHigh));
+              ::testing::UnorderedElementsAre(
+                  OutField::kCycle, OutField::kSlipLeft, OutField::kSlipRight,
+                  OutField::kOutOfBand, OutField::kSlipUnattributed, OutField::kCalibrated,
+                  OutField::kResidual, OutField::kBandLow, OutField::kBandHigh));
   for (OutMessage m : {OutMessage::kPose, OutMessage::kPoseRaw}) {
     EXPECT_THAT(p.OutputFields(m), ::testing::UnorderedElementsAre(
                                        OutField::kCycle, OutField::kX, OutField::kY,
