@@ -25,6 +25,7 @@
 #include <linux/close_range.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
@@ -93,6 +94,10 @@ REAL_FN(sendmsg, ssize_t, (int, const msghdr*, int))
 REAL_FN(recv, ssize_t, (int, void*, size_t, int))
 REAL_FN(recvfrom, ssize_t, (int, void*, size_t, int, sockaddr*, socklen_t*))
 REAL_FN(recvmsg, ssize_t, (int, msghdr*, int))
+REAL_FN(readv, ssize_t, (int, const iovec*, int))
+REAL_FN(writev, ssize_t, (int, const iovec*, int))
+REAL_FN(sendmmsg, int, (int, mmsghdr*, unsigned, int))
+REAL_FN(recvmmsg, int, (int, mmsghdr*, unsigned, int, timespec*))
 REAL_FN(if_nametoindex, unsigned, (const char*))
 REAL_FN(if_indextoname, char*, (unsigned, char*))
 
@@ -991,6 +996,52 @@ UCAN_EXPORT ssize_t recvmsg(int fd, msghdr* msg, int flags) {
   if (!GetView(fd, &v)) return real_recvmsg()(fd, msg, flags);
   if (msg == nullptr) return Fail(EFAULT);
   return RecvFrame(fd, v, msg, flags);
+}
+
+UCAN_EXPORT ssize_t writev(int fd, const iovec* iov, int iovcnt) {
+  View v;
+  if (!GetView(fd, &v)) return real_writev()(fd, iov, iovcnt);
+  if (iovcnt < 0) return Fail(EINVAL);
+  return SendFrame(fd, v, iov, static_cast<std::size_t>(iovcnt), 0, nullptr, 0);
+}
+
+UCAN_EXPORT ssize_t readv(int fd, const iovec* iov, int iovcnt) {
+  View v;
+  if (!GetView(fd, &v)) return real_readv()(fd, iov, iovcnt);
+  if (iovcnt < 0) return Fail(EINVAL);
+  msghdr m{};
+  m.msg_iov = const_cast<iovec*>(iov);
+  m.msg_iovlen = static_cast<std::size_t>(iovcnt);
+  return RecvFrame(fd, v, &m, 0);
+}
+
+// The mmsg calls: one frame per entry. recvmmsg blocks for the first frame only when
+// MSG_WAITFORONE is set, for each one otherwise (its timeout argument is not supported).
+UCAN_EXPORT int sendmmsg(int fd, mmsghdr* vec, unsigned vlen, int flags) {
+  View v;
+  if (!GetView(fd, &v)) return real_sendmmsg()(fd, vec, vlen, flags);
+  unsigned i = 0;
+  for (; i < vlen; ++i) {
+    const msghdr& m = vec[i].msg_hdr;
+    const ssize_t n = SendFrame(fd, v, m.msg_iov, m.msg_iovlen, flags, m.msg_name, m.msg_namelen);
+    if (n < 0) return i > 0 ? static_cast<int>(i) : -1;
+    vec[i].msg_len = static_cast<unsigned>(n);
+  }
+  return static_cast<int>(i);
+}
+
+UCAN_EXPORT int recvmmsg(int fd, mmsghdr* vec, unsigned vlen, int flags, timespec* timeout) {
+  View v;
+  if (!GetView(fd, &v)) return real_recvmmsg()(fd, vec, vlen, flags, timeout);
+  unsigned i = 0;
+  for (; i < vlen; ++i) {
+    int f = flags & ~MSG_WAITFORONE;
+    if (i > 0 && (flags & MSG_WAITFORONE)) f |= MSG_DONTWAIT;
+    const ssize_t n = RecvFrame(fd, v, &vec[i].msg_hdr, f);
+    if (n < 0) return i > 0 ? static_cast<int>(i) : -1;
+    vec[i].msg_len = static_cast<unsigned>(n);
+  }
+  return static_cast<int>(i);
 }
 
 // _FORTIFY_SOURCE entry points (programs built with it call these instead).

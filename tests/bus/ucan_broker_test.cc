@@ -12,12 +12,14 @@
 #include <sys/epoll.h>
 #include <sys/ioctl.h>
 #include <sys/syscall.h>
+#include <sys/uio.h>
 #include <sys/un.h>
 #include <sys/wait.h>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cerrno>
 #include <random>
 #include <thread>
@@ -520,6 +522,40 @@ TEST_F(UcanBusTest, AnySocketHearsAllBusesAndSendsByAddress) {
   EXPECT_EQ(name.can_family, AF_CAN);
   EXPECT_EQ(name.can_ifindex, 1001);
   for (int s : {any, on0, on1}) ::close(s);
+}
+
+TEST_F(UcanBusTest, VectoredAndBatchedCalls) {
+  const int tx = OpenCan("ucan0"), rx = OpenCan("ucan0");
+  can_frame f = Frame(0x41, {7});
+  iovec halves[2] = {{&f, 8}, {reinterpret_cast<std::uint8_t*>(&f) + 8, 8}};
+  ASSERT_EQ(::writev(tx, halves, 2), static_cast<ssize_t>(sizeof(f)));
+  std::array<can_frame, 3> out{Frame(0x42), Frame(0x43), Frame(0x44)};
+  std::array<iovec, 3> iovs{};
+  std::array<mmsghdr, 3> msgs{};
+  for (std::size_t i = 0; i < 3; ++i) {
+    iovs[i] = {&out[i], sizeof(can_frame)};
+    msgs[i].msg_hdr.msg_iov = &iovs[i];
+    msgs[i].msg_hdr.msg_iovlen = 1;
+  }
+  ASSERT_EQ(::sendmmsg(tx, msgs.data(), 3, 0), 3);
+  can_frame got{};
+  iovec in{&got, sizeof(got)};
+  ASSERT_TRUE(testing::Readable(rx, 2000));
+  ASSERT_EQ(::readv(rx, &in, 1), static_cast<ssize_t>(sizeof(got)));
+  EXPECT_EQ(got.can_id, 0x41u);
+  std::array<can_frame, 3> batch{};
+  for (std::size_t i = 0; i < 3; ++i) {
+    iovs[i] = {&batch[i], sizeof(can_frame)};
+    msgs[i] = {};
+    msgs[i].msg_hdr.msg_iov = &iovs[i];
+    msgs[i].msg_hdr.msg_iovlen = 1;
+  }
+  ASSERT_EQ(::recvmmsg(rx, msgs.data(), 3, 0, nullptr), 3);  // waits for each
+  EXPECT_EQ(batch[0].can_id, 0x42u);
+  EXPECT_EQ(batch[2].can_id, 0x44u);
+  EXPECT_EQ(msgs[2].msg_len, sizeof(can_frame));
+  ::close(tx);
+  ::close(rx);
 }
 
 TEST_F(UcanBusTest, DupSharesTheSocketAndCloseForgetsIt) {
