@@ -147,8 +147,9 @@ double DecodeSignal(const DbcSignal& sig, std::span<const std::uint8_t> payload)
 bool EncodeSignal(const DbcSignal& sig, double physical, std::span<std::uint8_t> payload) noexcept {
   const double scaled = (physical - sig.offset) / sig.factor;
   if (sig.value_type == DbcValueType::kFloat32) {
-    const auto bits = std::bit_cast<std::uint32_t>(static_cast<float>(scaled));
-    return InsertRaw(sig, bits, payload) && !std::isnan(scaled);
+    const float value = static_cast<float>(scaled);
+    const bool exact = !std::isnan(scaled) && (std::isfinite(value) || !std::isfinite(scaled));
+    return InsertRaw(sig, std::bit_cast<std::uint32_t>(value), payload) && exact;
   }
   if (sig.value_type == DbcValueType::kFloat64) {
     return InsertRaw(sig, std::bit_cast<std::uint64_t>(scaled), payload) && !std::isnan(scaled);

@@ -37,8 +37,10 @@ double DecodeSignal(const DbcSignal& sig, std::span<const std::uint8_t> payload)
 /// Physical -> raw: raw = round_half_away((physical - offset) / factor), saturated to the raw
 /// range of the signal ([0, 2^n-1] unsigned, [-2^(n-1), 2^(n-1)-1] signed); NaN encodes as raw
 /// 0. The DBC [min|max] range is not enforced (it is documentation; clamp before if needed).
-/// Returns true when the value was encoded exactly-rounded; false when it was saturated, was
-/// NaN, or the payload is too short (then nothing is written).
+/// Float signals (SIG_VALTYPE_) store (physical - offset) / factor as IEEE single/double; a
+/// finite value beyond the float range becomes +-inf and counts as saturated.
+/// Returns true when the value was encoded (rounded to the raw resolution); false when it was
+/// saturated, was NaN, or the payload is too short (then nothing is written).
 bool EncodeSignal(const DbcSignal& sig, double physical, std::span<std::uint8_t> payload) noexcept;
 
 /// The smallest and largest physical value the signal can carry (after factor/offset).

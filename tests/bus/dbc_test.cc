@@ -202,6 +202,9 @@ SIG_VALTYPE_ 2147484672 F64 : 2;
   EXPECT_THAT(Bytes(f.payload()).at(3), 0x3F);  // 1.5f = 0x3FC00000, little-endian
   EXPECT_EQ(f.data[12], 0xBE);                   // bytes 12-13 via the bit-by-bit path
   EXPECT_EQ(f.data[13], 0xEF);
+  std::array<std::uint8_t, 16> bytes{};
+  EXPECT_FALSE(EncodeSignal(*m->FindSignal("F32"), 1e40, bytes));  // beyond float: +inf
+  EXPECT_TRUE(std::isinf(DecodeSignal(*m->FindSignal("F32"), bytes)));
   const auto v = DecodeMessage(*m, f);
   EXPECT_EQ(v.at("F32"), 1.5);
   EXPECT_EQ(v.at("F64"), -3.25);
