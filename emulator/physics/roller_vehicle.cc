@@ -18,6 +18,7 @@ using Eigen::Vector3d;
 constexpr double kPi = std::numbers::pi;
 constexpr double kAnchorGain = 0.2;     // fraction of the accumulated creep removed per step
 constexpr double kRayMargin_m = 0.02;
+constexpr double kSolverTolerance = 1e-6;  // m/s (or rad/s) change of any row per sweep
 constexpr std::size_t kMaxWheels = 32;
 
 Vector3d ToEigen(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
@@ -38,15 +39,19 @@ struct Row {
   Vector3d lin;   // direction of the impulse on the chassis
   Vector3d ang;   // r x lin
   Vector3d iang;  // Iinv * ang
-  double jw = 0;                     // coefficient on the wheel spin rate
-  int wheel = 0;
-  double inv_k = 0;                  // 1 / effective inverse mass
-  double target = 0;                 // desired row velocity
-  double lo = 0, hi = 0;             // impulse bounds (box rows)
-  double* lambda = nullptr;          // accumulated impulse (persistent, warm start)
-  int partner = -1;                  // circle-clamped pair: index of the lateral row
-  double radius = 0;                 // circle radius for the pair (impulse)
-  double lateral_scale = 1;          // ellipse: lateral bound = radius * scale
+  Vector3d lin_m;                    // lin / m
+  // No default initialisers: a step's rows are filled completely where they are added.
+  double jw;             // coefficient on the wheel spin rate
+  double jw_i;           // jw / wheel inertia
+  int wheel;
+  double inv_k;          // 1 / (effective inverse mass + cfm)
+  double cfm;            // softness: row velocity error per unit impulse (0 = rigid)
+  double target;         // desired row velocity
+  double lo, hi;         // impulse bounds (box rows)
+  double* lambda;        // accumulated impulse (persistent, warm start)
+  int partner;           // circle-clamped pair: index of the lateral row
+  double radius;         // circle radius for the pair (impulse)
+  double lateral_scale;  // ellipse: lateral bound = radius * scale
 };
 
 }  // namespace
@@ -119,6 +124,10 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
               "must be > 0");
       Require(m.max_accel_rad_s2 >= 0, where, f + "motor.max_accel_rad_s2", m.max_accel_rad_s2,
               "must be >= 0");
+      Require(m.speed_gain_nm_s_rad > 0, where, f + "motor.speed_gain_nm_s_rad",
+              m.speed_gain_nm_s_rad, "must be > 0");
+      Require(m.integral_gain_nm_rad >= 0, where, f + "motor.integral_gain_nm_rad",
+              m.integral_gain_nm_rad, "must be >= 0");
     }
   }
 }
@@ -157,6 +166,7 @@ RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
                                         w.motor.rotor_inertia_kg_m2
                                   : 0.0;
     st.inv_inertia = 1.0 / (w.inertia_kg_m2 + rotor);
+    st.axle_B = Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
     // Start with the hub on the floor (or hanging).
     st.length_m = w.suspension.max_length_m;
     double offset = 0;
@@ -262,8 +272,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
     double offset = 0;
     const double r_eff = EffectiveRadius(ws, tr.angle_rad, &offset);
     tr.effective_radius_m = r_eff;
-    const Vector3d axle =
-        R * Vector3d(-std::sin(ws.heading_rad), std::cos(ws.heading_rad), 0);
+    const Vector3d axle = R * st.axle_B;
     const Vector3d mount = p + R * ws.mount_B;
     const Vector3d from = mount + axle * offset;
     const SuspensionSpec& q = ws.suspension;
@@ -358,16 +367,20 @@ void RollerVehicle::PreStep(double dt) noexcept {
         row.lin = lin;
         row.ang = r_c.cross(lin);
         row.iang = Iinv * row.ang;
+        row.lin_m = lin * inv_m;
         row.jw = jw;
+        row.jw_i = ws.kind == WheelKind::kCaster ? 0.0 : jw * st.inv_inertia;
         row.wheel = static_cast<int>(i);
-        const double k = inv_m * lin.squaredNorm() + row.ang.dot(row.iang) +
-                         jw * jw * (ws.kind == WheelKind::kCaster ? 0.0 : st.inv_inertia);
+        const double k = inv_m * lin.squaredNorm() + row.ang.dot(row.iang) + jw * row.jw_i;
         row.inv_k = k > 1e-12 ? 1.0 / k : 0.0;
+        row.cfm = 0;
         row.target = target;
         row.lo = lo;
         row.hi = hi;
         row.lambda = lambda;
         row.partner = -1;
+        row.radius = 0;
+        row.lateral_scale = 1;
         return &row;
       };
       switch (ws.kind) {
@@ -419,19 +432,26 @@ void RollerVehicle::PreStep(double dt) noexcept {
         lo = std::max(lo, kt * (-m.supply_voltage_v - emf) / m.winding_resistance_ohm);
         if (lo > hi) lo = hi = 0.5 * (lo + hi);
       }
+      // Integral part: an explicit torque inside the same window; proportional part: a soft
+      // row (cfm = 1/(gain*dt)) solved with the contacts.
+      st.motor_integral_nm = std::clamp(st.motor_integral_nm, lo, hi);
+      omega[i] += st.motor_integral_nm * dt * st.inv_inertia;
       Row& row = rows_buf[nrows++];
       row.partner = -1;
       row.radius = 0;
       row.lateral_scale = 1;
       row.lin.setZero();
+      row.lin_m.setZero();
       row.ang.setZero();
       row.iang.setZero();
       row.jw = 1;
+      row.jw_i = st.inv_inertia;
       row.wheel = static_cast<int>(i);
-      row.inv_k = 1.0 / st.inv_inertia;
+      row.cfm = 1.0 / (m.speed_gain_nm_s_rad * dt);
+      row.inv_k = 1.0 / (st.inv_inertia + row.cfm);
       row.target = cmd;
-      row.lo = lo * dt;
-      row.hi = hi * dt;
+      row.lo = (lo - st.motor_integral_nm) * dt;
+      row.hi = (hi - st.motor_integral_nm) * dt;
       row.lambda = &st.lambda_motor;
     } else if (!ws.driven && nrows < kMaxRows) {
       double tau = ws.bearing_friction_nm;
@@ -443,11 +463,14 @@ void RollerVehicle::PreStep(double dt) noexcept {
       row.radius = 0;
       row.lateral_scale = 1;
       row.lin.setZero();
+      row.lin_m.setZero();
       row.ang.setZero();
       row.iang.setZero();
       row.jw = 1;
+      row.jw_i = st.inv_inertia;
       row.wheel = static_cast<int>(i);
       row.inv_k = 1.0 / st.inv_inertia;
+      row.cfm = 0;
       row.target = 0;
       row.lo = -tau * dt;
       row.hi = tau * dt;
@@ -455,15 +478,10 @@ void RollerVehicle::PreStep(double dt) noexcept {
     }
   }
 
-  auto inv_i_wheel = [&](const Row& row) {
-    return spec_.wheels[static_cast<std::size_t>(row.wheel)].kind == WheelKind::kCaster
-               ? 0.0
-               : state_[static_cast<std::size_t>(row.wheel)].inv_inertia;
-  };
   auto apply_row = [&](const Row& row, double d) {
-    v += row.lin * (d * inv_m);
+    v += row.lin_m * d;
     w += row.iang * d;
-    omega[row.wheel] += row.jw * d * inv_i_wheel(row);
+    omega[row.wheel] += row.jw_i * d;
   };
   auto row_velocity = [&](const Row& row) {
     return row.lin.dot(v) + row.ang.dot(w) + row.jw * omega[row.wheel];
@@ -475,7 +493,12 @@ void RollerVehicle::PreStep(double dt) noexcept {
     *row.lambda = lam;
     apply_row(row, lam);
   }
+  // Projected Gauss-Seidel; stops early once no row changes its velocity by more than
+  // kSolverTolerance (a deterministic test, so runs stay bit-identical).
+  int sweeps = 0;
   for (int it = 0; it < spec_.solver_iterations; ++it) {
+    ++sweeps;
+    double max_change = 0;
     for (std::size_t k = 0; k < nrows; ++k) {
       Row& row = rows_buf[k];
       if (row.partner >= 0) {
@@ -495,15 +518,21 @@ void RollerVehicle::PreStep(double dt) noexcept {
         *lat.lambda = lb;
         apply_row(row, la - la0);
         apply_row(lat, lb - lb0);
+        if (row.inv_k > 0) max_change = std::max(max_change, std::abs(la - la0) / row.inv_k);
+        if (lat.inv_k > 0) max_change = std::max(max_change, std::abs(lb - lb0) / lat.inv_k);
         ++k;  // the lateral row follows directly and was handled here
         continue;
       }
       const double old = *row.lambda;
-      const double lam = std::clamp(old + (row.target - row_velocity(row)) * row.inv_k, row.lo, row.hi);
+      const double lam = std::clamp(
+          old + (row.target - row_velocity(row) - row.cfm * old) * row.inv_k, row.lo, row.hi);
       *row.lambda = lam;
       apply_row(row, lam - old);
+      if (row.inv_k > 0) max_change = std::max(max_change, std::abs(lam - old) / row.inv_k);
     }
+    if (max_change < kSolverTolerance) break;
   }
+  body_truth_.solver_sweeps = sweeps;
 
   body_->setLinearVelocity(ToBt(v));
   body_->setAngularVelocity(ToBt(w));
@@ -519,7 +548,9 @@ void RollerVehicle::PreStep(double dt) noexcept {
     const Contact& ct = contact[i];
     tr.rim_travel_m += omega[i] * ct.r_eff * dt;
     if (ws.driven) {
-      tr.motor_torque_nm = st.lambda_motor / dt;
+      tr.motor_torque_nm = st.lambda_motor / dt + st.motor_integral_nm;
+      st.motor_integral_nm +=
+          ws.motor.integral_gain_nm_rad * (st.omega_cmd_slewed - omega[i]) * dt;
       tr.motor_current_a = tr.motor_torque_nm / (ws.motor.torque_constant_nm_a * ws.motor.gear_ratio);
     }
     if (!tr.in_contact) {

@@ -64,6 +64,7 @@ struct BodyTruth {
   Eigen::Vector3d omega_WB_W = Eigen::Vector3d::Zero();
   Eigen::Vector3d a_WB_W = Eigen::Vector3d::Zero();      ///< linear acceleration (no gravity)
   Eigen::Vector3d alpha_WB_W = Eigen::Vector3d::Zero();  ///< angular acceleration
+  int solver_sweeps = 0;  ///< contact-solver sweeps used in the last step (diagnostics)
 };
 
 class RollerVehicle : public btActionInterface {
@@ -102,6 +103,7 @@ class RollerVehicle : public btActionInterface {
     bool ground_valid = false;
     double omega_cmd_slewed = 0;
     double lambda_motor = 0;       // warm start, impulses
+    double motor_integral_nm = 0;  // PI servo integral torque
     double lambda_spin = 0;
     double lambda_a = 0;           // constrained row 1 (rolling or roller axis)
     double lambda_b = 0;           // row 2 (lateral for conventional, free for rollers)
@@ -109,6 +111,7 @@ class RollerVehicle : public btActionInterface {
     double anchor_b_m = 0;
     double last_slip_m_s = 0;
     double inv_inertia = 0;        // 1 / (wheel + reflected rotor inertia)
+    Eigen::Vector3d axle_B = Eigen::Vector3d::UnitY();  // left of the rolling direction
   };
   double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
 

@@ -38,10 +38,11 @@ struct SuspensionSpec {
   double tire_damping_n_s_m = 300;
 };
 
-/// Driven-wheel motor: an ideal speed servo (solved implicitly with the contact, so it holds the
-/// commanded wheel speed exactly while torque allows) behind a gear, saturated by the wheel-side
-/// torque limit, the current limit (torque = gear_ratio * torque_constant * current) and, when
-/// winding_resistance_ohm > 0, the supply voltage against the back-EMF.
+/// Driven-wheel motor: a PI speed servo at the wheel, torque = speed_gain*(cmd - omega) +
+/// integral_gain*integral(cmd - omega), the proportional part solved implicitly together with the
+/// contacts, behind a gear, saturated by the wheel-side torque limit, the current limit
+/// (torque = gear_ratio * torque_constant * current) and, when winding_resistance_ohm > 0, the
+/// supply voltage against the back-EMF (anti-windup: the integral is clamped to the same window).
 struct MotorSpec {
   double gear_ratio = 1.0;                ///< motor turns per wheel turn
   double torque_constant_nm_a = 0.05;     ///< = back-EMF constant in V*s/rad
@@ -51,6 +52,8 @@ struct MotorSpec {
   double supply_voltage_v = 24.0;
   double winding_resistance_ohm = 0.0;    ///< 0 = no voltage limit
   double max_accel_rad_s2 = 0.0;          ///< slew limit of the command at the wheel, 0 = none
+  double speed_gain_nm_s_rad = 30.0;      ///< proportional gain, wheel side
+  double integral_gain_nm_rad = 300.0;    ///< integral gain, wheel side
 };
 
 /// One wheel (or caster, or orthogonal-wheel assembly).

@@ -103,7 +103,8 @@ const std::set<std::string> kSuspensionKeys = {"free_length_m",      "min_length
 const std::set<std::string> kMotorKeys = {"gear_ratio",          "torque_constant_nm_a",
                                           "max_current_a",       "max_torque_nm",
                                           "rotor_inertia_kg_m2", "supply_voltage_v",
-                                          "winding_resistance_ohm", "max_accel_rad_s2"};
+                                          "winding_resistance_ohm", "max_accel_rad_s2",
+                                          "speed_gain_nm_s_rad", "integral_gain_nm_rad"};
 
 WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& defaults,
                      const std::string& prefix, bool* encoder) {
@@ -187,6 +188,10 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
     m.supply_voltage_v = rd.GetOr(motor, dmotor, "supply_voltage_v", mp, 1e-3, 1e4, 24);
     m.winding_resistance_ohm = rd.GetOr(motor, dmotor, "winding_resistance_ohm", mp, 0, 1e4, 0);
     m.max_accel_rad_s2 = rd.GetOr(motor, dmotor, "max_accel_rad_s2", mp, 0, 1e6, 0);
+    m.speed_gain_nm_s_rad =
+        rd.GetOr(motor, dmotor, "speed_gain_nm_s_rad", mp, 1e-6, 1e6, m.speed_gain_nm_s_rad);
+    m.integral_gain_nm_rad =
+        rd.GetOr(motor, dmotor, "integral_gain_nm_rad", mp, 0, 1e8, m.integral_gain_nm_rad);
     if (w.kind == WheelKind::kCaster) rd.Fail(motor, prefix + "motor", "a caster cannot be driven");
   }
   return w;
