@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <cstdio>
 #include <fstream>
 #include <initializer_list>
 #include <memory>
@@ -13,6 +12,7 @@
 #include <vector>
 
 #include "bus/can_frame.h"
+#include "bus/candump_log.h"
 #include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
@@ -256,26 +256,17 @@ std::shared_ptr<const Cia406Codec> Codec() {
 // ---------------------------------------------------------------------------------------------
 // CANopen CiA 406 encoder node against hand-written golden candump traces.
 
-// "ID#DATA" (can-utils notation, classic frames only) to a frame.
+// "ID#DATA" (can-utils notation) to a frame, through the project's candump reader.
 CanFrame ParseCanUtils(const std::string& text) {
-  const auto hash = text.find('#');
   CanFrame f;
-  f.id = static_cast<std::uint32_t>(std::stoul(text.substr(0, hash), nullptr, 16));
-  f.extended = hash > 3;
-  const std::string data = text.substr(hash + 1);
-  f.len = static_cast<std::uint8_t>(data.size() / 2);
-  for (std::size_t i = 0; i < f.len; ++i) {
-    f.data[i] = static_cast<std::uint8_t>(std::stoul(data.substr(2 * i, 2), nullptr, 16));
-  }
+  std::string error;
+  if (!bus::ParseCanUtilsFrame(text, f, &error)) ADD_FAILURE() << text << ": " << error;
   return f;
 }
 
+// One `candump -L` line, through the project's log writer.
 std::string CandumpLine(std::int64_t t_ns, const CanFrame& f) {
-  char stamp[40];
-  std::snprintf(stamp, sizeof stamp, "(%010lld.%06lld)",
-                static_cast<long long>(t_ns / 1'000'000'000),
-                static_cast<long long>((t_ns % 1'000'000'000) / 1000));
-  return std::string(stamp) + " vcan0 " + bus::ToCanUtilsString(f);
+  return bus::FormatCandumpLine(t_ns, "vcan0", f);
 }
 
 std::vector<std::string> ReadGolden(const std::string& name) {
