@@ -9,6 +9,7 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <Eigen/Geometry>
+#include <BulletCollision/NarrowPhaseCollision/btRaycastCallback.h>
 #include <btBulletCollisionCommon.h>
 #include <fmt/format.h>
 
@@ -21,6 +22,23 @@ btVector3 ToBt(const Eigen::Vector3d& v) {
                    static_cast<btScalar>(v.z()));
 }
 Eigen::Vector3d ToEigen(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
+
+// Closest-hit ray callback over one triangle mesh.
+struct ClosestTriangleRay : public btTriangleRaycastCallback {
+  ClosestTriangleRay(const btVector3& from, const btVector3& to)
+      : btTriangleRaycastCallback(from, to, 0) {}
+  btScalar reportHit(const btVector3& hit_normal, btScalar fraction, int /*part*/,
+                     int /*triangle*/) override {
+    if (fraction < m_hitFraction) {
+      normal = hit_normal;
+      hit = true;
+      return fraction;
+    }
+    return m_hitFraction;
+  }
+  btVector3 normal{0, 0, 1};
+  bool hit = false;
+};
 
 bool InsidePolygon(const std::vector<Eigen::Vector2d>& poly, double x, double y) {
   bool inside = false;
@@ -191,32 +209,31 @@ bool Terrain::Raycast(const Eigen::Vector3d& from, const Eigen::Vector3d& dir, d
     hit->normal_W = p.n;
     hit->friction = p.friction;
   }
-  if (world_ && !meshes_.empty()) {
+  if (!meshes_.empty()) {
+    // Straight to each mesh's BVH (static meshes have identity transforms, vertices in W): no
+    // broadphase pass, no collision-object callback.
     const btVector3 a = ToBt(from);
     const btVector3 b = ToBt(from + dir * best);
-    btCollisionWorld::ClosestRayResultCallback cb(a, b);
-    world_->rayTest(a, b, cb);
-    if (!cb.hasHit()) {
-      // A ray along a shared triangle edge can slip through in single precision; look again
-      // 50 um to the side before calling it a gap.
-      const Eigen::Vector3d side = dir.unitOrthogonal() * 5e-5;
-      const btVector3 a2 = ToBt(from + side);
-      const btVector3 b2 = ToBt(from + side + dir * best);
-      cb = btCollisionWorld::ClosestRayResultCallback(a2, b2);
-      world_->rayTest(a2, b2, cb);
-    }
-    if (cb.hasHit()) {
-      const double t = best * cb.m_closestHitFraction;
-      if (!found || t < best) {
-        found = true;
-        hit->distance_m = t;
-        hit->point_W = from + t * dir;
-        Eigen::Vector3d n = ToEigen(cb.m_hitNormalWorld).normalized();
-        if (n.dot(dir) > 0) n = -n;  // facing the ray origin
-        hit->normal_W = n;
-        hit->friction = meshes_[static_cast<std::size_t>(cb.m_collisionObject->getUserIndex())]
-                            .friction;
+    const btVector3 side = ToBt(dir.unitOrthogonal() * 5e-5);
+    for (std::size_t m = 0; m < meshes_.size(); ++m) {
+      ClosestTriangleRay cb(a, b);
+      meshes_[m].shape->performRaycast(&cb, a, b);
+      if (!cb.hit) {
+        // A ray along a shared triangle edge can slip through in single precision; look again
+        // 50 um to the side before calling it a gap.
+        cb = ClosestTriangleRay(a + side, b + side);
+        meshes_[m].shape->performRaycast(&cb, a + side, b + side);
       }
+      if (!cb.hit) continue;
+      const double t = best * cb.m_hitFraction;
+      if (found && t >= hit->distance_m) continue;
+      found = true;
+      hit->distance_m = t;
+      hit->point_W = from + t * dir;
+      Eigen::Vector3d n = ToEigen(cb.normal).normalized();
+      if (n.dot(dir) > 0) n = -n;  // facing the ray origin
+      hit->normal_W = n;
+      hit->friction = meshes_[m].friction;
     }
   }
   if (found && !patches_.empty()) hit->friction = FrictionAt(hit->point_W, hit->friction);

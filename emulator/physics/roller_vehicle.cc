@@ -167,6 +167,8 @@ RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
                                   : 0.0;
     st.inv_inertia = 1.0 / (w.inertia_kg_m2 + rotor);
     st.axle_B = Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
+    st.roller_cos = std::cos(w.roller_angle_rad);
+    st.roller_sin = std::sin(w.roller_angle_rad);
     // Start with the hub on the floor (or hanging).
     st.length_m = w.suspension.max_length_m;
     double offset = 0;
@@ -348,7 +350,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
       tr.contact_point_W = cp;
       const Vector3d r_c = cp - p;
       // Lateral part of the normal force (sloped floor): goes to the chassis directly.
-      apply_at(dt * (n_load * nrm + n_axis * dir), r_c);
+      const Vector3d lateral = n_load * nrm + n_axis * dir;
+      if (lateral.squaredNorm() > 1e-18) apply_at(dt * lateral, r_c);
       Vector3d f = axle.cross(nrm);
       const double fn = f.norm();
       f = fn > 1e-9 ? Vector3d(f / fn) : Vector3d(R.col(0));
@@ -399,7 +402,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
         case WheelKind::kMecanum:
         case WheelKind::kOmni:
         case WheelKind::kOrthogonal: {
-          u = std::cos(ws.roller_angle_rad) * l + std::sin(ws.roller_angle_rad) * f;
+          u = st.roller_cos * l + st.roller_sin * f;
           const Vector3d free_dir = nrm.cross(u);
           add_row(u, -r_eff * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim,
                   &st.lambda_a);

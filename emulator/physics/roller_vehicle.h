@@ -112,6 +112,7 @@ class RollerVehicle : public btActionInterface {
     double last_slip_m_s = 0;
     double inv_inertia = 0;        // 1 / (wheel + reflected rotor inertia)
     Eigen::Vector3d axle_B = Eigen::Vector3d::UnitY();  // left of the rolling direction
+    double roller_cos = 0, roller_sin = 1;
   };
   double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
 
