@@ -117,6 +117,52 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
                                 ToBt(vertices_W[t[2]]), /*removeDuplicateVertices=*/false);
   }
   mesh.shape = std::make_unique<btBvhTriangleMeshShape>(mesh.triangles.get(), true, true);
+  // x-y grid for vertical rays: about two triangles' footprint per cell, at most 1024^2 cells.
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  for (const auto& t : triangles) {
+    std::array<Eigen::Vector3d, 3> tri{vertices_W[t[0]], vertices_W[t[1]], vertices_W[t[2]]};
+    for (const auto& v : tri) {
+      x0 = std::min(x0, v.x());
+      y0 = std::min(y0, v.y());
+      x1 = std::max(x1, v.x());
+      y1 = std::max(y1, v.y());
+    }
+    mesh.tris.push_back(tri);
+  }
+  const double w = std::max(x1 - x0, 1e-6), h = std::max(y1 - y0, 1e-6);
+  double cell = std::sqrt(w * h / static_cast<double>(triangles.size()));
+  cell = std::max({cell, w / 1024, h / 1024, 1e-4});
+  mesh.cell_m = cell;
+  mesh.grid_x0 = x0;
+  mesh.grid_y0 = y0;
+  mesh.nx = static_cast<int>(std::floor(w / cell)) + 1;
+  mesh.ny = static_cast<int>(std::floor(h / cell)) + 1;
+  const std::size_t ncell = static_cast<std::size_t>(mesh.nx) * static_cast<std::size_t>(mesh.ny);
+  std::vector<std::uint32_t> count(ncell + 1, 0);
+  auto for_cells = [&](const std::array<Eigen::Vector3d, 3>& tri, auto&& fn) {
+    double a0 = 1e300, b0 = 1e300, a1 = -1e300, b1 = -1e300;
+    for (const auto& v : tri) {
+      a0 = std::min(a0, v.x());
+      b0 = std::min(b0, v.y());
+      a1 = std::max(a1, v.x());
+      b1 = std::max(b1, v.y());
+    }
+    const int i0 = std::clamp(static_cast<int>(std::floor((a0 - x0) / cell)), 0, mesh.nx - 1);
+    const int i1 = std::clamp(static_cast<int>(std::floor((a1 - x0) / cell)), 0, mesh.nx - 1);
+    const int j0 = std::clamp(static_cast<int>(std::floor((b0 - y0) / cell)), 0, mesh.ny - 1);
+    const int j1 = std::clamp(static_cast<int>(std::floor((b1 - y0) / cell)), 0, mesh.ny - 1);
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) fn(static_cast<std::size_t>(j) * mesh.nx + i);
+    }
+  };
+  for (const auto& tri : mesh.tris) for_cells(tri, [&](std::size_t c) { ++count[c + 1]; });
+  for (std::size_t c = 0; c < ncell; ++c) count[c + 1] += count[c];
+  mesh.cell_start = count;
+  mesh.cell_tris.resize(count[ncell]);
+  std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
+  for (std::size_t k = 0; k < mesh.tris.size(); ++k) {
+    for_cells(mesh.tris[k], [&](std::size_t c) { mesh.cell_tris[fill[c]++] = static_cast<std::uint32_t>(k); });
+  }
   mesh.object = std::make_unique<btCollisionObject>();
   mesh.object->setCollisionShape(mesh.shape.get());
   mesh.object->setUserIndex(static_cast<int>(meshes_.size()));
@@ -173,6 +219,49 @@ void Terrain::AddMesh(const std::string& path, const MeshOptions& options) {
   AddTriangles(vertices, triangles, options.friction, path);
 }
 
+bool Terrain::GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from,
+                          const Eigen::Vector3d& dir, double max_distance, double* t_out,
+                          Eigen::Vector3d* normal) noexcept {
+  const Eigen::Vector3d to = from + dir * max_distance;
+  const double inv = 1.0 / mesh.cell_m;
+  const int i0 = static_cast<int>(std::floor((std::min(from.x(), to.x()) - mesh.grid_x0) * inv));
+  const int i1 = static_cast<int>(std::floor((std::max(from.x(), to.x()) - mesh.grid_x0) * inv));
+  const int j0 = static_cast<int>(std::floor((std::min(from.y(), to.y()) - mesh.grid_y0) * inv));
+  const int j1 = static_cast<int>(std::floor((std::max(from.y(), to.y()) - mesh.grid_y0) * inv));
+  bool found = false;
+  double best = max_distance;
+  for (int j = std::max(j0, 0); j <= std::min(j1, mesh.ny - 1); ++j) {
+    for (int i = std::max(i0, 0); i <= std::min(i1, mesh.nx - 1); ++i) {
+      const std::size_t c = static_cast<std::size_t>(j) * mesh.nx + i;
+      for (std::uint32_t k = mesh.cell_start[c]; k < mesh.cell_start[c + 1]; ++k) {
+        const auto& tri = mesh.tris[mesh.cell_tris[k]];
+        // Moller-Trumbore, two-sided, edges inclusive (a shared edge is never missed).
+        const Eigen::Vector3d e1 = tri[1] - tri[0];
+        const Eigen::Vector3d e2 = tri[2] - tri[0];
+        const Eigen::Vector3d p = dir.cross(e2);
+        const double det = e1.dot(p);
+        if (std::abs(det) < 1e-15) continue;
+        const double inv_det = 1.0 / det;
+        const Eigen::Vector3d s = from - tri[0];
+        const double u = s.dot(p) * inv_det;
+        if (u < -1e-12 || u > 1 + 1e-12) continue;
+        const Eigen::Vector3d q = s.cross(e1);
+        const double v = dir.dot(q) * inv_det;
+        if (v < -1e-12 || u + v > 1 + 1e-12) continue;
+        const double t = e2.dot(q) * inv_det;
+        if (t < 0 || t > best) continue;
+        best = t;
+        found = true;
+        Eigen::Vector3d n = e1.cross(e2).normalized();
+        if (n.dot(dir) > 0) n = -n;
+        *normal = n;
+      }
+    }
+  }
+  *t_out = best;
+  return found;
+}
+
 void Terrain::AddPatch(const FrictionPatch& patch) {
   const std::string where = fmt::format("patch '{}'", patch.name);
   if (patch.polygon_W.size() < 3) {
@@ -216,6 +305,18 @@ bool Terrain::Raycast(const Eigen::Vector3d& from, const Eigen::Vector3d& dir, d
     const btVector3 b = ToBt(from + dir * best);
     const btVector3 side = ToBt(dir.unitOrthogonal() * 5e-5);
     for (std::size_t m = 0; m < meshes_.size(); ++m) {
+      if (std::abs(dir.z()) > 0.7) {
+        double t = 0;
+        Eigen::Vector3d n;
+        if (GridRaycast(meshes_[m], from, dir, best, &t, &n) && (!found || t < hit->distance_m)) {
+          found = true;
+          hit->distance_m = t;
+          hit->point_W = from + t * dir;
+          hit->normal_W = n;
+          hit->friction = meshes_[m].friction;
+        }
+        continue;
+      }
       ClosestTriangleRay cb(a, b);
       meshes_[m].shape->performRaycast(&cb, a, b);
       if (!cb.hit) {

@@ -8,6 +8,7 @@
 /// Raycast() is const and allocation-free; Terrain is thread-compatible.
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -91,12 +92,22 @@ class Terrain {
     double d;  // n.x = d on the plane
     Friction friction;
   };
+  // A static triangle mesh: Bullet's BVH shape (any ray direction) plus, for the near-vertical
+  // rays of the wheels, a uniform x-y grid of triangle lists tested in double precision.
   struct Mesh {
     std::unique_ptr<btTriangleMesh> triangles;
     std::unique_ptr<btBvhTriangleMeshShape> shape;
     std::unique_ptr<btCollisionObject> object;
     Friction friction;
+    std::vector<std::array<Eigen::Vector3d, 3>> tris;  // W
+    double grid_x0 = 0, grid_y0 = 0, cell_m = 1;
+    int nx = 0, ny = 0;
+    std::vector<std::uint32_t> cell_start;  // nx*ny + 1
+    std::vector<std::uint32_t> cell_tris;
   };
+  static bool GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from,
+                          const Eigen::Vector3d& dir, double max_distance, double* t,
+                          Eigen::Vector3d* normal) noexcept;
   std::vector<Plane> planes_;
   std::vector<Mesh> meshes_;
   std::vector<FrictionPatch> patches_;

@@ -83,6 +83,25 @@ TEST(Terrain, ShippedMeshesHaveTheirFeatures) {
   EXPECT_LT(zmax - zmin, 6e-3);
 }
 
+TEST(Terrain, MeshRaysOnEdgesVerticesAndSlanted) {
+  Terrain t;
+  t.AddMesh(SourcePath("meshes/floor_flat.obj"), MeshOptions{});
+  SurfaceHit hit;
+  // Vertical rays (grid path) exactly through a vertex and along shared edges.
+  for (const auto& xy : {Eigen::Vector2d(0.5, 0.5), Eigen::Vector2d(0.5, 0.123),
+                         Eigen::Vector2d(0.25, 0.25), Eigen::Vector2d(-2.0, -2.0)}) {
+    ASSERT_TRUE(t.Raycast(Eigen::Vector3d(xy.x(), xy.y(), 0.3), -Eigen::Vector3d::UnitZ(), 1, &hit))
+        << xy.transpose();
+    EXPECT_NEAR(hit.distance_m, 0.3, 1e-12);
+  }
+  // A slanted ray (Bullet BVH path) at 60 deg from vertical.
+  const Eigen::Vector3d dir = Eigen::Vector3d(std::sin(M_PI / 3), 0, -std::cos(M_PI / 3));
+  ASSERT_TRUE(t.Raycast(Eigen::Vector3d(0, 0.1, 0.5), dir, 2, &hit));
+  EXPECT_NEAR(hit.distance_m, 1.0, 1e-5);
+  // Off the mesh: nothing.
+  EXPECT_FALSE(t.Raycast(Eigen::Vector3d(3, 0, 0.3), -Eigen::Vector3d::UnitZ(), 1, &hit));
+}
+
 TEST(Terrain, PatchOverridesFriction) {
   Terrain t;
   t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.7});
