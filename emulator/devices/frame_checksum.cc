@@ -1,0 +1,87 @@
+#include "emulator/devices/frame_checksum.h"
+
+#include <array>
+#include <cstring>
+
+#include "bus/dbc_codec.h"
+
+namespace wheelhil::emulator {
+
+std::optional<ChecksumKind> ParseChecksumKind(std::string_view name) noexcept {
+  if (name == "xor") return ChecksumKind::kXor;
+  if (name == "sum") return ChecksumKind::kSum;
+  if (name == "crc8_sae_j1850" || name == "crc8") return ChecksumKind::kCrc8SaeJ1850;
+  return std::nullopt;
+}
+
+std::string_view ChecksumKindName(ChecksumKind kind) noexcept {
+  switch (kind) {
+    case ChecksumKind::kXor:
+      return "xor";
+    case ChecksumKind::kSum:
+      return "sum";
+    case ChecksumKind::kCrc8SaeJ1850:
+      return "crc8_sae_j1850";
+  }
+  return "?";
+}
+
+bool ChecksumFits(ChecksumKind kind, const bus::DbcSignal& sig) noexcept {
+  if (sig.value_type != bus::DbcValueType::kInteger) return false;
+  switch (kind) {
+    case ChecksumKind::kXor:
+      return sig.length == 4 || sig.length == 8;
+    case ChecksumKind::kSum:
+      return sig.length >= 1 && sig.length <= 8;
+    case ChecksumKind::kCrc8SaeJ1850:
+      return sig.length == 8;
+  }
+  return false;
+}
+
+std::uint8_t Crc8SaeJ1850(std::span<const std::uint8_t> bytes) noexcept {
+  std::uint8_t crc = 0xFF;
+  for (std::uint8_t b : bytes) {
+    crc ^= b;
+    for (int i = 0; i < 8; ++i) {
+      crc = static_cast<std::uint8_t>((crc & 0x80) ? ((crc << 1) ^ 0x1D) : (crc << 1));
+    }
+  }
+  return static_cast<std::uint8_t>(crc ^ 0xFF);
+}
+
+std::uint64_t ComputeChecksum(ChecksumKind kind, const bus::DbcSignal& checksum_sig,
+                              std::span<const std::uint8_t> payload) noexcept {
+  std::array<std::uint8_t, 64> buf{};
+  if (payload.size() > buf.size()) return 0;
+  std::memcpy(buf.data(), payload.data(), payload.size());
+  const std::span<std::uint8_t> work(buf.data(), payload.size());
+  if (!bus::InsertRaw(checksum_sig, 0, work)) return 0;
+  const int w = checksum_sig.length;
+  const std::uint64_t mask = w >= 64 ? ~0ULL : ((1ULL << w) - 1);
+  switch (kind) {
+    case ChecksumKind::kXor: {
+      std::uint8_t x = 0;
+      for (std::uint8_t b : work) x ^= b;
+      if (w == 4) x = static_cast<std::uint8_t>((x & 0x0F) ^ (x >> 4));
+      return x & mask;
+    }
+    case ChecksumKind::kSum: {
+      std::uint64_t s = 0;
+      for (std::uint8_t b : work) s += b;
+      return s & mask;
+    }
+    case ChecksumKind::kCrc8SaeJ1850:
+      return Crc8SaeJ1850(work) & mask;
+  }
+  return 0;
+}
+
+bool WriteChecksum(ChecksumKind kind, const bus::DbcSignal& checksum_sig,
+                   std::span<std::uint8_t> payload) noexcept {
+  std::uint64_t unused = 0;
+  if (!bus::ExtractRaw(checksum_sig, payload, unused)) return false;
+  return bus::InsertRaw(checksum_sig, ComputeChecksum(kind, checksum_sig, payload), payload);
+}
+
+}  // namespace wheelhil::emulator

@@ -1,0 +1,285 @@
+// Tests of emulator/devices/accel4_node.h, dbc_imu_node.h and frame_checksum.h.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "bus/dbc.h"
+#include "bus/dbc_codec.h"
+#include "emulator/devices/accel4_node.h"
+#include "emulator/devices/dbc_imu_node.h"
+#include "emulator/devices/frame_checksum.h"
+#include "emulator/sensors/accelerometer_model.h"
+
+namespace wheelhil::emulator {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+std::shared_ptr<const bus::DbcDatabase> Accel4Dbc() {
+  return std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(WHEELHIL_SOURCE_DIR "/bus/dbc/wheelhil_accel4.dbc"));
+}
+
+std::uint8_t NibbleXorOf15(const bus::CanFrame& f) {
+  std::uint8_t x = f.data[7] & 0x0F;
+  for (int i = 0; i < 7; ++i) x ^= static_cast<std::uint8_t>((f.data[i] & 0x0F) ^ (f.data[i] >> 4));
+  return x;
+}
+
+TEST(FrameChecksum, Crc8SaeJ1850CheckValue) {
+  const std::string s = "123456789";
+  const std::vector<std::uint8_t> bytes(s.begin(), s.end());
+  EXPECT_EQ(Crc8SaeJ1850(bytes), 0x4B);
+  EXPECT_EQ(ParseChecksumKind("crc8_sae_j1850"), ChecksumKind::kCrc8SaeJ1850);
+  EXPECT_EQ(ParseChecksumKind("md5"), std::nullopt);
+}
+
+// A spinning, accelerating, slightly tilted body: every frame decodes (through the DBC) to the
+// analytic specific force along each sensor axis within half a quantisation step.
+TEST(Accel4Node, FramesDecodeToSpecificForceWithinQuantisation) {
+  const auto dbc = Accel4Dbc();
+  const double R = 0.15;
+  Accel4Node node(dbc, Paper002AccelParams(R, 1000.0, 7), 0);
+  EXPECT_EQ(node.period_ns(), 1'000'000);
+  const bus::DbcMessage& msg = node.message();
+  EXPECT_EQ(msg.id, 0x170u);
+  const double lsb = msg.FindSignal("ACC4_A1")->factor;
+  const auto params = Paper002AccelParams(R, 1000.0, 7);
+  for (int k = 0; k < 40; ++k) {
+    const double t = 1e-3 * k;
+    BodyKinematics kin;
+    kin.a_WBo_B = {1.2 * std::cos(5 * t), -0.7 + t, 0.1};
+    kin.omega_WB_B = {0.0, 0.0, 3.0 + 5.0 * t};
+    kin.alpha_WB_B = {0.0, 0.0, 5.0};
+    kin.g_B = {0.3, 0.0, -9.8};
+    EXPECT_EQ(node.next_sample_ns(), static_cast<std::int64_t>(k) * 1'000'000);
+    bus::CanFrame f;
+    ASSERT_TRUE(node.Sample(kin, f));
+    ASSERT_EQ(f.len, 8);
+    const bus::SignalValues v = bus::DecodeMessage(msg, f);
+    const char* names[] = {"ACC4_A1", "ACC4_A2", "ACC4_A3", "ACC4_A4"};
+    for (int i = 0; i < 4; ++i) {
+      const Eigen::Vector3d f_B = SpecificForceAt(kin, params[i].r_BP_B);
+      const double expected = params[i].axes_B[0].dot(f_B);
+      EXPECT_NEAR(v.at(names[i]), expected, 0.5 * lsb + 1e-9) << "channel " << i + 1 << " k " << k;
+    }
+    // Paper 002 eq. 3 (tangential terms) + the centripetal terms the sensors really see.
+    const double w2 = kin.omega_WB_B.z() * kin.omega_WB_B.z();
+    const double ax = kin.a_WBo_B.x() - kin.g_B.x(), ay = kin.a_WBo_B.y() - kin.g_B.y();
+    EXPECT_NEAR(v.at("ACC4_A1"), ax - 5.0 * R, 0.5 * lsb + 1e-9);  // r = (0, R): no x centripetal
+    EXPECT_NEAR(v.at("ACC4_A2"), ay + 5.0 * R, 0.5 * lsb + 1e-9);
+    EXPECT_NEAR(v.at("ACC4_A3"), -ay + 5.0 * R, 0.5 * lsb + 1e-9);
+    EXPECT_NEAR(v.at("ACC4_A4"), -ax - 5.0 * R, 0.5 * lsb + 1e-9);
+    (void)w2;
+    EXPECT_EQ(v.at("ACC4_Counter"), k % 16);
+    EXPECT_EQ(v.at("ACC4_Checksum"), NibbleXorOf15(f));
+  }
+  EXPECT_EQ(node.samples(), 40u);
+  EXPECT_EQ(node.saturated(), 0u);
+}
+
+TEST(Accel4Node, OutOfRangeReadingsAreSentSaturated) {
+  Accel4Node node(Accel4Dbc(), Paper002AccelParams(0.15, 1000.0, 1), 5);
+  bus::CanFrame f;
+  EXPECT_FALSE(node.EncodeSample({100.0, -100.0, 0.0, 1.0}, f));
+  std::uint64_t raw = 0;
+  ASSERT_TRUE(bus::ExtractRaw(*node.message().FindSignal("ACC4_A1"), f.payload(), raw));
+  EXPECT_EQ(raw, 8191u);
+  ASSERT_TRUE(bus::ExtractRaw(*node.message().FindSignal("ACC4_A2"), f.payload(), raw));
+  EXPECT_EQ(raw, 0x2000u);  // -8192 in 14 bits
+  EXPECT_EQ(node.saturated(), 1u);
+  EXPECT_EQ(node.next_sample_ns(), 5 + 1'000'000);
+}
+
+TEST(Accel4Node, RejectsBadConfiguration) {
+  auto p = Paper002AccelParams(0.15, 1000.0, 1);
+  p[2].rate_hz = 500.0;
+  EXPECT_THAT([&] { Accel4Node(Accel4Dbc(), p, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("sensors[2].rate_hz")));
+  p = Paper002AccelParams(0.15, 1000.0, 1);
+  p[1].axes_B.push_back(Eigen::Vector3d::UnitZ());
+  EXPECT_THAT([&] { Accel4Node(Accel4Dbc(), p, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("sensors[1].axes")));
+  const auto other = std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(WHEELHIL_SOURCE_DIR "/bus/dbc/bosch_mm5_10.dbc"));
+  EXPECT_THAT([&] { Accel4Node(other, Paper002AccelParams(0.15, 1000.0, 1), 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("ACC4_Data")));
+}
+
+// A user's IMU, written here: rates in deg/s (Intel) with an 8-bit counter and CRC-8 every
+// 10 ms; accelerations in m/s^2 and g (Motorola) with a 4-bit counter and a byte sum every
+// 20 ms; a z rate in rad/s with a 4-bit counter and a nibble XOR every 5 ms.
+constexpr char kUserImuDbc[] = R"(VERSION ""
+NS_ :
+BS_:
+BU_: Imu Fw
+BO_ 1280 IMU_Rates: 8 Imu
+ SG_ IMU_RateX : 0|16@1- (0.01,0) [-327.68|327.67] "deg/s" Fw
+ SG_ IMU_RateY : 16|16@1- (0.01,0) [-327.68|327.67] "deg/s" Fw
+ SG_ IMU_RateZ : 32|16@1- (0.01,0) [-327.68|327.67] "deg/s" Fw
+ SG_ IMU_Counter : 48|8@1+ (1,0) [0|255] "" Fw
+ SG_ IMU_Crc : 56|8@1+ (1,0) [0|255] "" Fw
+BO_ 1281 IMU_Accel: 8 Imu
+ SG_ IMU_AccX : 7|16@0- (0.001,0) [-32.768|32.767] "m/s^2" Fw
+ SG_ IMU_AccY : 23|16@0- (0.001,0) [-32.768|32.767] "m/s^2" Fw
+ SG_ IMU_AccZ : 39|16@0- (0.0001,0) [-3.2768|3.2767] "g" Fw
+ SG_ IMU_Cnt : 48|4@1+ (1,0) [0|15] "" Fw
+ SG_ IMU_Sum : 56|8@1+ (1,0) [0|255] "" Fw
+BO_ 1282 IMU_RadRateZ: 8 Imu
+ SG_ RR_Z : 0|32@1- (1E-006,0) [-2147|2147] "rad/s" Fw
+ SG_ RR_Cnt : 32|4@1+ (1,0) [0|15] "" Fw
+ SG_ RR_Xor : 36|4@1+ (1,0) [0|15] "" Fw
+BO_ 1283 IMU_NoCycle: 2 Imu
+ SG_ NC_RateZ : 0|16@1- (0.01,0) [-327.68|327.67] "deg/s" Fw
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_DEF_DEF_ "GenMsgCycleTime" 0;
+BA_ "GenMsgCycleTime" BO_ 1280 10;
+BA_ "GenMsgCycleTime" BO_ 1281 20;
+BA_ "GenMsgCycleTime" BO_ 1282 5;
+)";
+
+std::shared_ptr<const bus::DbcDatabase> UserImuDbc() {
+  return std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::Parse(kUserImuDbc, "user_imu.dbc"));
+}
+
+DbcImuConfig UserImuConfig() {
+  DbcImuConfig c;
+  c.channels = {
+      {ImuQuantity::kRateX, "IMU_Rates", "IMU_RateX"},
+      {ImuQuantity::kRateY, "IMU_Rates", "IMU_RateY"},
+      {ImuQuantity::kRateZ, "IMU_Rates", "IMU_RateZ"},
+      {ImuQuantity::kAccelX, "IMU_Accel", "IMU_AccX"},
+      {ImuQuantity::kAccelY, "IMU_Accel", "IMU_AccY"},
+      {ImuQuantity::kAccelZ, "IMU_Accel", "IMU_AccZ"},
+      {ImuQuantity::kRateZ, "IMU_RadRateZ", "RR_Z"},
+  };
+  c.message_options = {
+      {"IMU_Rates", "IMU_Counter", "IMU_Crc", ChecksumKind::kCrc8SaeJ1850},
+      {"IMU_Accel", "IMU_Cnt", "IMU_Sum", ChecksumKind::kSum},
+      {"IMU_RadRateZ", "RR_Cnt", "RR_Xor", ChecksumKind::kXor},
+  };
+  return c;
+}
+
+TEST(DbcImuNode, InlineDbcFramesCarryTheQuantitiesInTheDbcUnits) {
+  const auto dbc = UserImuDbc();
+  DbcImuNode node(dbc, UserImuConfig(), 1'000);
+  ASSERT_EQ(node.message_count(), 3u);
+  EXPECT_EQ(node.period_ns(0), 10'000'000);
+  EXPECT_EQ(node.period_ns(1), 20'000'000);
+  EXPECT_EQ(node.period_ns(2), 5'000'000);
+  std::map<std::uint32_t, std::vector<std::int64_t>> instants;
+  std::map<std::uint32_t, int> counter;
+  constexpr double kDeg = 180.0 / std::numbers::pi;
+  for (std::int64_t t = node.NextEventNs(); t <= 100'000'000; t = node.NextEventNs()) {
+    const double ts = static_cast<double>(t) * 1e-9;
+    ImuSample s;
+    s.rate_rad_s = {0.5 * std::sin(ts * 20), -0.25, 1.0 + ts};
+    s.accel_m_s2 = {3.0 * ts, -1.5, 9.80665 * (1.0 + ts)};
+    const std::vector<NodeFrame> frames = node.Poll(t, s);
+    ASSERT_FALSE(frames.empty());
+    for (const NodeFrame& nf : frames) {
+      EXPECT_EQ(nf.due_ns, t);
+      const bus::CanFrame& f = nf.frame;
+      instants[f.id].push_back(nf.due_ns);
+      const bus::DbcMessage* msg = dbc->FindMessage(f.id, false);
+      ASSERT_NE(msg, nullptr);
+      const bus::SignalValues v = bus::DecodeMessage(*msg, f);
+      const int n = counter[f.id]++;
+      if (f.id == 1280) {
+        EXPECT_NEAR(v.at("IMU_RateX"), s.rate_rad_s.x() * kDeg, 0.005 + 1e-9);
+        EXPECT_NEAR(v.at("IMU_RateY"), s.rate_rad_s.y() * kDeg, 0.005 + 1e-9);
+        EXPECT_NEAR(v.at("IMU_RateZ"), s.rate_rad_s.z() * kDeg, 0.005 + 1e-9);
+        EXPECT_EQ(v.at("IMU_Counter"), n % 256);
+        std::array<std::uint8_t, 7> b{};
+        std::copy(f.data.begin(), f.data.begin() + 7, b.begin());
+        std::array<std::uint8_t, 8> with_zero{};
+        std::copy(b.begin(), b.end(), with_zero.begin());
+        EXPECT_EQ(v.at("IMU_Crc"), Crc8SaeJ1850(with_zero));
+      } else if (f.id == 1281) {
+        EXPECT_NEAR(v.at("IMU_AccX"), s.accel_m_s2.x(), 0.0005 + 1e-9);
+        EXPECT_NEAR(v.at("IMU_AccY"), s.accel_m_s2.y(), 0.0005 + 1e-9);
+        EXPECT_NEAR(v.at("IMU_AccZ"), s.accel_m_s2.z() / 9.80665, 0.00005 + 1e-9);
+        // Motorola: AccX's MSB byte first.
+        EXPECT_EQ(static_cast<std::int16_t>((f.data[0] << 8) | f.data[1]),
+                  static_cast<std::int16_t>(std::lround(s.accel_m_s2.x() / 0.001)));
+        EXPECT_EQ(v.at("IMU_Cnt"), n % 16);
+        unsigned sum = 0;
+        for (int i = 0; i < 7; ++i) sum += f.data[i];
+        EXPECT_EQ(v.at("IMU_Sum"), sum % 256);
+      } else {
+        ASSERT_EQ(f.id, 1282u);
+        EXPECT_NEAR(v.at("RR_Z"), s.rate_rad_s.z(), 0.5e-6 + 1e-12);
+        EXPECT_EQ(v.at("RR_Cnt"), n % 16);
+        std::uint8_t x = 0;
+        for (int i = 0; i < 8; ++i) {
+          const std::uint8_t byte = i == 4 ? (f.data[4] & 0x0F) : f.data[i];
+          x ^= static_cast<std::uint8_t>((byte & 0x0F) ^ (byte >> 4));
+        }
+        EXPECT_EQ(v.at("RR_Xor"), x);
+      }
+    }
+  }
+  // First sample at 1 us, then every GenMsgCycleTime.
+  ASSERT_EQ(instants[1280].size(), 10u);
+  ASSERT_EQ(instants[1281].size(), 5u);
+  ASSERT_EQ(instants[1282].size(), 20u);
+  for (std::size_t i = 0; i < instants[1282].size(); ++i) {
+    EXPECT_EQ(instants[1282][i], 1'000 + static_cast<std::int64_t>(i) * 5'000'000);
+  }
+  EXPECT_EQ(node.frames_sent(), 35u);
+  EXPECT_EQ(node.saturated(), 0u);
+}
+
+TEST(DbcImuNode, PollCatchesUpInDueOrder) {
+  DbcImuNode node(UserImuDbc(), UserImuConfig(), 0);
+  const std::vector<NodeFrame> frames = node.Poll(20'000'000, ImuSample{});
+  // 0x502 at 0, 5, 10, 15, 20 ms; 0x500 at 0, 10, 20; 0x501 at 0, 20: ties in config order.
+  std::vector<std::pair<std::int64_t, std::uint32_t>> got;
+  for (const NodeFrame& f : frames) got.emplace_back(f.due_ns, f.frame.id);
+  const std::vector<std::pair<std::int64_t, std::uint32_t>> want = {
+      {0, 1280},        {0, 1281},        {0, 1282},        {5'000'000, 1282},
+      {10'000'000, 1280}, {10'000'000, 1282}, {15'000'000, 1282}, {20'000'000, 1280},
+      {20'000'000, 1281}, {20'000'000, 1282}};
+  EXPECT_EQ(got, want);
+}
+
+TEST(DbcImuNode, RejectsConfigurationsTheDbcCannotCarry) {
+  const auto dbc = UserImuDbc();
+  DbcImuConfig c = UserImuConfig();
+  c.channels[3].quantity = ImuQuantity::kRateX;  // a rate on an m/s^2 signal
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("channels[3].signal: unit 'm/s^2'")));
+  c = UserImuConfig();
+  c.channels.push_back({ImuQuantity::kRateZ, "IMU_NoCycle", "NC_RateZ"});
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("GenMsgCycleTime")));
+  c = UserImuConfig();
+  c.channels[0].signal = "IMU_Nope";
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("channels[0].signal")));
+  c = UserImuConfig();
+  c.message_options[1].checksum = ChecksumKind::kXor;
+  c.message_options[1].checksum_signal = "IMU_Cnt";  // 4 bits fit XOR; use a CRC on it instead
+  c.message_options[1].checksum = ChecksumKind::kCrc8SaeJ1850;
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("message_options[1].checksum_signal")));
+  c = UserImuConfig();
+  c.message_options.push_back({"IMU_NoCycle", "", "", ChecksumKind::kXor});
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("carries no configured channel")));
+  EXPECT_EQ(ParseImuQuantity("accel_z"), ImuQuantity::kAccelZ);
+  EXPECT_EQ(ParseImuQuantity("yaw"), std::nullopt);
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator
