@@ -77,6 +77,11 @@ DbcImuNode::DbcImuNode(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImu
       throw std::invalid_argument(
           fmt::format("{}: message '{}' has no GenMsgCycleTime > 0", field, name));
     }
+    if (msg->length > 8) {
+      throw std::invalid_argument(fmt::format(
+          "{}: message '{}' is {} bytes: only classic CAN frames (<= 8) are modelled", field, name,
+          msg->length));
+    }
     Message m;
     m.msg = msg;
     m.period_ns = static_cast<std::int64_t>(*msg->cycle_time_ms) * 1'000'000;

@@ -7,7 +7,7 @@
 ///                abort a frame, so the destroyed-and-retransmitted frame of a real bus is not
 ///                modelled) and is reported as a SocketCAN error frame (CanFrame.error, id =
 ///                CAN_ERR_PROT | CAN_ERR_BUSERROR = 0x88, len 8) completing when the blocker would.
-///                A blocker occupies about 55 bit times (exact stuffing), a real error frame 17..23
+///                A blocker occupies 53 bit times (exact stuffing), a real error frame 17..23
 ///                bits plus the interframe space: the burst is modelled longer than on a real bus.
 ///   kBusOff      node `node` is bus-off: frames it queues (ready instant) in the window are
 ///                discarded (frames queued before t0 still go out).

@@ -463,12 +463,13 @@ TEST(BusFaults, ErrorBurstDelaysButChangesNoFrame) {
     EXPECT_GE(w.start_ns, 20 * kMs + 30'000);
     EXPECT_LT(w.complete_ns, 21 * kMs);
   }
+  // Each error frame holds the bus as long as a zero-length id-0 frame (docs/faults.md).
+  EXPECT_EQ(errors[0].bits, CanFrameBits(bus::CanFrame{}, StuffingMode::kExact));
+  RecordProperty("error_frame_bits", static_cast<int>(errors[0].bits));
   // Back to back: the burst holds the bus.
   for (std::size_t i = 1; i < errors.size(); ++i) {
     EXPECT_EQ(errors[i].start_ns, errors[i - 1].start_ns + errors[i - 1].bits * 1000);
   }
-  // The accel frame due at 21 ms... no: the one due at 20 ms is unaffected (before t0); a frame
-  // ready during the burst waits for it.
   EXPECT_TRUE(Recorded(f.log, "error_burst", "start", 20 * kMs + 30'000));
 }
 
@@ -506,7 +507,10 @@ TEST(BusFaults, FloodAtTheGivenLoad) {
     EXPECT_EQ(w.frame.len, 8);
     busy += w.bits * 1000;  // 1 Mbit/s
   }
-  EXPECT_NEAR(static_cast<double>(busy) / static_cast<double>(20 * kMs), 0.4, 0.01);
+  const double load = static_cast<double>(busy) / static_cast<double>(20 * kMs);
+  EXPECT_NEAR(load, 0.4, 0.01);
+  RecordProperty("flood_load_x1e4", static_cast<int>(std::lround(load * 1e4)));
+  RecordProperty("flood_frames", static_cast<int>(flood.size()));
   EXPECT_TRUE(Recorded(f.log, "flood", "start", 20 * kMs));
   EXPECT_TRUE(Recorded(f.log, "flood", "end", 40 * kMs));
 }
