@@ -212,18 +212,34 @@ TEST(Suspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
   world.StepFor(1.0);
   platforms::CommandTwist(v, p, platforms::BodyTwist{0.3, 0, 0});
   int drive_lost = 0, weak_lost = 0, strong_lost = 0;
-  const std::size_t strong = p.wheel_index("follower_front");
+  const std::size_t strong = p.wheel_index("follower_right");
+  const double weak_rim0 = v.wheel_truth()[weak].rim_travel_m;
+  const double strong_rim0 = v.wheel_truth()[strong].rim_travel_m;
+  double weak_expected = 0, strong_expected = 0;  // rim travel the body motion implies
   const double x_end = 2.0;
   while (v.body_truth().p_WB.x() < x_end && world.time_s() < 12) {
     world.Step();
     for (std::size_t i : p.drive_wheels) drive_lost += v.wheel_truth()[i].in_contact ? 0 : 1;
     weak_lost += v.wheel_truth()[weak].in_contact ? 0 : 1;
     strong_lost += v.wheel_truth()[strong].in_contact ? 0 : 1;
+    const auto& b = v.body_truth();
+    const Eigen::Matrix3d R = b.q_WB.toRotationMatrix();
+    const Eigen::Vector3d v_B = R.transpose() * b.v_WB_W;
+    const platforms::BodyTwist twist{v_B.x(), v_B.y(), (R.transpose() * b.omega_WB_W).z()};
+    weak_expected += platforms::RimSpeedForTwist(p.vehicle.wheels[weak], twist) * world.step_s();
+    strong_expected +=
+        platforms::RimSpeedForTwist(p.vehicle.wheels[strong], twist) * world.step_s();
   }
   EXPECT_GT(v.body_truth().p_WB.x(), x_end - 0.01);
   EXPECT_EQ(drive_lost, 0);
   EXPECT_EQ(strong_lost, 0);
   EXPECT_GT(weak_lost, 20);  // > 20 ms off the floor
+  // The followers (at 120 and 240 deg) roll |vl| = |vr| = 0.3 * sqrt(3)/2 m/s. The sprung one's
+  // encoder follows the body within 1 %; the weak one's misses travel while it is in the air.
+  const double strong_rim = v.wheel_truth()[strong].rim_travel_m - strong_rim0;
+  const double weak_rim = v.wheel_truth()[weak].rim_travel_m - weak_rim0;
+  EXPECT_NEAR(strong_rim, strong_expected, 0.01 * std::abs(strong_expected));
+  EXPECT_GT(std::abs(weak_rim - weak_expected), 0.002) << weak_rim << " vs " << weak_expected;
 }
 
 TEST(Determinism, SameInputsGiveBitIdenticalTrajectories) {
