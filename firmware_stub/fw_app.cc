@@ -121,6 +121,7 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
 
 void FwApp::Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
   master_.Start(t_ns);
+  next_startup_status_ns_ = t_ns;
   state_ = FwState::kWaitingForNodes;
   Poll(t_ns, out);
 }
@@ -144,11 +145,23 @@ void FwApp::HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
 void FwApp::Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
   HandleMasterPoll(master_.Poll(t_ns), t_ns, out);
   if (auto closed = assembler_.Poll(t_ns)) OnCycle(*closed, out);
+  if (StartupStatusDue() && t_ns >= next_startup_status_ns_) {
+    // Alive while waiting for the nodes: a receiver that sees no FW_Status for 3 cycles takes
+    // the firmware for lost (wheelhil_fw.dbc). Cycle 0: no cycle has run yet.
+    SendStatus(0, out);
+    next_startup_status_ns_ = t_ns + period_ns_;
+  }
   if (state_ == FwState::kWaitingForNodes && master_.started()) state_ = FwState::kRunning;
 }
 
+bool FwApp::StartupStatusDue() const {
+  return config_.sync.produce && !master_.started() && stats_.cycles == 0;
+}
+
 std::int64_t FwApp::NextEventNs() const {
-  return std::min(master_.NextEventNs(), assembler_.NextDeadlineNs());
+  std::int64_t next = std::min(master_.NextEventNs(), assembler_.NextDeadlineNs());
+  if (StartupStatusDue()) next = std::min(next, next_startup_status_ns_);
+  return next;
 }
 
 void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
@@ -372,7 +385,12 @@ void FwApp::OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out) {
     Send(OutMessage::kVelocityAccel, acc, out);
   }
 
-  // Status.
+  SendStatus(c.index, out);
+}
+
+void FwApp::SendStatus(std::uint64_t cycle, std::vector<bus::CanFrame>& out) {
+  OutValues v;
+  v.Set(OutField::kCycle, static_cast<double>(cycle));
   const bool imu_lost = config_.imu.enabled && imu_silent_cycles_ >= kLostAfterCycles;
   const bool accel_lost = config_.accel.enabled && accel_silent_cycles_ >= kLostAfterCycles;
   std::uint32_t faults = master_.faults() | event_faults_;

@@ -9,8 +9,10 @@
 /// order, the estimate frames of the estimator (paper000: FW_Pose, FW_PoseRaw, FW_SlipStatus,
 /// FW_Velocity; paper001: FW_Pose, FW_Velocity; paper002: FW_Pose, FW_Velocity,
 /// FW_VelocityOdom, FW_VelocityAccel), then FW_Status last; all carry the cycle counter
-/// (mod 256). Time steps are the configured SYNC period times the SYNC intervals a step spans
-/// (not receive times), so the output depends only on the frames, never on scheduling.
+/// (mod 256). While the SYNC-producing firmware waits for its nodes (before the first cycle),
+/// FW_Status (state WaitingForNodes, cycle 0) goes out every sync period. Time steps are the
+/// configured SYNC period times the SYNC intervals a step spans (not receive times), so the
+/// output depends only on the frames, never on scheduling.
 /// Degrading, not dying: a cycle with an encoder missing skips the estimator step (the next
 /// complete cycle spans the gap: counters are absolute, gyro and accelerometer samples carry
 /// over); a source silent for lost_after_cycles cycles is flagged lost; bad frames are counted.
@@ -78,6 +80,8 @@ class FwApp {
  private:
   void OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out);
   void Send(OutMessage m, const OutValues& v, std::vector<bus::CanFrame>& out);
+  void SendStatus(std::uint64_t cycle, std::vector<bus::CanFrame>& out);
+  bool StartupStatusDue() const;
   void Step000(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step002(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
@@ -115,6 +119,7 @@ class FwApp {
   std::uint32_t event_faults_ = 0;
   std::uint8_t last_emcy_node_ = 0;
   std::uint64_t heartbeat_ = 0;
+  std::int64_t next_startup_status_ns_ = 0;
   std::uint32_t last_faults_ = 0;
   FwState state_ = FwState::kBoot;
   FwAppStats stats_;

@@ -214,7 +214,8 @@ TEST(FwApp, Paper000StraightLineOutputsOnceEveryCycleWithTheCycleCounter) {
                          OutMessage::kVelocity, OutMessage::kStatus}) {
       EXPECT_EQ(b.Out(frames, m).Get(OutField::kCycle), k) << OutMessageName(m);
     }
-    EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), k);
+    // +1: the status sent at start while waiting for the nodes.
+    EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), k + 1);
     travel += 0.0625;  // 0.25 m/s for 0.25 s.
   }
   const OutValues pose = b.Out(frames, OutMessage::kPose);
@@ -254,6 +255,41 @@ TEST(FwApp, Paper000SlipOfTheRightWheelIsFlaggedAndCorrected) {
   EXPECT_NEAR(raw.Get(OutField::kTheta), 0.02 / 0.5, 2e-3);  // Encoders: turned 40 mrad.
 }
 
+TEST(FwApp, StatusWhileWaitingForNodesThenDegradedWithoutThem) {
+  Bench b(kPaper000);
+  b.alive_[1] = b.alive_[2] = false;  // Nobody boots.
+  std::vector<bus::CanFrame> out;
+  b.app().Start(0, out);
+  std::vector<std::pair<std::int64_t, OutValues>> statuses;
+  for (std::int64_t t = 0; t <= 1000 * kMs; t = b.app().NextEventNs()) {
+    b.app().Poll(t, out);
+    for (const auto& f : out) {
+      OutValues v;
+      if (b.protocol().DecodeOutput(OutMessage::kStatus, f, v)) statuses.emplace_back(t, v);
+    }
+    out.clear();
+  }
+  // Every 250 ms while waiting (t = 0, 250 ms); the boot timeout (500 ms) ends the wait; the
+  // first SYNC a period later; that cycle closes at its 200 ms deadline without TPDOs.
+  ASSERT_EQ(statuses.size(), 3u);
+  EXPECT_EQ(statuses[0].first, 0);
+  EXPECT_EQ(statuses[1].first, 250 * kMs);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(statuses[i].second.Get(OutField::kState),
+              static_cast<double>(FwState::kWaitingForNodes));
+    EXPECT_EQ(statuses[i].second.Get(OutField::kCycle), 0);
+    EXPECT_EQ(statuses[i].second.Get(OutField::kHeartbeat), i);
+  }
+  EXPECT_EQ(statuses[2].first, 950 * kMs);
+  const OutValues& st = statuses[2].second;
+  EXPECT_EQ(st.Get(OutField::kState), static_cast<double>(FwState::kDegraded));
+  EXPECT_EQ(st.Get(OutField::kFaultBootTimeout), 1);
+  EXPECT_EQ(st.Get(OutField::kFaultCycleIncomplete), 1);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc1), 1);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc2), 1);
+  EXPECT_EQ(st.Get(OutField::kNodeLostEnc3), 0);
+}
+
 TEST(FwApp, EncoderCounterWrapIsSeamless) {
   Bench b(kPaper000);
   b.StartUp();
@@ -274,7 +310,7 @@ TEST(FwApp, OutputCycleCounterWrapsAt256) {
   for (int k = 0; k < 258; ++k) frames = b.Cycle({{1, 0}, {2, 0}, {3, 0}});
   EXPECT_EQ(b.Out(frames, OutMessage::kPose).Get(OutField::kCycle), 257 % 256);
   EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kCycle), 1);
-  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), 1);
+  EXPECT_EQ(b.Out(frames, OutMessage::kStatus).Get(OutField::kHeartbeat), 2);  // 259 % 256.
   EXPECT_EQ(b.app().stats().cycles, 258u);
 }
 
