@@ -49,6 +49,10 @@ class DeviceFaultInjector {
   /// True when a frame the node sends at t_ns would be suppressed entirely (silent / off).
   bool SilentAt(std::int64_t t_ns) const;
 
+  /// Records the start/end events due at or before t_ns (FilterOutputs and ApplyTo do this too;
+  /// call it for a node that may produce no frame at all).
+  void AdvanceTo(std::int64_t t_ns) { Track(t_ns); }
+
   /// Earliest pending reboot/EMCY action instant (INT64_MAX if none).
   std::int64_t NextActionNs() const;
   /// Performs every reboot / EMCY action due at or before t_ns on `node` (rebuilt from

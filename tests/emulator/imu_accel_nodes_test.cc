@@ -15,6 +15,7 @@
 #include "emulator/devices/accel4_node.h"
 #include "emulator/devices/dbc_imu_node.h"
 #include "emulator/devices/frame_checksum.h"
+#include "emulator/faults/frame_faults.h"
 #include "emulator/sensors/accelerometer_model.h"
 
 namespace wheelhil::emulator {
@@ -279,6 +280,57 @@ TEST(DbcImuNode, RejectsConfigurationsTheDbcCannotCarry) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("carries no configured channel")));
   EXPECT_EQ(ParseImuQuantity("accel_z"), ImuQuantity::kAccelZ);
   EXPECT_EQ(ParseImuQuantity("yaw"), std::nullopt);
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator
+
+namespace wheelhil::emulator {
+namespace {
+
+// The frame faults work on a user's DBC too: a wrong counter on the CRC-8 protected message
+// keeps a valid CRC; a wrong checksum breaks it; the other messages pass untouched.
+TEST(DbcImuNode, WrongCounterAndChecksumFaultsOnAUserDbc) {
+  const auto dbc = UserImuDbc();
+  DbcImuNode node(dbc, UserImuConfig(), 0);
+  FrameFault counter;
+  counter.kind = FrameFaultKind::kWrongCounter;
+  counter.window = {10'000'000, 30'000'000};
+  counter.id = 1280;
+  counter.counter_signal = "IMU_Counter";
+  counter.counter_offset = 3;
+  counter.checksum_signal = "IMU_Crc";
+  counter.checksum = ChecksumKind::kCrc8SaeJ1850;
+  FrameFault crc = counter;
+  crc.kind = FrameFaultKind::kWrongChecksum;
+  crc.window = {30'000'000, 50'000'000};
+  FaultEventLog log;
+  FrameFaultFilter filter({counter, crc}, dbc, 1, &log);
+  const bus::DbcMessage& m = *dbc->FindMessage(1280, false);
+  ImuSample s;
+  s.rate_rad_s = {0.1, 0.2, 0.3};
+  const std::vector<NodeFrame> clean = node.Poll(60'000'000, s);
+  const std::vector<NodeFrame> out = filter.Process(clean, 60'000'000);
+  ASSERT_EQ(out.size(), clean.size());
+  int n1280 = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    if (out[i].frame.id != 1280) {
+      EXPECT_EQ(out[i].frame, clean[i].frame);
+      continue;
+    }
+    const auto v = bus::DecodeMessage(m, out[i].frame);
+    std::array<std::uint8_t, 8> zeroed{};
+    std::copy(out[i].frame.data.begin(), out[i].frame.data.begin() + 7, zeroed.begin());
+    const bool crc_ok = v.at("IMU_Crc") == Crc8SaeJ1850(zeroed);
+    const std::int64_t t = out[i].due_ns;
+    EXPECT_EQ(v.at("IMU_Counter"), (n1280 + (counter.window.Contains(t) ? 3 : 0)) % 256) << t;
+    EXPECT_EQ(crc_ok, !crc.window.Contains(t)) << t;
+    ++n1280;
+  }
+  EXPECT_EQ(n1280, 7);
+  EXPECT_EQ(filter.affected(0), 2u);  // 10, 20 ms
+  EXPECT_EQ(filter.affected(1), 2u);  // 30, 40 ms
+  EXPECT_EQ(log.events().size(), 4u);
 }
 
 }  // namespace
