@@ -39,7 +39,7 @@ Planar RunMotion(Rig& rig, double vx, double vy, double wz, double duration_s) {
   return Displacement(start, rig.vehicle->body_truth());
 }
 
-TEST(MecanumOmni3, ForwardReachesCommandedDistance) {
+TEST(PhysicsMecanumOmni3, ForwardReachesCommandedDistance) {
   Rig rig("mecanum4_omni3");
   const Planar d = RunMotion(rig, 0.3, 0, 0, 5.0);
   EXPECT_NEAR(d.fwd, 1.5, 0.03 * 1.5);
@@ -47,7 +47,7 @@ TEST(MecanumOmni3, ForwardReachesCommandedDistance) {
   EXPECT_LT(std::abs(d.dyaw), 0.02);
 }
 
-TEST(MecanumOmni3, SidewaysRightReachesCommandedDistance) {
+TEST(PhysicsMecanumOmni3, SidewaysRightReachesCommandedDistance) {
   Rig rig("mecanum4_omni3");
   const Planar d = RunMotion(rig, 0, -0.3, 0, 5.0);
   EXPECT_NEAR(d.left, -1.5, 0.03 * 1.5);
@@ -55,7 +55,7 @@ TEST(MecanumOmni3, SidewaysRightReachesCommandedDistance) {
   EXPECT_LT(std::abs(d.dyaw), 0.02);
 }
 
-TEST(MecanumOmni3, ClockwiseSpinReachesCommandedAngle) {
+TEST(PhysicsMecanumOmni3, ClockwiseSpinReachesCommandedAngle) {
   Rig rig("mecanum4_omni3");
   const Planar d = RunMotion(rig, 0, 0, -0.5, 5.0);
   EXPECT_NEAR(d.dyaw, -2.5, 0.03 * 2.5);
@@ -63,7 +63,7 @@ TEST(MecanumOmni3, ClockwiseSpinReachesCommandedAngle) {
   EXPECT_LT(std::hypot(d.fwd, d.left), 0.02 * 2.5 * std::hypot(0.25, 0.20));
 }
 
-TEST(MecanumOmni3, Diagonal45ReachesCommandedDisplacement) {
+TEST(PhysicsMecanumOmni3, Diagonal45ReachesCommandedDisplacement) {
   Rig rig("mecanum4_omni3");
   const double v = 0.3, c = std::sqrt(0.5);
   const Planar d = RunMotion(rig, v * c, -v * c, 0, 5.0);  // forward-right at 45 deg
@@ -81,7 +81,7 @@ Eigen::Vector3d Eq2(double vx_b, double vy_b, double wz, double d) {
           0.5 * X + std::sqrt(3.0) / 2 * Y + d * wz};
 }
 
-TEST(MecanumOmni3, FollowerRimSpeedsMatchPaperEq2) {
+TEST(PhysicsMecanumOmni3, FollowerRimSpeedsMatchPaperEq2) {
   struct Case {
     double vx, vy, wz;
   };
@@ -113,14 +113,14 @@ TEST(MecanumOmni3, FollowerRimSpeedsMatchPaperEq2) {
   }
 }
 
-TEST(Diff2, StraightTenMetresDriftsUnderFiveMillimetres) {
+TEST(PhysicsDiff2, StraightTenMetresDriftsUnderFiveMillimetres) {
   Rig rig("diff2");
   const Planar d = RunMotion(rig, 0.25, 0, 0, 40.0);
   EXPECT_NEAR(d.fwd, 10.0, 0.03 * 10.0);
   EXPECT_LT(std::abs(d.left), 0.005);
 }
 
-TEST(Diff2, ArcsMatchKinematicRadius) {
+TEST(PhysicsDiff2, ArcsMatchKinematicRadius) {
   for (const double radius : {0.5, 1.0, -2.0}) {
     Rig rig("diff2");
     rig.world.StepFor(1.0);
@@ -156,13 +156,13 @@ void ExpectRestWithoutDrift(const std::string& platform, double slope_deg, doubl
   }
 }
 
-TEST(Rest, FlatFloorNoDrift) {
+TEST(PhysicsRest, FlatFloorNoDrift) {
   ExpectRestWithoutDrift("diff2", 0, 0);
   ExpectRestWithoutDrift("mecanum4_omni3", 0, 0);
   ExpectRestWithoutDrift("ortho3", 0, 0);
 }
 
-TEST(Rest, FiveDegreeRampNoDrift) {
+TEST(PhysicsRest, FiveDegreeRampNoDrift) {
   ExpectRestWithoutDrift("diff2", 5, 0);
   ExpectRestWithoutDrift("diff2", 5, M_PI / 2);
   ExpectRestWithoutDrift("mecanum4_omni3", 5, 0);
@@ -170,7 +170,7 @@ TEST(Rest, FiveDegreeRampNoDrift) {
   ExpectRestWithoutDrift("ortho3", 5, 0.3);
 }
 
-TEST(Slip, LowMuPatchMakesDriveWheelSlipAndRecoverOffIt) {
+TEST(PhysicsSlip, LowMuPatchMakesDriveWheelSlipAndRecoverOffIt) {
   Rig rig("diff2");
   // mu = 0.05 patch under the start position, up to x = 0.6 m.
   rig.world.terrain().AddPatch(
@@ -199,7 +199,7 @@ TEST(Slip, LowMuPatchMakesDriveWheelSlipAndRecoverOffIt) {
   EXPECT_NEAR(w3.rim_travel_m - w2.rim_travel_m, w3.ground_travel_m - w2.ground_travel_m, 1e-3);
 }
 
-TEST(Suspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
+TEST(PhysicsSuspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
   platforms::Platform p = LoadShipped("mecanum4_omni3");
   const std::size_t weak = p.wheel_index("follower_left");
   // Too weak a follower spring (with its slider's damping): it cannot follow the floor down.
@@ -242,7 +242,7 @@ TEST(Suspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
   EXPECT_GT(std::abs(weak_rim - weak_expected), 0.002) << weak_rim << " vs " << weak_expected;
 }
 
-TEST(Determinism, SameInputsGiveBitIdenticalTrajectories) {
+TEST(PhysicsDeterminism, SameInputsGiveBitIdenticalTrajectories) {
   auto run = [] {
     Rig rig("mecanum4_omni3");
     rig.world.terrain().AddPatch(
@@ -261,7 +261,7 @@ TEST(Determinism, SameInputsGiveBitIdenticalTrajectories) {
   for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i], b[i]) << i;
 }
 
-TEST(Ortho3, HandoverDisturbsBodyPeriodically) {
+TEST(PhysicsOrtho3, HandoverDisturbsBodyPeriodically) {
   Rig rig("ortho3");
   rig.world.StepFor(1.0);
   rig.Command(0.1, 0, 0);

@@ -23,7 +23,7 @@ using ::testing::ThrowsMessage;
 using wheelhil::emulator::testing::LoadShipped;
 using wheelhil::emulator::testing::SourcePath;
 
-TEST(Platform, ShippedPlatformsLoadWithTheirParts) {
+TEST(PlatformFile, ShippedPlatformsLoadWithTheirParts) {
   const Platform diff2 = LoadShipped("diff2");
   EXPECT_EQ(diff2.kinematics, KinematicsKind::kDiffDrive);
   EXPECT_EQ(diff2.drive_wheels.size(), 2u);
@@ -41,7 +41,7 @@ TEST(Platform, ShippedPlatformsLoadWithTheirParts) {
   }
 }
 
-TEST(Platform, MecanumInverseKinematicsIsPaper001Eq1) {
+TEST(PlatformFile, MecanumInverseKinematicsIsPaper001Eq1) {
   const Platform p = LoadShipped("mecanum4_omni3");
   const double l1 = p.parameter("l1_m"), l2 = p.parameter("l2_m");
   const double R = p.parameter("wheel_radius_m");
@@ -64,7 +64,7 @@ TEST(Platform, MecanumInverseKinematicsIsPaper001Eq1) {
   }
 }
 
-TEST(Platform, DiffDriveInverseKinematics) {
+TEST(PlatformFile, DiffDriveInverseKinematics) {
   const Platform p = LoadShipped("diff2");
   const double B = p.parameter("track_m"), r = p.parameter("wheel_radius_m");
   const BodyTwist t{0.25, 0, 0.4};
@@ -73,7 +73,7 @@ TEST(Platform, DiffDriveInverseKinematics) {
   EXPECT_NEAR(w[p.wheel_index("right")], (0.25 + 0.4 * B / 2) / r, 1e-9);
 }
 
-TEST(Platform, Omni3InverseKinematics) {
+TEST(PlatformFile, Omni3InverseKinematics) {
   const Platform p = LoadShipped("ortho3");
   const double L = p.parameter("base_radius_m"), r = p.parameter("wheel_radius_m");
   const BodyTwist t{0.1, -0.2, 0.3};
@@ -85,7 +85,7 @@ TEST(Platform, Omni3InverseKinematics) {
   }
 }
 
-TEST(Platform, MissingFileNamesTheFile) {
+TEST(PlatformFile, MissingFileNamesTheFile) {
   EXPECT_THAT([] { LoadPlatformFile("/nonexistent/robot.yaml"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/robot.yaml")));
 }
@@ -95,7 +95,7 @@ std::string Shipped(const std::string& name) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
-TEST(Platform, BadFieldNamesFileLineAndField) {
+TEST(PlatformFile, BadFieldNamesFileLineAndField) {
   std::string text = Shipped("diff2");
   const auto pos = text.find("radius_m: 0.075");
   ASSERT_NE(pos, std::string::npos);
@@ -117,7 +117,7 @@ TEST(Platform, BadFieldNamesFileLineAndField) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("syntax.yaml:")));
 }
 
-TEST(Platform, LineNumberPointsAtTheBadValue) {
+TEST(PlatformFile, LineNumberPointsAtTheBadValue) {
   const std::string text =
       "name: x\nchassis:\n  mass_kg: 1\n  inertia_kg_m2: [1, 1, 1]\n"
       "  half_extents_m: [0.1, 0.1, 0.1]\nwheels:\n  - name: a\n    kind: squircle\n";

@@ -20,7 +20,7 @@ using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 using testing::SourcePath;
 
-TEST(Terrain, PlaneRaycast) {
+TEST(TerrainMesh, PlaneRaycast) {
   Terrain t;
   t.AddPlane(Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0, 0, 0.1), Friction{0.8, 0.7});
   SurfaceHit hit;
@@ -31,7 +31,7 @@ TEST(Terrain, PlaneRaycast) {
   EXPECT_FALSE(t.Raycast(Eigen::Vector3d(1, 2, 1), -Eigen::Vector3d::UnitZ(), 0.5, &hit));
 }
 
-TEST(Terrain, MeshesInFourFormats) {
+TEST(TerrainMesh, MeshesInFourFormats) {
   struct Case {
     const char* file;
     char up;
@@ -55,7 +55,7 @@ TEST(Terrain, MeshesInFourFormats) {
   }
 }
 
-TEST(Terrain, ShippedMeshesHaveTheirFeatures) {
+TEST(TerrainMesh, ShippedMeshesHaveTheirFeatures) {
   Terrain bump;
   bump.AddMesh(SourcePath("meshes/bump.obj"), MeshOptions{});
   SurfaceHit hit;
@@ -83,7 +83,7 @@ TEST(Terrain, ShippedMeshesHaveTheirFeatures) {
   EXPECT_LT(zmax - zmin, 6e-3);
 }
 
-TEST(Terrain, MeshRaysOnEdgesVerticesAndSlanted) {
+TEST(TerrainMesh, MeshRaysOnEdgesVerticesAndSlanted) {
   Terrain t;
   t.AddMesh(SourcePath("meshes/floor_flat.obj"), MeshOptions{});
   SurfaceHit hit;
@@ -102,7 +102,7 @@ TEST(Terrain, MeshRaysOnEdgesVerticesAndSlanted) {
   EXPECT_FALSE(t.Raycast(Eigen::Vector3d(3, 0, 0.3), -Eigen::Vector3d::UnitZ(), 1, &hit));
 }
 
-TEST(Terrain, PatchOverridesFriction) {
+TEST(TerrainMesh, PatchOverridesFriction) {
   Terrain t;
   t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.7});
   t.AddPatch(FrictionPatch{"oil", {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, Friction{0.05, 0.04}});
@@ -113,7 +113,7 @@ TEST(Terrain, PatchOverridesFriction) {
   EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.8);
 }
 
-TEST(Terrain, ErrorsNameFileAndField) {
+TEST(TerrainMesh, ErrorsNameFileAndField) {
   Terrain t;
   EXPECT_THAT([&] { t.AddMesh("/nonexistent/floor.obj", MeshOptions{}); },
               ThrowsMessage<std::invalid_argument>(
