@@ -97,14 +97,16 @@ bool FaultyCanBus::Enqueue(int node, const bus::CanFrame& frame, std::int64_t re
 void FaultyCanBus::Generate(std::int64_t t_ns) {
   constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
   for (State& s : states_) {
-    std::string detail;
-    if (s.fault.kind == BusFaultKind::kFlood) {
-      detail = fmt::format("load={} period_ns={}", s.fault.load, s.period_ns);
-    } else if (s.fault.kind == BusFaultKind::kErrorBurst) {
-      detail = fmt::format("error_frames={}", s.fault.error_frames);
+    if (s.phase.Pending(t_ns, s.fault.window)) {
+      std::string detail;
+      if (s.fault.kind == BusFaultKind::kFlood) {
+        detail = fmt::format("load={} period_ns={}", s.fault.load, s.period_ns);
+      } else if (s.fault.kind == BusFaultKind::kErrorBurst) {
+        detail = fmt::format("error_frames={}", s.fault.error_frames);
+      }
+      s.phase.Advance(t_ns, s.fault.window, log_, "bus", BusFaultKindName(s.fault.kind), s.target,
+                      detail);
     }
-    s.phase.Advance(t_ns, s.fault.window, log_, "bus", BusFaultKindName(s.fault.kind), s.target,
-                    detail);
     if (s.fault.kind == BusFaultKind::kFlood) {
       const std::int64_t end = std::min(t_ns, s.fault.window.t1_ns);
       for (; s.next_ns < end; s.next_ns += s.period_ns) {

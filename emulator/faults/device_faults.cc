@@ -55,6 +55,7 @@ DeviceFaultInjector::DeviceFaultInjector(std::string node_name, std::uint8_t nod
 
 void DeviceFaultInjector::Track(std::int64_t t_ns) {
   for (State& s : faults_) {
+    if (!s.phase.Pending(t_ns, s.fault.window)) continue;
     std::string detail;
     if (s.fault.kind == DeviceFaultKind::kEmcy) {
       detail = fmt::format("code=0x{:04X} register=0x{:02X}", s.fault.emcy_code,

@@ -59,6 +59,11 @@ class WindowPhase {
   void Advance(std::int64_t t_ns, const FaultWindow& w, FaultEventLog* log,
                std::string_view category, std::string_view kind, std::string_view target,
                std::string_view detail);
+  /// True when Advance(t_ns, w, ...) would record an event (callers build details only then).
+  bool Pending(std::int64_t t_ns, const FaultWindow& w) const {
+    return (!started_ && t_ns >= w.t0_ns) ||
+           (!ended_ && w.t1_ns != FaultWindow::kForever && t_ns >= w.t1_ns);
+  }
   bool started() const { return started_; }
 
  private:

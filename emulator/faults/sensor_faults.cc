@@ -74,8 +74,10 @@ SensorFaultInjector::SensorFaultInjector(std::string sensor, std::vector<SensorF
 
 void SensorFaultInjector::Track(std::int64_t t_ns) {
   for (State& s : faults_) {
-    s.phase.Advance(t_ns, s.fault.window, log_, "sensor", SensorFaultKindName(s.fault.kind),
-                    sensor_, fmt::format("value={}", s.fault.value));
+    if (s.phase.Pending(t_ns, s.fault.window)) {
+      s.phase.Advance(t_ns, s.fault.window, log_, "sensor", SensorFaultKindName(s.fault.kind),
+                      sensor_, fmt::format("value={}", s.fault.value));
+    }
     if (!s.fault.window.Contains(t_ns)) s.holding = false;
   }
 }
