@@ -16,8 +16,8 @@
 /// after start re-sends NMT start; EMCY with a non-zero code sets kFaultEmcy for the node until
 /// its error-reset EMCY (code 0).
 /// SYNC (0x080) is produced every sync_period once start-up is over (every node operational,
-/// missing or given up), when produce_sync; the first one a period after the last NMT start. Poll reports each SYNC it emits (sync_sent).
-/// Thread-compatible.
+/// missing or given up), when produce_sync; the first one a period after the last NMT start. Poll
+/// reports each SYNC it emits (sync_sent). Thread-compatible.
 
 #include <cstdint>
 #include <vector>
@@ -41,9 +41,9 @@ enum FaultBit : std::uint32_t {
 };
 
 struct CanopenMasterConfig {
-  std::vector<std::uint8_t> node_ids;        ///< 1..127, distinct.
+  std::vector<std::uint8_t> node_ids;  ///< 1..127, distinct.
   std::int64_t boot_timeout_ns = 2'000'000'000;
-  std::uint16_t heartbeat_producer_ms = 100;  ///< Written to 0x1017; 0 = not written.
+  std::uint16_t heartbeat_producer_ms = 100;        ///< Written to 0x1017; 0 = not written.
   std::int64_t heartbeat_timeout_ns = 350'000'000;  ///< 0 = no supervision.
   std::int64_t sdo_timeout_ns = 100'000'000;
   int sdo_retries = 2;
@@ -65,8 +65,8 @@ class CanopenMaster {
   struct NodeStatus {
     std::uint8_t node_id = 0;
     NodeState state = NodeState::kWaitBoot;
-    bool lost = false;          ///< Heartbeat consumer timeout.
-    bool emcy_active = false;   ///< Last EMCY had a non-zero code.
+    bool lost = false;         ///< Heartbeat consumer timeout.
+    bool emcy_active = false;  ///< Last EMCY had a non-zero code.
     std::uint16_t last_emcy_code = 0;
     std::uint8_t last_heartbeat_state = 0xFF;
     std::int64_t last_heartbeat_ns = 0;

@@ -10,8 +10,8 @@ namespace wheelhil::fw {
 
 CycleAssembler::CycleAssembler(const CycleAssemblerConfig& config) : config_(config) {
   if (config_.tpdo_nodes.size() > AssembledCycle::kMaxNodes) {
-    throw std::invalid_argument(fmt::format("at most {} encoder nodes per cycle",
-                                            AssembledCycle::kMaxNodes));
+    throw std::invalid_argument(
+        fmt::format("at most {} encoder nodes per cycle", AssembledCycle::kMaxNodes));
   }
   std::set<std::uint8_t> seen;
   for (std::uint8_t n : config_.tpdo_nodes) {

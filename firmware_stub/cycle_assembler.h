@@ -44,11 +44,11 @@ struct AssembledCycle {
   static constexpr std::size_t kMaxNodes = 8;
   enum class Close : std::uint8_t { kComplete, kNextSync, kDeadline };
 
-  std::uint64_t index = 0;      ///< 0 for the first SYNC seen, +1 per SYNC.
-  std::int64_t sync_ns = 0;     ///< Time of this cycle's SYNC.
-  std::int64_t interval_ns = 0; ///< sync_ns - previous SYNC (0 for the first cycle).
+  std::uint64_t index = 0;       ///< 0 for the first SYNC seen, +1 per SYNC.
+  std::int64_t sync_ns = 0;      ///< Time of this cycle's SYNC.
+  std::int64_t interval_ns = 0;  ///< sync_ns - previous SYNC (0 for the first cycle).
   std::array<EncoderReading, kMaxNodes> encoders{};  ///< In tpdo_nodes order.
-  std::uint32_t missing_mask = 0;  ///< Bit i: encoders[i] missing.
+  std::uint32_t missing_mask = 0;                    ///< Bit i: encoders[i] missing.
   Close close = Close::kComplete;
   // Asynchronous samples of the interval ending at this SYNC.
   std::uint32_t yaw_samples = 0;

@@ -47,8 +47,8 @@ CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config) {
   for (const auto& n : config.encoder_nodes()) {
     a.tpdo_nodes.push_back(static_cast<std::uint8_t>(n.node_id));
   }
-  const double deadline_s = config.sync.deadline_s > 0 ? config.sync.deadline_s
-                                                       : 0.9 * config.sync.period_s;
+  const double deadline_s =
+      config.sync.deadline_s > 0 ? config.sync.deadline_s : 0.9 * config.sync.period_s;
   a.deadline_ns = ToNs(deadline_s);
   return a;
 }
@@ -60,8 +60,8 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
       assembler_(AssemblerConfigFrom(config)),
       nodes_(config.encoder_nodes()),
       period_ns_(ToNs(config.sync.period_s)) {
-  const std::string where = fmt::format("{}: {}", config.source_path,
-                                        EstimatorName(config.estimator));
+  const std::string where =
+      fmt::format("{}: {}", config.source_path, EstimatorName(config.estimator));
   try {
     switch (config.estimator) {
       case EstimatorKind::kPaper000SlipCorrection: {
@@ -456,8 +456,7 @@ void FwApp::Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFr
   const Paper001Settings& p = config_.paper001;
   std::array<std::int64_t, 3> d{};
   for (std::size_t i = 0; i < 3; ++i) {
-    d[i] = CounterDelta(last_position_[i], c.encoders[i].position, p.counter_bits) *
-           nodes_[i].sign;
+    d[i] = CounterDelta(last_position_[i], c.encoders[i].position, p.counter_bits) * nodes_[i].sign;
     last_position_[i] = c.encoders[i].position;
   }
   p001_->StepDeltaCounts(d);
@@ -465,8 +464,7 @@ void FwApp::Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFr
   vel_ = {v.vx_m_s / dt_s, v.vy_m_s / dt_s, v.omega_rad_s / dt_s};
 }
 
-void FwApp::Step002(const AssembledCycle& c, double /*dt_s*/,
-                    std::vector<bus::CanFrame>& /*out*/) {
+void FwApp::Step002(const AssembledCycle& c, double /*dt_s*/, std::vector<bus::CanFrame>& /*out*/) {
   const Paper002Settings& p = config_.paper002;
   std::array<double, 3> rim{};
   for (std::size_t i = 0; i < 3; ++i) {

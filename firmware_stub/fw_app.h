@@ -38,7 +38,12 @@ namespace wheelhil::fw {
 
 /// Status_State values (VAL_ of FW_Status in wheelhil_fw.dbc).
 enum class FwState : std::uint8_t {
-  kBoot = 0, kWaitingForNodes = 1, kCalibrating = 2, kRunning = 3, kDegraded = 4, kFault = 5
+  kBoot = 0,
+  kWaitingForNodes = 1,
+  kCalibrating = 2,
+  kRunning = 3,
+  kDegraded = 4,
+  kFault = 5
 };
 
 struct FwAppStats {

@@ -35,8 +35,8 @@ struct CanopenSettings {
 
 /// SYNC production and the cycle's timing (see cycle_assembler.h).
 struct SyncSettings {
-  bool produce = true;         ///< The firmware is the SYNC producer (else it follows 0x080).
-  double period_s = 0.01;      ///< SYNC / estimator cycle period [s], > 0.
+  bool produce = true;     ///< The firmware is the SYNC producer (else it follows 0x080).
+  double period_s = 0.01;  ///< SYNC / estimator cycle period [s], > 0.
   /// A cycle closes at the latest this long after its SYNC [s]; (0, period]. Default: 0.9 period.
   double deadline_s = 0.0;
 };
@@ -91,7 +91,7 @@ struct Paper002AxisSettings {
 };
 
 struct Paper002Settings {
-  double wheel_radius_m = 0.0;  ///< Effective radius of the drive-wheel assemblies.
+  double wheel_radius_m = 0.0;        ///< Effective radius of the drive-wheel assemblies.
   double wheel_mount_radius_m = 0.0;  ///< Centre to wheel contact.
   double counts_per_rev = 0.0;
   int counter_bits = 32;

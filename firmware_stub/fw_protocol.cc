@@ -109,14 +109,22 @@ CanFrame Blank(std::uint32_t id, const DbcMessage& m) {
 
 const char* OutMessageName(OutMessage m) noexcept {
   switch (m) {
-    case OutMessage::kPose: return "FW_Pose";
-    case OutMessage::kPoseRaw: return "FW_PoseRaw";
-    case OutMessage::kSlipStatus: return "FW_SlipStatus";
-    case OutMessage::kVelocity: return "FW_Velocity";
-    case OutMessage::kVelocityOdom: return "FW_VelocityOdom";
-    case OutMessage::kVelocityAccel: return "FW_VelocityAccel";
-    case OutMessage::kStatus: return "FW_Status";
-    case OutMessage::kCount: break;
+    case OutMessage::kPose:
+      return "FW_Pose";
+    case OutMessage::kPoseRaw:
+      return "FW_PoseRaw";
+    case OutMessage::kSlipStatus:
+      return "FW_SlipStatus";
+    case OutMessage::kVelocity:
+      return "FW_Velocity";
+    case OutMessage::kVelocityOdom:
+      return "FW_VelocityOdom";
+    case OutMessage::kVelocityAccel:
+      return "FW_VelocityAccel";
+    case OutMessage::kStatus:
+      return "FW_Status";
+    case OutMessage::kCount:
+      break;
   }
   return "?";
 }
@@ -194,8 +202,8 @@ OutField ClassifyOutputSignal(const std::string& name) noexcept {
   return ClassifyNormalised(Lower(name.substr(us + 1)));
 }
 
-FwProtocol::FwProtocol(Sources sources, const std::vector<int>& node_ids,
-                       std::uint32_t imu_yaw_id, std::uint32_t accel_id)
+FwProtocol::FwProtocol(Sources sources, const std::vector<int>& node_ids, std::uint32_t imu_yaw_id,
+                       std::uint32_t accel_id)
     : src_(std::move(sources)), imu_yaw_id_(imu_yaw_id), accel_id_(accel_id) {
   if (!src_.cia406 || !src_.fw) throw std::invalid_argument("protocol: missing DBC database");
   const DbcDatabase& co = *src_.cia406;
@@ -239,9 +247,8 @@ FwProtocol::FwProtocol(Sources sources, const std::vector<int>& node_ids,
     imu_db_ = src_.imu.get();
     imu_yaw_.msg = imu_db_->FindMessage(imu_yaw_id_, false);
     if (!imu_yaw_.msg) {
-      throw std::invalid_argument(
-          fmt::format("{}: no message with id 0x{:03X} (imu.yaw_frame_id)", src_.imu_name,
-                      imu_yaw_id_));
+      throw std::invalid_argument(fmt::format("{}: no message with id 0x{:03X} (imu.yaw_frame_id)",
+                                              src_.imu_name, imu_yaw_id_));
     }
     imu_yaw_.sig[0] = SignalAt(*imu_yaw_.msg, 0, 16);
     if (!imu_yaw_.sig[0] || RateScale(imu_yaw_.sig[0]->unit) == 0.0) {
@@ -255,8 +262,8 @@ FwProtocol::FwProtocol(Sources sources, const std::vector<int>& node_ids,
     if (!src_.accel) throw std::invalid_argument(fmt::format("{}: not loaded", src_.accel_name));
     accel_.msg = src_.accel->FindMessage(accel_id_, false);
     if (!accel_.msg) {
-      throw std::invalid_argument(fmt::format(
-          "{}: no message with id 0x{:03X} (accel.frame_id)", src_.accel_name, accel_id_));
+      throw std::invalid_argument(fmt::format("{}: no message with id 0x{:03X} (accel.frame_id)",
+                                              src_.accel_name, accel_id_));
     }
     std::vector<const DbcSignal*> acc;
     for (const auto& s : accel_.msg->signals) {
@@ -355,12 +362,18 @@ FrameKind FwProtocol::Classify(const CanFrame& f, std::uint8_t& node_id) const n
   if (node == 0) return FrameKind::kUnknown;
   node_id = node;
   switch (fn) {
-    case 0x080: return FrameKind::kEmcy;
-    case 0x180: return FrameKind::kTpdo1;
-    case 0x580: return FrameKind::kSdoResponse;
-    case 0x600: return FrameKind::kSdoRequest;
-    case 0x700: return FrameKind::kErrorControl;
-    default: break;
+    case 0x080:
+      return FrameKind::kEmcy;
+    case 0x180:
+      return FrameKind::kTpdo1;
+    case 0x580:
+      return FrameKind::kSdoResponse;
+    case 0x600:
+      return FrameKind::kSdoRequest;
+    case 0x700:
+      return FrameKind::kErrorControl;
+    default:
+      break;
   }
   node_id = 0;
   return FrameKind::kUnknown;
@@ -432,7 +445,8 @@ bool FwProtocol::DecodeAccel(const CanFrame& f, std::array<double, 4>& a_m_s2,
   if (!accel_.msg || f.len != accel_.msg->length) return false;
   if (accel_checksum_ && f.len == 8) {
     std::uint8_t x = static_cast<std::uint8_t>(f.data[7] & 0x0F);
-    for (int i = 0; i < 7; ++i) x ^= static_cast<std::uint8_t>((f.data[i] & 0x0F) ^ (f.data[i] >> 4));
+    for (int i = 0; i < 7; ++i)
+      x ^= static_cast<std::uint8_t>((f.data[i] & 0x0F) ^ (f.data[i] >> 4));
     if (x != RawOf(accel_checksum_, f)) return false;
   }
   counter = accel_counter_ ? static_cast<int>(RawOf(accel_counter_, f)) : -1;
@@ -452,8 +466,7 @@ std::vector<OutField> FwProtocol::OutputFields(OutMessage m) const {
   return out;
 }
 
-bool FwProtocol::EncodeOutput(OutMessage m, const OutValues& values,
-                              CanFrame& out) const noexcept {
+bool FwProtocol::EncodeOutput(OutMessage m, const OutValues& values, CanFrame& out) const noexcept {
   const Output& o = outputs_[static_cast<std::size_t>(m)];
   if (!o.msg) return false;
   out = Blank(o.msg->id, *o.msg);

@@ -50,27 +50,54 @@ enum class FrameKind : std::uint8_t {
   kSdoRequest,    ///< 0x601..0x67F (another client's).
   kErrorControl,  ///< 0x701..0x77F: boot-up (state 0) or heartbeat.
   kImuYaw,
-  kImuOther,      ///< Other messages of the IMU DBC (roll/pitch, accelerations): not used.
+  kImuOther,  ///< Other messages of the IMU DBC (roll/pitch, accelerations): not used.
   kAccel,
-  kOwnOutput,     ///< A wheelhil_fw.dbc frame (e.g. a second firmware, or our own echo).
+  kOwnOutput,  ///< A wheelhil_fw.dbc frame (e.g. a second firmware, or our own echo).
 };
 
 /// Output quantities a wheelhil_fw.dbc signal can carry.
 enum class OutField : std::uint8_t {
   kNone,
   kCycle,
-  kX, kY, kTheta,
-  kSlipLeft, kSlipRight, kSlipUnattributed, kOutOfBand, kCalibrated,
-  kResidual, kBandLow, kBandHigh,
-  kVx, kVy, kOmega,
-  kHeartbeat, kState, kFaults,
-  kFaultBootTimeout, kFaultNodeLost, kFaultEmcy, kFaultSdo, kFaultBadFrame,
-  kFaultCycleIncomplete, kFaultLateFrame, kFaultEstimator, kFaultConfig,
+  kX,
+  kY,
+  kTheta,
+  kSlipLeft,
+  kSlipRight,
+  kSlipUnattributed,
+  kOutOfBand,
+  kCalibrated,
+  kResidual,
+  kBandLow,
+  kBandHigh,
+  kVx,
+  kVy,
+  kOmega,
+  kHeartbeat,
+  kState,
+  kFaults,
+  kFaultBootTimeout,
+  kFaultNodeLost,
+  kFaultEmcy,
+  kFaultSdo,
+  kFaultBadFrame,
+  kFaultCycleIncomplete,
+  kFaultLateFrame,
+  kFaultEstimator,
+  kFaultConfig,
   kNodesLost,
-  kNodeLostEnc1, kNodeLostEnc2, kNodeLostEnc3, kNodeLostEnc4,  ///< By CANopen node id.
-  kNodeLostEnc5, kNodeLostEnc6, kNodeLostEnc7, kNodeLostEnc8,
-  kNodeLostImu, kNodeLostAccel,
-  kEmcyNodeId, kBadFrameCount,
+  kNodeLostEnc1,
+  kNodeLostEnc2,
+  kNodeLostEnc3,
+  kNodeLostEnc4,  ///< By CANopen node id.
+  kNodeLostEnc5,
+  kNodeLostEnc6,
+  kNodeLostEnc7,
+  kNodeLostEnc8,
+  kNodeLostImu,
+  kNodeLostAccel,
+  kEmcyNodeId,
+  kBadFrameCount,
   kCount,
 };
 
@@ -83,7 +110,14 @@ OutField NodeLostField(int node_id) noexcept;
 OutField ClassifyOutputSignal(const std::string& name) noexcept;
 
 enum class OutMessage : std::uint8_t {
-  kPose, kPoseRaw, kSlipStatus, kVelocity, kVelocityOdom, kVelocityAccel, kStatus, kCount
+  kPose,
+  kPoseRaw,
+  kSlipStatus,
+  kVelocity,
+  kVelocityOdom,
+  kVelocityAccel,
+  kStatus,
+  kCount
 };
 const char* OutMessageName(OutMessage m) noexcept;
 
@@ -127,8 +161,7 @@ class FwProtocol {
                                       bus::CanFrame& out) const noexcept;
 
   /// Decoders return false for a frame whose length differs from its DBC message's.
-  [[nodiscard]] bool DecodeErrorControl(const bus::CanFrame& f,
-                                        std::uint8_t& state) const noexcept;
+  [[nodiscard]] bool DecodeErrorControl(const bus::CanFrame& f, std::uint8_t& state) const noexcept;
   [[nodiscard]] bool DecodeEmcy(const bus::CanFrame& f, std::uint16_t& code,
                                 std::uint8_t& error_register) const noexcept;
   [[nodiscard]] bool DecodeTpdo1(const bus::CanFrame& f, std::uint32_t& position,
@@ -170,7 +203,7 @@ class FwProtocol {
   const bus::DbcDatabase* imu_db_ = nullptr;
   Layout accel_;
   std::uint32_t imu_yaw_id_ = 0, accel_id_ = 0;
-  double yaw_scale_ = 1.0;    // signal unit -> rad/s
+  double yaw_scale_ = 1.0;  // signal unit -> rad/s
   std::array<double, 4> accel_scale_{1, 1, 1, 1};
   const bus::DbcSignal* accel_counter_ = nullptr;
   const bus::DbcSignal* accel_checksum_ = nullptr;

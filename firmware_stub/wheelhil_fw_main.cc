@@ -5,9 +5,9 @@
 // Exit codes: 0 clean stop (SIGINT/SIGTERM), 1 the interface cannot be opened (the transport's
 // message is printed), 2 bad command line, config or DBC files (file:line: field: problem).
 
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include <atomic>
 #include <cerrno>
@@ -72,8 +72,8 @@ int main(int argc, char** argv) {
   std::unique_ptr<fw::FwApp> fwapp;
   try {
     cfg = fw::LoadFwConfig(config_path);
-    const std::string dir = fw::FwProtocol::FindDbcDir(dbc_dir.empty() ? cfg.dbc_dir : dbc_dir,
-                                                       ExeDir());
+    const std::string dir =
+        fw::FwProtocol::FindDbcDir(dbc_dir.empty() ? cfg.dbc_dir : dbc_dir, ExeDir());
     if (dir.empty()) {
       throw std::invalid_argument(
           "no DBC directory: set dbc_dir in the config, --dbc-dir or WHEELHIL_DBC_DIR "
@@ -81,9 +81,9 @@ int main(int argc, char** argv) {
     }
     std::vector<int> ids;
     for (const auto& n : cfg.encoder_nodes()) ids.push_back(n.node_id);
-    protocol = std::make_unique<fw::FwProtocol>(fw::FwProtocol::LoadDir(
-        dir, ids, cfg.imu.enabled ? cfg.imu.yaw_frame_id : 0,
-        cfg.accel.enabled ? cfg.accel.frame_id : 0));
+    protocol = std::make_unique<fw::FwProtocol>(
+        fw::FwProtocol::LoadDir(dir, ids, cfg.imu.enabled ? cfg.imu.yaw_frame_id : 0,
+                                cfg.accel.enabled ? cfg.accel.frame_id : 0));
     fwapp = std::make_unique<fw::FwApp>(cfg, *protocol);
     if (!quiet) {
       fmt::print(stderr, "wheelhil-fw: estimator {}, SYNC {} every {} s, DBC {}\n",

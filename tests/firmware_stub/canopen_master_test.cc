@@ -8,17 +8,16 @@
 namespace wheelhil::fw {
 namespace {
 
+using testing::Devices;
 using ::testing::ElementsAre;
 using ::testing::IsEmpty;
-using testing::Devices;
 using testing::Strings;
 
 constexpr std::int64_t kMs = 1'000'000;
 
 class CanopenMasterTest : public ::testing::Test {
  protected:
-  CanopenMasterTest()
-      : protocol_(FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0, 0)) {
+  CanopenMasterTest() : protocol_(FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0, 0)) {
     config_.node_ids = {1, 2};
     config_.boot_timeout_ns = 500 * kMs;
     config_.heartbeat_producer_ms = 100;
@@ -248,11 +247,11 @@ TEST_F(CanopenMasterTest, HeartbeatBeforeBootUpMeansAlreadyBooted) {
 TEST_F(CanopenMasterTest, MalformedFramesAreCountedNotFatal) {
   CanopenMaster m(config_, protocol_);
   m.Start(0);
-  EXPECT_TRUE(m.OnFrame(testing::Frame("701#0000"), 0));          // Heartbeat, DLC 2.
-  EXPECT_TRUE(m.OnFrame(testing::Frame("081#0573"), 0));          // EMCY, DLC 2.
-  EXPECT_TRUE(m.OnFrame(testing::Frame("581#60001802"), 0));      // SDO, DLC 4.
-  EXPECT_FALSE(m.OnFrame(testing::Frame("709#00"), 0));           // Not our node.
-  EXPECT_FALSE(m.OnFrame(testing::Frame("123#DEADBEEF"), 0));     // Not CANopen NMT/SDO.
+  EXPECT_TRUE(m.OnFrame(testing::Frame("701#0000"), 0));       // Heartbeat, DLC 2.
+  EXPECT_TRUE(m.OnFrame(testing::Frame("081#0573"), 0));       // EMCY, DLC 2.
+  EXPECT_TRUE(m.OnFrame(testing::Frame("581#60001802"), 0));   // SDO, DLC 4.
+  EXPECT_FALSE(m.OnFrame(testing::Frame("709#00"), 0));        // Not our node.
+  EXPECT_FALSE(m.OnFrame(testing::Frame("123#DEADBEEF"), 0));  // Not CANopen NMT/SDO.
   EXPECT_EQ(m.bad_frames(), 3u);
   EXPECT_EQ(m.faults() & kFaultBadFrame, kFaultBadFrame);
   EXPECT_EQ(m.nodes()[0].state, CanopenMaster::NodeState::kWaitBoot);

@@ -78,7 +78,7 @@ TEST(CycleAssembler, DeadlineClosesAnIncompleteCycleAndLateFramesAreCounted) {
   ASSERT_TRUE(c);
   EXPECT_EQ(c->close, AssembledCycle::Close::kDeadline);
   EXPECT_EQ(c->missing_mask, 0b10u);
-  EXPECT_FALSE(a.Poll(109 * kMs));  // Closed exactly once.
+  EXPECT_FALSE(a.Poll(109 * kMs));             // Closed exactly once.
   EXPECT_FALSE(a.OnTpdo(2, 2, 0, 109 * kMs));  // The straggler.
   EXPECT_EQ(a.late_frames(), 1u);
   EXPECT_FALSE(a.OnSync(110 * kMs));  // Nothing was open any more.

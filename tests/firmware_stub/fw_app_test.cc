@@ -141,9 +141,9 @@ class Bench {
   FwApp& app() { return app_; }
   const FwProtocol& protocol() const { return protocol_; }
   const Devices& dev() const { return dev_; }
-  std::map<int, bool> alive_;           ///< Node answers and beats.
-  std::map<int, bool> drop_next_tpdo_;  ///< Node skips its next TPDO.
-  std::map<int, int> repeat_next_tpdo_; ///< Node sends its next TPDO this many times more.
+  std::map<int, bool> alive_;            ///< Node answers and beats.
+  std::map<int, bool> drop_next_tpdo_;   ///< Node skips its next TPDO.
+  std::map<int, int> repeat_next_tpdo_;  ///< Node sends its next TPDO this many times more.
   bool accel_on_ = true;
   bool imu_on_ = true;
   std::int64_t t_ = 0;
@@ -251,7 +251,7 @@ TEST(FwApp, Paper000SlipOfTheRightWheelIsFlaggedAndCorrected) {
   }
   const OutValues pose = b.Out(frames, OutMessage::kPose);
   const OutValues raw = b.Out(frames, OutMessage::kPoseRaw);
-  EXPECT_NEAR(pose.Get(OutField::kTheta), 0.0, 2e-3);  // Corrected: still straight.
+  EXPECT_NEAR(pose.Get(OutField::kTheta), 0.0, 2e-3);        // Corrected: still straight.
   EXPECT_NEAR(raw.Get(OutField::kTheta), 0.02 / 0.5, 2e-3);  // Encoders: turned 40 mrad.
 }
 
@@ -348,9 +348,9 @@ TEST(FwApp, BadTrafficIsCountedFlaggedAndSurvived) {
   Bench b(kPaper000);
   b.StartUp();
   b.Cycle({{1, 0}, {2, 0}});
-  b.Feed(testing::Frame("181#0102"));                 // TPDO1 with DLC 2.
-  b.Feed(testing::Frame("174#00"));                   // IMU with DLC 1.
-  b.Feed(testing::Frame("321#DEADBEEF"));             // Unknown id.
+  b.Feed(testing::Frame("181#0102"));                   // TPDO1 with DLC 2.
+  b.Feed(testing::Frame("174#00"));                     // IMU with DLC 1.
+  b.Feed(testing::Frame("321#DEADBEEF"));               // Unknown id.
   b.Feed(testing::Frame("20000004#0000000000000000"));  // Error frame.
   auto frames = b.Cycle({{1, 100}, {2, 100}});
   const OutValues st = b.Out(frames, OutMessage::kStatus);
@@ -461,8 +461,8 @@ TEST(FwApp, SameInputsGiveTheSameOutputs) {
     std::vector<std::string> all;
     for (int k = 0; k < 30; ++k) {
       const double t = 0.0625 * k;
-      const auto frames = b.Cycle({{1, Counts000(t)}, {2, Counts000(t * 1.02 + 0.001 * k)}},
-                                  0.01 * std::sin(k));
+      const auto frames =
+          b.Cycle({{1, Counts000(t)}, {2, Counts000(t * 1.02 + 0.001 * k)}}, 0.01 * std::sin(k));
       for (const auto& s : testing::Strings(frames)) all.push_back(s);
     }
     return all;
@@ -476,9 +476,8 @@ TEST(FwApp, BadEstimatorParametersNameTheFile) {
   FwConfig c = ParseFwConfig(kPaper002, "p2.yaml");
   c.paper002.angles_rad = {0.0, 0.0, 0.0};  // Singular wheel geometry.
   const FwProtocol p = FwProtocol::LoadDir(testing::DbcDir(), {1, 2, 3}, 0, 0x170);
-  EXPECT_THAT([&] { FwApp(c, p); },
-              ::testing::ThrowsMessage<std::invalid_argument>(
-                  ::testing::HasSubstr("p2.yaml: paper002: wheels")));
+  EXPECT_THAT([&] { FwApp(c, p); }, ::testing::ThrowsMessage<std::invalid_argument>(
+                                        ::testing::HasSubstr("p2.yaml: paper002: wheels")));
 }
 
 }  // namespace

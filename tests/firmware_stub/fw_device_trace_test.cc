@@ -40,9 +40,7 @@ double YawRate(int cycle) { return cycle >= 20 && cycle < 40 ? 0.2 : 0.0; }
 std::vector<bus::CandumpRecord> BuildTrace() {
   const Devices dev;
   std::vector<bus::CandumpRecord> out;
-  auto add = [&](std::int64_t t, const bus::CanFrame& f) {
-    out.push_back({t, "vcan0", f, 0});
-  };
+  auto add = [&](std::int64_t t, const bus::CanFrame& f) { out.push_back({t, "vcan0", f, 0}); };
   // Start-up: boot-ups, then the answers to the two SDO downloads the firmware sends.
   add(50 * kMs, dev.Boot(1));
   add(50 * kMs, dev.Boot(2));
@@ -82,12 +80,11 @@ std::vector<bus::CandumpRecord> BuildTrace() {
       right += ds + dd / 2 + (k == 45 ? 0.010 : 0.0);
     }
     add(sync + kMs / 2, dev.Tpdo(1, Counts(left)));
-    if (k == 52) add(sync + kMs / 2, dev.Tpdo(1, Counts(left)));  // Duplicated.
+    if (k == 52) add(sync + kMs / 2, dev.Tpdo(1, Counts(left)));   // Duplicated.
     if (k != 50) add(sync + 800'000, dev.Tpdo(2, Counts(right)));  // Node 2 misses cycle 50.
   }
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
-    return a.timestamp_ns < b.timestamp_ns;
-  });
+  std::stable_sort(out.begin(), out.end(),
+                   [](const auto& a, const auto& b) { return a.timestamp_ns < b.timestamp_ns; });
   return out;
 }
 
@@ -135,7 +132,8 @@ void CompareOrUpdate(const std::string& path, const std::string& text) {
 }
 
 TEST(FwDeviceTrace, CommittedTraceIsTheDeviceModel) {
-  std::string text = "# wheelhil-fw end-to-end trace (paper 000 devices); see fw_device_trace_test.cc\n";
+  std::string text =
+      "# wheelhil-fw end-to-end trace (paper 000 devices); see fw_device_trace_test.cc\n";
   for (const auto& r : BuildTrace()) {
     text += bus::FormatCandumpLine(r.timestamp_ns, r.interface, r.frame) + "\n";
   }
@@ -158,7 +156,8 @@ TEST(FwDeviceTrace, TraceExercisesTheEstimatorAndTheFaultPaths) {
   for (const auto& s : outputs) {
     const bus::CanFrame f = testing::Frame(s);
     OutValues v;
-    if (p.DecodeOutput(OutMessage::kSlipStatus, f, v)) slips_right += v.Get(OutField::kSlipRight) == 1;
+    if (p.DecodeOutput(OutMessage::kSlipStatus, f, v))
+      slips_right += v.Get(OutField::kSlipRight) == 1;
     if (p.DecodeOutput(OutMessage::kStatus, f, v)) {
       bad += v.Get(OutField::kFaultBadFrame) == 1;
       degraded += v.Get(OutField::kState) == static_cast<double>(FwState::kDegraded);

@@ -108,7 +108,8 @@ class Loop {
   void Measure(std::size_t i) {
     const double x = 0.25 * static_cast<double>(now_) * 1e-9;
     const double counts = x / (2 * M_PI * 0.075) * 2000;
-    nodes_[i]->SetMeasurement(static_cast<std::uint32_t>(std::llround(counts)), 0.25 / (2 * M_PI * 0.075) * 2000);
+    nodes_[i]->SetMeasurement(static_cast<std::uint32_t>(std::llround(counts)),
+                              0.25 / (2 * M_PI * 0.075) * 2000);
   }
 
   void Push(const std::vector<bus::CanFrame>& frames, std::int64_t t, int src) {

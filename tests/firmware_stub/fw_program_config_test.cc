@@ -72,8 +72,10 @@ TEST(FwProgramConfig, ErrorsNameFileLineAndField) {
               "paper000: node_id 1 is used twice");
   ExpectError(Replace(kOk, "{period_s: 0.25}", "{period_s: 0.25, deadline_s: 0.3}"),
               "fw.yaml:2:36: sync.deadline_s: (0.3) must be <= period_s (0.25)");
-  ExpectError(Replace(kOk, "sync: {period_s: 0.25}\n", ""), "fw.yaml:1:1: sync: missing (required)");
-  ExpectError(Replace(kOk, "imu: {yaw_frame_id: 0x174}\n", ""), "imu: paper000 needs the yaw-rate IMU");
+  ExpectError(Replace(kOk, "sync: {period_s: 0.25}\n", ""),
+              "fw.yaml:1:1: sync: missing (required)");
+  ExpectError(Replace(kOk, "imu: {yaw_frame_id: 0x174}\n", ""),
+              "imu: paper000 needs the yaw-rate IMU");
   ExpectError(Replace(kOk, "calibration_samples: 40", "calibration_samples: 0"),
               "paper000.residual_sigma_rad: missing (required)");
   ExpectError(Replace(kOk, "0x174", "0x900"), "imu.yaw_frame_id: (2304) must be in [1, 2047]");
@@ -115,9 +117,9 @@ TEST(FwProgramConfig, ShippedScenarioConfigsLoadAndBind) {
     const FwConfig c = LoadFwConfig(e.path().string());
     std::vector<int> ids;
     for (const auto& node : c.encoder_nodes()) ids.push_back(node.node_id);
-    const FwProtocol p = FwProtocol::LoadDir(testing::DbcDir(), ids,
-                                             c.imu.enabled ? c.imu.yaw_frame_id : 0,
-                                             c.accel.enabled ? c.accel.frame_id : 0);
+    const FwProtocol p =
+        FwProtocol::LoadDir(testing::DbcDir(), ids, c.imu.enabled ? c.imu.yaw_frame_id : 0,
+                            c.accel.enabled ? c.accel.frame_id : 0);
     EXPECT_TRUE(p.unbound_output_signals().empty());
     FwApp app(c, p);
     ++n;
@@ -128,25 +130,23 @@ TEST(FwProgramConfig, ShippedScenarioConfigsLoadAndBind) {
 TEST(FwProgramConfig, ProtocolBindsEveryOutputSignalOfTheDbc) {
   const FwProtocol p = FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0x174, 0x170);
   EXPECT_THAT(p.unbound_output_signals(), ::testing::IsEmpty());
-  EXPECT_THAT(p.OutputFields(OutMessage::kStatus),
-              ::testing::IsSupersetOf({OutField::kHeartbeat, OutField::kState,
-                                       OutField::kFaultEmcy, OutField::kFaultBadFrame,
-                                       OutField::kFaultConfig, OutField::kNodeLostEnc1,
-                                       OutField::kNodeLostEnc8, OutField::kNodeLostImu,
-                                       OutField::kNodeLostAccel, OutField::kEmcyNodeId,
-                                       OutField::kBadFrameCount, OutField::kCycle,
-                                       OutField::kFaultSdo, OutField::kFaultBootTimeout,
-                                       OutField::kFaultCycleIncomplete,
-                                       OutField::kFaultLateFrame, OutField::kFaultEstimator}));
+  EXPECT_THAT(
+      p.OutputFields(OutMessage::kStatus),
+      ::testing::IsSupersetOf(
+          {OutField::kHeartbeat, OutField::kState, OutField::kFaultEmcy, OutField::kFaultBadFrame,
+           OutField::kFaultConfig, OutField::kNodeLostEnc1, OutField::kNodeLostEnc8,
+           OutField::kNodeLostImu, OutField::kNodeLostAccel, OutField::kEmcyNodeId,
+           OutField::kBadFrameCount, OutField::kCycle, OutField::kFaultSdo,
+           OutField::kFaultBootTimeout, OutField::kFaultCycleIncomplete, OutField::kFaultLateFrame,
+           OutField::kFaultEstimator}));
   EXPECT_THAT(p.OutputFields(OutMessage::kSlipStatus),
               ::testing::UnorderedElementsAre(
-                  OutField::kCycle, OutField::kSlipLeft, OutField::kSlipRight,
-                  OutField::kOutOfBand, OutField::kSlipUnattributed, OutField::kCalibrated,
-                  OutField::kResidual, OutField::kBandLow, OutField::kBandHigh));
+                  OutField::kCycle, OutField::kSlipLeft, OutField::kSlipRight, OutField::kOutOfBand,
+                  OutField::kSlipUnattributed, OutField::kCalibrated, OutField::kResidual,
+                  OutField::kBandLow, OutField::kBandHigh));
   for (OutMessage m : {OutMessage::kPose, OutMessage::kPoseRaw}) {
-    EXPECT_THAT(p.OutputFields(m), ::testing::UnorderedElementsAre(
-                                       OutField::kCycle, OutField::kX, OutField::kY,
-                                       OutField::kTheta));
+    EXPECT_THAT(p.OutputFields(m), ::testing::UnorderedElementsAre(OutField::kCycle, OutField::kX,
+                                                                   OutField::kY, OutField::kTheta));
   }
 }
 

@@ -70,8 +70,11 @@ class Devices {
   /// ACC4_Data with counter and the XOR-of-nibbles checksum of wheelhil_accel4.dbc.
   bus::CanFrame Accel(const std::array<double, 4>& a, int counter) const {
     bus::CanFrame f = Encode(acc_, 0x170,
-                             {{"ACC4_A1", a[0]}, {"ACC4_A2", a[1]}, {"ACC4_A3", a[2]},
-                              {"ACC4_A4", a[3]}, {"ACC4_Counter", counter & 15}});
+                             {{"ACC4_A1", a[0]},
+                              {"ACC4_A2", a[1]},
+                              {"ACC4_A3", a[2]},
+                              {"ACC4_A4", a[3]},
+                              {"ACC4_Counter", counter & 15}});
     std::uint8_t x = f.data[7] & 0x0F;
     for (int i = 0; i < 7; ++i) x ^= (f.data[i] & 0x0F) ^ (f.data[i] >> 4);
     f.data[7] = static_cast<std::uint8_t>((f.data[7] & 0x0F) | (x << 4));
