@@ -1,0 +1,128 @@
+#include "emulator/cli/run_command.h"
+
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <stdexcept>
+#include <system_error>
+
+#include <fmt/format.h>
+
+#include "emulator/cli/bus_commands.h"
+#include "emulator/scenario/runner.h"
+#include "emulator/scenario/scenario.h"
+
+namespace wheelhil::emulator {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ExeDir() {
+  std::error_code ec;
+  const auto p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string(".") : p.parent_path().string();
+}
+
+// $WHEELHIL_DBC_DIR, <exe>/../../bus/dbc (build tree), <exe>/../share/wheelhil/dbc (install).
+std::string FindDbcDir() {
+  if (const char* env = std::getenv("WHEELHIL_DBC_DIR"); env != nullptr && env[0] != '\0') {
+    return env;
+  }
+  for (const fs::path& p : {fs::path(ExeDir()) / "../../bus/dbc",
+                           fs::path(ExeDir()) / "../share/wheelhil/dbc"}) {
+    if (fs::exists(p / "wheelhil_fw.dbc")) return fs::canonical(p).string();
+  }
+  return {};
+}
+
+void PrintSummary(const nlohmann::json& r) {
+  fmt::print("\n{} (seed {}): {:.2f} s simulated in {:.2f} s wall ({:.0f}x real time)\n",
+             r.value("scenario", std::string()), r.value("seed", std::uint64_t{0}),
+             r.value("sim_time_s", 0.0), r["wall"].value("wall_time_s", 0.0),
+             r["wall"].value("real_time_factor", 0.0));
+  const auto& m = r["metrics"];
+  const char* streams[] = {"pose", "pose_raw"};
+  fmt::print("{:<10} {:>14} {:>14} {:>12} {:>12} {:>12}\n", "stream", "final_err_m",
+             "heading_err", "ape_rmse_m", "distance_m", "rotation");
+  for (const char* s : streams) {
+    if (!m.contains(s)) continue;
+    const auto& p = m[s];
+    fmt::print("{:<10} {:>14.4f} {:>14.4f} {:>12.4f} {:>12.3f} {:>12.3f}\n", s,
+               p.value("final_position_error_m", 0.0), p.value("final_heading_error_rad", 0.0),
+               p.value("ape_rmse_m", 0.0), p.value("distance_m", 0.0),
+               p.value("rotation_rad", 0.0));
+  }
+  for (const char* s : {"fused", "odometry", "accel"}) {
+    if (m.contains(s)) {
+      fmt::print("{:<10} velocity RMSE {:.4f} m/s\n", s, m[s].value("velocity_rmse_m_s", 0.0));
+    }
+  }
+  if (m.contains("correction")) {
+    fmt::print("correction: uncorrected / corrected final error = {:.2f}\n",
+               m["correction"].value("uncorrected_over_corrected", 0.0));
+  }
+  if (m.contains("slip") && m["slip"].contains("precision")) {
+    fmt::print("slip detection: precision {:.2f}, recall {:.2f}, {} truth intervals\n",
+               m["slip"].value("precision", 0.0), m["slip"].value("recall", 0.0),
+               m["slip"].value("truth_intervals", 0));
+  }
+  if (m.contains("bus")) {
+    fmt::print("bus: {} frames, load {:.1f} %, {} drops\n", m["bus"].value("frames", 0),
+               100.0 * m["bus"].value("load", 0.0), m["bus"].value("drops", 0));
+  }
+  for (const auto& e : r.value("expectations", nlohmann::json::array())) {
+    fmt::print("  [{}] {}{}\n", e.value("passed", false) ? "PASS" : "FAIL",
+               e.value("text", std::string()),
+               e.contains("value") ? fmt::format("  (value {})", e["value"].dump()) : "");
+  }
+  if (r.contains("failure")) fmt::print("run failed: {}\n", r["failure"].get<std::string>());
+  fmt::print("verdict: {}\n", r.value("verdict", std::string()));
+}
+
+}  // namespace
+
+RunCommand::RunCommand(CLI::App& app) {
+  run_ = app.add_subcommand("run", "Run a scenario with the firmware in the loop");
+  run_->add_option("scenario", scenario_, "Scenario file (scenarios/*.yaml)")->required();
+  run_->add_option("--out", out_, "Output directory (can.log, report.json, ...)");
+  run_->add_option("--seed", seed_, "Seed (overrides the scenario's)");
+  run_->add_option("--can", can_,
+                   "SocketCAN interface (vcan0, can0); default: a private userspace bus");
+  run_->add_flag("--realtime", realtime_, "Pace virtual time to the wall clock");
+  run_->add_flag("--quiet", quiet_, "No progress line and no summary");
+}
+
+std::optional<int> RunCommand::Run() {
+  if (!run_->parsed()) return std::nullopt;
+  scenario::Scenario sc;
+  try {
+    sc = scenario::LoadScenarioFile(scenario_);
+  } catch (const std::invalid_argument& e) {
+    fmt::print(stderr, "wheelhil run: {}\n", e.what());
+    return 2;
+  }
+  scenario::RunOptions o;
+  o.out_dir = out_;
+  o.seed = seed_;
+  o.can_iface = can_;
+  o.realtime = realtime_;
+  o.progress = !quiet_ && ::isatty(2);
+  o.bin_dir = ExeDir();
+  o.dbc_dir = FindDbcDir();
+  o.ucan_child_env = [](const std::string& dir) { return UcanChildEnvironment(dir); };
+  try {
+    const auto result = scenario::RunScenario(sc, o);
+    if (!quiet_) PrintSummary(result.report);
+    return result.exit_code;
+  } catch (const std::invalid_argument& e) {
+    fmt::print(stderr, "wheelhil run: {}\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "wheelhil run: {}\n", e.what());
+    return 1;
+  }
+}
+
+}  // namespace wheelhil::emulator

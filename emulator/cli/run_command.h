@@ -1,0 +1,31 @@
+#pragma once
+/// `wheelhil run SCENARIO [--out DIR] [--seed N] [--can IFACE] [--realtime] [--timeout S]`: runs a
+/// scenario (emulator/scenario/runner.h) with the firmware in the loop, prints a summary table
+/// and returns 0 when every expectation holds, 1 when one fails or the run fails, 2 for a usage
+/// or input error (bad scenario file: file:line:column: field: problem). Thread-compatible.
+
+#include <CLI/CLI.hpp>
+
+#include <optional>
+#include <string>
+
+namespace wheelhil::emulator {
+
+class RunCommand {
+ public:
+  /// Adds the `run` subcommand to `app` (call before parsing).
+  explicit RunCommand(CLI::App& app);
+  /// After parsing: the exit code when `run` ran, else nullopt.
+  std::optional<int> Run();
+
+ private:
+  CLI::App* run_ = nullptr;
+  std::string scenario_;
+  std::string out_ = "out/run";
+  std::optional<std::uint64_t> seed_;
+  std::string can_;
+  bool realtime_ = false;
+  bool quiet_ = false;
+};
+
+}  // namespace wheelhil::emulator

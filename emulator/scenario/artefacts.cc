@@ -1,0 +1,193 @@
+#include "emulator/scenario/artefacts.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+namespace wheelhil::emulator::scenario {
+
+namespace {
+
+std::ofstream Open(const std::string& path) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw std::runtime_error(fmt::format("{}: cannot be written", path));
+  return out;
+}
+
+void Check(std::ofstream& out, const std::string& path) {
+  out.flush();
+  if (!out) throw std::runtime_error(fmt::format("{}: write failed", path));
+}
+
+std::string Escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '<': o += "&lt;"; break;
+      case '>': o += "&gt;"; break;
+      case '&': o += "&amp;"; break;
+      case '"': o += "&quot;"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+
+}  // namespace
+
+void WriteTruthCsv(const std::string& path, const std::vector<TruthRow>& rows) {
+  auto out = Open(path);
+  out << "t_s,x_m,y_m,z_m,theta_rad,vx_m_s,vy_m_s,omega_rad_s,slipping_wheels\n";
+  for (const auto& r : rows) {
+    out << fmt::format("{:.6f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{}\n", r.t_s,
+                       r.x_m, r.y_m, r.z_m, r.theta_rad, r.vx_m_s, r.vy_m_s, r.omega_rad_s,
+                       r.slipping_wheels);
+  }
+  Check(out, path);
+}
+
+void WriteEstimateCsv(const std::string& path, const std::vector<EstimateRow>& rows) {
+  auto out = Open(path);
+  out << "t_s,cycle,stream,x_m_or_vx_m_s,y_m_or_vy_m_s,theta_rad_or_omega_rad_s\n";
+  for (const auto& r : rows) {
+    out << fmt::format("{:.6f},{},{},{:.6f},{:.6f},{:.6f}\n", r.t_s, r.cycle, r.stream, r.a, r.b,
+                       r.c);
+  }
+  Check(out, path);
+}
+
+void WriteTum(const std::string& path, const std::vector<PoseSample>& poses) {
+  auto out = Open(path);
+  for (const auto& p : poses) {
+    out << fmt::format("{:.6f} {:.9f} {:.9f} 0 0 0 {:.9f} {:.9f}\n", p.t_s, p.x_m, p.y_m,
+                       std::sin(p.theta_rad / 2), std::cos(p.theta_rad / 2));
+  }
+  Check(out, path);
+}
+
+void WriteJsonLines(const std::string& path, const std::vector<nlohmann::json>& events) {
+  auto out = Open(path);
+  for (const auto& e : events) out << e.dump() << '\n';
+  Check(out, path);
+}
+
+void WriteText(const std::string& path, const std::string& text) {
+  auto out = Open(path);
+  out << text;
+  Check(out, path);
+}
+
+std::string SvgPlot(const std::string& title, const std::string& x_label,
+                    const std::string& y_label, const std::vector<Series>& series,
+                    bool equal_axes, int width, int height) {
+  double x0 = std::numeric_limits<double>::infinity(), x1 = -x0, y0 = x0, y1 = -x0;
+  for (const auto& s : series) {
+    for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      x0 = std::min(x0, s.x[i]);
+      x1 = std::max(x1, s.x[i]);
+      y0 = std::min(y0, s.y[i]);
+      y1 = std::max(y1, s.y[i]);
+    }
+  }
+  if (!std::isfinite(x0)) x0 = 0, x1 = 1, y0 = 0, y1 = 1;
+  if (x1 - x0 < 1e-12) x1 = x0 + 1;
+  if (y1 - y0 < 1e-12) y0 -= 0.5, y1 += 0.5;
+  const double ml = 70, mr = 20, mt = 30, mb = 45;
+  const double pw = width - ml - mr, ph = height - mt - mb;
+  if (equal_axes) {
+    const double sx = (x1 - x0) / pw, sy = (y1 - y0) / ph;
+    if (sx > sy) {
+      const double c = (y0 + y1) / 2, h = sx * ph / 2;
+      y0 = c - h, y1 = c + h;
+    } else {
+      const double c = (x0 + x1) / 2, h = sy * pw / 2;
+      x0 = c - h, x1 = c + h;
+    }
+  }
+  auto X = [&](double x) { return ml + (x - x0) / (x1 - x0) * pw; };
+  auto Y = [&](double y) { return mt + ph - (y - y0) / (y1 - y0) * ph; };
+  std::string svg = fmt::format(
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" "
+      "font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" "
+      "fill=\"white\"/>\n<text x=\"{}\" y=\"18\" font-size=\"13\" font-weight=\"bold\">{}</text>\n"
+      "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>\n",
+      width, height, ml, Escape(title), ml, mt, pw, ph);
+  svg += fmt::format(
+      "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n<text x=\"14\" y=\"{}\" "
+      "transform=\"rotate(-90 14 {})\" text-anchor=\"middle\">{}</text>\n",
+      ml + pw / 2, height - 8, Escape(x_label), mt + ph / 2, mt + ph / 2, Escape(y_label));
+  for (int i = 0; i <= 4; ++i) {
+    const double xv = x0 + (x1 - x0) * i / 4, yv = y0 + (y1 - y0) * i / 4;
+    svg += fmt::format(
+        "<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.4g}</text>\n<text x=\"{}\" "
+        "y=\"{:.1f}\" text-anchor=\"end\">{:.4g}</text>\n<line x1=\"{:.1f}\" y1=\"{}\" "
+        "x2=\"{:.1f}\" y2=\"{}\" stroke=\"#eee\"/>\n",
+        X(xv), mt + ph + 15, xv, ml - 4, Y(yv) + 4, yv, X(xv), mt, X(xv), mt + ph);
+  }
+  int legend = 0;
+  for (const auto& s : series) {
+    std::string pts;
+    const std::size_t n = std::min(s.x.size(), s.y.size());
+    const std::size_t stride = std::max<std::size_t>(1, n / 4000);
+    for (std::size_t i = 0; i < n; i += stride) {
+      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      pts += fmt::format("{:.1f},{:.1f} ", X(s.x[i]), Y(s.y[i]));
+    }
+    svg += fmt::format(
+        "<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\"{} points=\"{}\"/>\n", s.color,
+        s.dashed ? " stroke-dasharray=\"5,3\"" : "", pts);
+    svg += fmt::format(
+        "<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"{}\" stroke-width=\"2\"/><text "
+        "x=\"{}\" y=\"{}\">{}</text>\n",
+        ml + 8, mt + 12 + 14 * legend, ml + 28, mt + 12 + 14 * legend, s.color, ml + 32,
+        mt + 16 + 14 * legend, Escape(s.name));
+    ++legend;
+  }
+  svg += "</svg>\n";
+  return svg;
+}
+
+std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots) {
+  std::string h =
+      "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>wheelhil run: " +
+      Escape(report.value("scenario", std::string())) +
+      "</title><style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
+      "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}.pass{color:#070}"
+      ".fail{color:#b00}</style></head><body>\n";
+  const std::string verdict = report.value("verdict", std::string());
+  h += fmt::format("<h1>{}</h1>\n<p>seed {} &middot; {:.3f} s simulated &middot; verdict <b "
+                   "class=\"{}\">{}</b></p>\n",
+                   Escape(report.value("scenario", std::string())),
+                   report.value("seed", std::uint64_t{0}), report.value("sim_time_s", 0.0),
+                   verdict == "pass" ? "pass" : "fail", Escape(verdict));
+  if (report.contains("failure")) {
+    h += "<p class=\"fail\">" + Escape(report["failure"].get<std::string>()) + "</p>\n";
+  }
+  h += "<h2>Expectations</h2>\n<table><tr><th>expectation</th><th>value</th><th>result</th></tr>\n";
+  for (const auto& e : report.value("expectations", nlohmann::json::array())) {
+    const bool ok = e.value("passed", false);
+    h += fmt::format("<tr><td>{}</td><td>{}</td><td class=\"{}\">{}</td></tr>\n",
+                     Escape(e.value("text", std::string())),
+                     Escape(e.contains("value") ? e["value"].dump() : std::string("-")),
+                     ok ? "pass" : "fail", ok ? "pass" : "FAIL");
+  }
+  h += "</table>\n<h2>Metrics</h2>\n<table><tr><th>stream</th><th>metric</th><th>value</th></tr>\n";
+  for (const auto& [stream, m] : report.value("metrics", nlohmann::json::object()).items()) {
+    if (!m.is_object()) continue;
+    for (const auto& [k, v] : m.items()) {
+      h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td></tr>\n", Escape(stream), Escape(k),
+                       Escape(v.dump()));
+    }
+  }
+  h += "</table>\n<h2>Plots</h2>\n";
+  for (const auto& s : svg_plots) h += "<div>" + s + "</div>\n";
+  h += "</body></html>\n";
+  return h;
+}
+
+}  // namespace wheelhil::emulator::scenario

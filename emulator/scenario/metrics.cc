@@ -1,0 +1,190 @@
+#include "emulator/scenario/metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace wheelhil::emulator::scenario {
+
+double WrapAngle(double a_rad) {
+  const double two_pi = 2.0 * std::numbers::pi;
+  double a = std::fmod(a_rad + std::numbers::pi, two_pi);
+  if (a <= 0) a += two_pi;
+  return a - std::numbers::pi;
+}
+
+PoseSample InterpolatePose(const std::vector<PoseSample>& truth, double t_s) {
+  if (t_s <= truth.front().t_s) return truth.front();
+  if (t_s >= truth.back().t_s) return truth.back();
+  const auto it = std::lower_bound(truth.begin(), truth.end(), t_s,
+                                   [](const PoseSample& p, double t) { return p.t_s < t; });
+  const PoseSample& b = *it;
+  const PoseSample& a = *(it - 1);
+  const double span = b.t_s - a.t_s;
+  const double w = span > 0 ? (t_s - a.t_s) / span : 0.0;
+  PoseSample p;
+  p.t_s = t_s;
+  p.x_m = a.x_m + w * (b.x_m - a.x_m);
+  p.y_m = a.y_m + w * (b.y_m - a.y_m);
+  p.theta_rad = a.theta_rad + w * WrapAngle(b.theta_rad - a.theta_rad);
+  return p;
+}
+
+double PathLength(const std::vector<PoseSample>& truth) {
+  double d = 0;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    d += std::hypot(truth[i].x_m - truth[i - 1].x_m, truth[i].y_m - truth[i - 1].y_m);
+  }
+  return d;
+}
+
+double TotalRotation(const std::vector<PoseSample>& truth) {
+  double r = 0;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    r += std::abs(WrapAngle(truth[i].theta_rad - truth[i - 1].theta_rad));
+  }
+  return r;
+}
+
+PoseMetrics ComputePoseMetrics(const std::vector<PoseSample>& truth,
+                               const std::vector<PoseSample>& estimate) {
+  PoseMetrics m;
+  m.distance_m = PathLength(truth);
+  m.rotation_rad = TotalRotation(truth);
+  if (truth.empty() || estimate.empty()) return m;
+  double sum_sq = 0;
+  for (const auto& e : estimate) {
+    const PoseSample t = InterpolatePose(truth, e.t_s);
+    sum_sq += (e.x_m - t.x_m) * (e.x_m - t.x_m) + (e.y_m - t.y_m) * (e.y_m - t.y_m);
+  }
+  m.samples = estimate.size();
+  m.ape_rmse_m = std::sqrt(sum_sq / static_cast<double>(estimate.size()));
+  const PoseSample& e = estimate.back();
+  const PoseSample t = InterpolatePose(truth, e.t_s);
+  m.final_position_error_m = std::hypot(e.x_m - t.x_m, e.y_m - t.y_m);
+  m.final_heading_error_rad = std::abs(WrapAngle(e.theta_rad - t.theta_rad));
+  return m;
+}
+
+double VelocityRmse(const std::vector<VelocitySample>& truth,
+                    const std::vector<VelocitySample>& estimate) {
+  if (truth.empty() || estimate.empty()) return 0;
+  double sum_sq = 0;
+  for (const auto& e : estimate) {
+    VelocitySample t = truth.front();
+    if (e.t_s >= truth.back().t_s) {
+      t = truth.back();
+    } else if (e.t_s > truth.front().t_s) {
+      const auto it = std::lower_bound(truth.begin(), truth.end(), e.t_s,
+                                       [](const VelocitySample& v, double x) { return v.t_s < x; });
+      const auto& b = *it;
+      const auto& a = *(it - 1);
+      const double span = b.t_s - a.t_s;
+      const double w = span > 0 ? (e.t_s - a.t_s) / span : 0.0;
+      t.vx_m_s = a.vx_m_s + w * (b.vx_m_s - a.vx_m_s);
+      t.vy_m_s = a.vy_m_s + w * (b.vy_m_s - a.vy_m_s);
+    }
+    sum_sq += (e.vx_m_s - t.vx_m_s) * (e.vx_m_s - t.vx_m_s) +
+              (e.vy_m_s - t.vy_m_s) * (e.vy_m_s - t.vy_m_s);
+  }
+  return std::sqrt(sum_sq / static_cast<double>(estimate.size()));
+}
+
+std::vector<Interval> FlagsToIntervals(const std::vector<double>& t_s,
+                                       const std::vector<bool>& flags, double step_s,
+                                       double merge_gap_s, double min_length_s) {
+  std::vector<Interval> raw;
+  for (std::size_t i = 0; i < flags.size() && i < t_s.size(); ++i) {
+    if (!flags[i]) continue;
+    if (!raw.empty() && t_s[i] - raw.back().end_s <= merge_gap_s + 1e-12) {
+      raw.back().end_s = t_s[i] + step_s;
+    } else {
+      raw.push_back({t_s[i], t_s[i] + step_s});
+    }
+  }
+  std::vector<Interval> out;
+  for (const auto& iv : raw) {
+    if (iv.end_s - iv.start_s >= min_length_s - 1e-12) out.push_back(iv);
+  }
+  return out;
+}
+
+SlipMetrics ComputeSlipMetrics(const std::vector<Interval>& truth,
+                               const std::vector<DetectionSample>& detections, double period_s,
+                               double min_overlap_s) {
+  SlipMetrics m;
+  m.intervals = truth.size();
+  auto overlap = [&](double a, double b) {
+    double best = 0;
+    for (const auto& iv : truth) {
+      best = std::max(best, std::min(b, iv.end_s) - std::max(a, iv.start_s));
+    }
+    return best;
+  };
+  for (const auto& d : detections) {
+    const double o = overlap(d.t_s - period_s, d.t_s);
+    const bool positive = !truth.empty() && o > 0 && o >= min_overlap_s;
+    if (d.detected && positive) ++m.true_positive;
+    if (d.detected && !positive) ++m.false_positive;
+    if (!d.detected && positive) ++m.false_negative;
+    if (!d.detected && !positive) ++m.true_negative;
+  }
+  const double tp = static_cast<double>(m.true_positive);
+  m.precision = (m.true_positive + m.false_positive) == 0
+                    ? 1.0
+                    : tp / static_cast<double>(m.true_positive + m.false_positive);
+  m.recall = (m.true_positive + m.false_negative) == 0
+                 ? 1.0
+                 : tp / static_cast<double>(m.true_positive + m.false_negative);
+  double sum = 0, worst = 0;
+  for (const auto& iv : truth) {
+    for (const auto& d : detections) {
+      if (!d.detected) continue;
+      if (d.t_s <= iv.start_s) continue;  // The cycle ended before the slip began.
+      if (d.t_s > iv.end_s + period_s) break;
+      const double lat = d.t_s - iv.start_s;
+      sum += lat;
+      worst = std::max(worst, lat);
+      ++m.intervals_detected;
+      break;
+    }
+  }
+  if (m.intervals_detected > 0) {
+    m.mean_latency_s = sum / static_cast<double>(m.intervals_detected);
+    m.max_latency_s = worst;
+  }
+  return m;
+}
+
+NormalityResult NormalityTest(const std::vector<double>& x, double z) {
+  NormalityResult r;
+  r.n = x.size();
+  if (x.size() < 8) return r;
+  const double n = static_cast<double>(x.size());
+  double mean = 0;
+  for (double v : x) mean += v;
+  mean /= n;
+  double b2 = 0, b3 = 0, b4 = 0;
+  for (double v : x) {
+    const double d = v - mean;
+    b2 += d * d;
+    b3 += d * d * d;
+    b4 += d * d * d * d;
+  }
+  b2 /= n;
+  b3 /= n;
+  b4 /= n;
+  if (!(b2 > 0)) return r;
+  r.g1 = b3 / std::pow(b2, 1.5);
+  r.g2 = b4 / (b2 * b2) - 3.0;
+  const double sd1 = std::sqrt(6.0 * (n - 2) / ((n + 1) * (n + 3)));
+  const double e2 = -6.0 / (n + 1);
+  const double sd2 =
+      std::sqrt(24.0 * n * (n - 2) * (n - 3) / ((n + 1) * (n + 1) * (n + 3) * (n + 5)));
+  r.u1 = r.g1 / sd1;
+  r.u2 = (r.g2 - e2) / sd2;
+  r.accepted = std::abs(r.u1) < z && std::abs(r.u2) < z;
+  return r;
+}
+
+}  // namespace wheelhil::emulator::scenario

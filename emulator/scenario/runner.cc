@@ -1,0 +1,1026 @@
+#include "emulator/scenario/runner.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <random>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include "bus/candump_log.h"
+#include "bus/dbc.h"
+#include "bus/dbc_codec.h"
+#include "bus/socketcan_transport.h"
+#include "bus/ucan_broker.h"
+#include "bus/ucan_runtime_dir.h"
+#include "emulator/devices/can_bus_model.h"
+#include "emulator/devices/canopen_encoder_node.h"
+#include "emulator/devices/dbc_cia406_codec.h"
+#include "emulator/devices/mm5_imu_node.h"
+#include "emulator/physics/physics_world.h"
+#include "emulator/scenario/artefacts.h"
+#include "emulator/scenario/metrics.h"
+#include "emulator/sensors/encoder_model.h"
+
+namespace wheelhil::emulator::scenario {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+constexpr std::uint32_t kSyncId = 0x080;
+constexpr std::uint32_t kFwStatusId = 0x686;
+
+double WallSeconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+// Deep-merges `over` into `base` (maps recursively, everything else replaced).
+void Merge(YAML::Node base, const YAML::Node& over) {
+  for (const auto& kv : over) {
+    const std::string key = kv.first.as<std::string>();
+    if (kv.second.IsMap() && base[key] && base[key].IsMap()) {
+      Merge(base[key], kv.second);
+    } else {
+      base[key] = kv.second;
+    }
+  }
+}
+
+// The firmware child process.
+class Firmware {
+ public:
+  ~Firmware() { Stop(); }
+
+  void Start(const std::string& command, const std::vector<std::pair<std::string, std::string>>& env,
+             const std::string& log_path) {
+    const int log_fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    pid_ = ::fork();
+    if (pid_ < 0) throw std::runtime_error("fork failed");
+    if (pid_ == 0) {
+      ::setpgid(0, 0);
+      for (const auto& [k, v] : env) ::setenv(k.c_str(), v.c_str(), 1);
+      if (log_fd >= 0) {
+        ::dup2(log_fd, 1);
+        ::dup2(log_fd, 2);
+      }
+      const std::string sh = "exec " + command;
+      ::execl("/bin/sh", "sh", "-c", sh.c_str(), static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    if (log_fd >= 0) ::close(log_fd);
+  }
+
+  /// Exit status if it has exited.
+  std::optional<int> Exited() {
+    if (pid_ <= 0) return std::nullopt;
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      pid_ = -1;
+      exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      return exit_status_;
+    }
+    return std::nullopt;
+  }
+
+  void Stop() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGTERM);
+    for (int i = 0; i < 200; ++i) {
+      if (Exited()) return;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    ::kill(pid_, SIGKILL);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+
+  bool running() const { return pid_ > 0; }
+
+ private:
+  pid_t pid_ = -1;
+  int exit_status_ = 0;
+};
+
+std::string Substitute(std::string s, const std::string& key, const std::string& value) {
+  for (std::size_t pos = s.find(key); pos != std::string::npos; pos = s.find(key, pos)) {
+    s.replace(pos, key.size(), value);
+    pos += value.size();
+  }
+  return s;
+}
+
+struct Decoded {
+  const bus::DbcMessage* msg = nullptr;
+  bus::SignalValues values;
+};
+
+// Everything one run holds.
+class Run {
+ public:
+  Run(const Scenario& s, const RunOptions& o) : s_(s), o_(o) {}
+
+  RunResult Execute();
+
+ private:
+  void BuildWorld();
+  void BuildDevices();
+  void OpenBus();
+  bool WaitForFirmwareConnection(std::string& why);
+  // One physics step plus the devices and the bus up to the end of the step.
+  void Step(bool motion);
+  // Moves the bus model to t_ns, in small slices while frames are in flight so answers to
+  // frames that complete inside the step are queued at their own instants.
+  void AdvanceBus(std::int64_t t_ns);
+  void OnWire(const WireFrame& w);
+  void EnqueueNodeFrames(int bus_node, std::size_t encoder, std::vector<NodeFrame> frames);
+  // Reads frames from the firmware until `done` or the wall-clock timeout; false on timeout.
+  bool WaitFirmware(const std::function<bool()>& done, double timeout_s);
+  void DrainFirmware(int timeout_ms);
+  void OnFirmwareFrame(const bus::CanFrame& f);
+  void RecordTruth(bool force);
+  void Progress(bool final);
+  json BuildReport(double wall_s);
+  void WriteArtefacts(const json& report);
+
+  const Scenario& s_;
+  const RunOptions& o_;
+  std::uint64_t seed_ = 1;
+  std::string out_;
+  std::string iface_;
+  std::string runtime_dir_;
+  std::unique_ptr<bus::UcanBroker> broker_;
+  std::optional<bus::SocketCanTransport> can_;
+  Firmware firmware_;
+  std::unique_ptr<bus::CandumpWriter> log_;
+
+  std::unique_ptr<physics::PhysicsWorld> world_;
+  physics::RollerVehicle* vehicle_ = nullptr;
+  std::int64_t step_ns_ = 1'000'000;
+  std::int64_t t_ns_ = 0;
+
+  std::shared_ptr<const DbcCia406Codec> cia406_;
+  std::shared_ptr<const bus::DbcDatabase> mm5_;
+  std::shared_ptr<const bus::DbcDatabase> fwdbc_;
+  std::unique_ptr<CanBusModel> bus_;
+  int bus_emulator_ = 0, bus_firmware_ = 0, bus_imu_ = -1;
+  struct Encoder {
+    EncoderDeviceSpec spec;
+    std::size_t wheel = 0;
+    std::unique_ptr<EncoderModel> model;
+    std::unique_ptr<CanopenEncoderNode> node;
+    int bus_node = 0;
+    bool silent = false;
+    CanopenEncoderNode::NmtState last_state = CanopenEncoderNode::NmtState::kOff;
+  };
+  std::vector<Encoder> encoders_;
+  std::unique_ptr<Mm5ImuNode> imu_;
+  std::uint64_t enqueued_ = 0, completed_ = 0, silenced_ = 0, enqueue_failures_ = 0;
+  std::vector<std::size_t> drive_wheels_;
+
+  // Lockstep bookkeeping.
+  std::uint64_t syncs_sent_ = 0;
+  std::map<int, double> sync_time_by_cycle_;  // cycle mod 256 -> virtual time of that SYNC.
+  int last_status_cycle_ = -1;
+  std::uint64_t status_frames_ = 0;
+  std::set<int> awaiting_nodes_;  // Nodes whose boot-up/SDO answer the firmware must react to.
+  int last_fw_state_ = -1;
+  std::uint64_t fw_frames_ = 0;
+
+  // Recorded data.
+  double t_motion0_s_ = 0;
+  Eigen::Vector3d p0_ = Eigen::Vector3d::Zero();
+  double yaw0_ = 0;
+  std::vector<TruthRow> truth_;
+  std::vector<PoseSample> truth_pose_;
+  std::vector<VelocitySample> truth_vel_;
+  std::vector<double> slip_t_;
+  std::vector<bool> slip_flag_;
+  std::vector<EstimateRow> estimates_;
+  std::map<std::string, std::vector<PoseSample>> pose_streams_;
+  std::map<std::string, std::vector<VelocitySample>> vel_streams_;
+  std::vector<DetectionSample> detections_;
+  std::vector<double> residual_t_, residual_, band_lo_, band_hi_;
+  std::vector<json> events_;
+  std::int64_t truth_every_ns_ = 10'000'000;
+  bool in_motion_ = false;
+  Clock::time_point wall0_;
+  Clock::time_point last_progress_;
+  std::string failure_;
+};
+
+void Run::BuildWorld() {
+  physics::WorldOptions wo;
+  wo.step_s = 1.0 / s_.timing.physics_rate_hz;
+  step_ns_ = std::llround(1e9 / s_.timing.physics_rate_hz);
+  world_ = std::make_unique<physics::PhysicsWorld>(wo);
+  Terrain& terrain = world_->terrain();
+  terrain.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), s_.terrain.friction);
+  for (const auto& m : s_.terrain.meshes) {
+    MeshOptions mo;
+    mo.friction = s_.terrain.friction;
+    terrain.AddMesh(m, mo);
+  }
+  for (const auto& p : s_.terrain.patches) {
+    terrain.AddPatch(FrictionPatch{p.name, p.polygon_m, p.friction});
+  }
+  const auto& rp = s_.terrain.random_patches;
+  if (rp.count > 0) {
+    std::mt19937_64 rng(seed_ ^ 0x5157AB1Eull);
+    std::uniform_real_distribution<double> ux(rp.x_min_m, rp.x_max_m);
+    std::uniform_real_distribution<double> ul(rp.length_min_m, rp.length_max_m);
+    std::uniform_int_distribution<std::size_t> ut(0, rp.track_y_m.size() - 1);
+    for (int i = 0; i < rp.count; ++i) {
+      const double x = ux(rng), len = ul(rng), y = rp.track_y_m[ut(rng)];
+      const double hw = rp.width_m / 2;
+      FrictionPatch p{fmt::format("random{}", i),
+                      {{x, y - hw}, {x + len, y - hw}, {x + len, y + hw}, {x, y + hw}},
+                      rp.friction};
+      terrain.AddPatch(p);
+      events_.push_back(json{{"t_s", 0.0},
+                             {"event", "patch"},
+                             {"name", p.name},
+                             {"x_m", x},
+                             {"y_m", y},
+                             {"length_m", len},
+                             {"mu_peak", rp.friction.mu_peak}});
+    }
+  }
+  vehicle_ = &world_->AddVehicle(s_.platform.vehicle, 0.0, 0.0, 0.0);
+  drive_wheels_ = s_.platform.drive_wheels;
+}
+
+void Run::BuildDevices() {
+  const std::string dir = o_.dbc_dir;
+  cia406_ = DbcCia406Codec::FromFile(dir + "/cia406_encoder.dbc");
+  mm5_ = std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(dir + "/bosch_mm5_10.dbc"));
+  fwdbc_ = std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(dir + "/wheelhil_fw.dbc"));
+  CanBusConfig bc;
+  bc.bitrate_bps = s_.sensors.bitrate_bps;
+  bus_ = std::make_unique<CanBusModel>(bc);
+  bus_emulator_ = bus_->AddNode("emulator");
+  bus_firmware_ = bus_->AddNode("firmware", CanBusModel::QueueOrder::kFifo, 4096);
+  std::uint64_t k = 0;
+  for (const auto& e : s_.sensors.encoders) {
+    Encoder enc;
+    enc.spec = e;
+    enc.wheel = s_.platform.wheel_index(e.wheel);
+    EncoderParams ep;
+    ep.lines_per_rev = s_.sensors.encoder_lines_per_rev;
+    ep.quadrature_x4 = s_.sensors.encoder_quadrature_x4;
+    ep.direction = e.direction;
+    ep.missed_count_prob = s_.sensors.encoder_missed_count_prob;
+    ep.glitch_prob = s_.sensors.encoder_glitch_prob;
+    ep.seed = seed_ * 1000003ull + (++k);
+    enc.model = std::make_unique<EncoderModel>(ep);
+    enc.model->Reset(vehicle_->wheel_truth()[enc.wheel].angle_rad, 0);
+    Cia406NodeConfig nc;
+    nc.node_id = static_cast<std::uint8_t>(e.node_id);
+    nc.heartbeat_ms = static_cast<std::uint16_t>(s_.sensors.heartbeat_ms);
+    enc.node = std::make_unique<CanopenEncoderNode>(nc, cia406_, 0);
+    enc.bus_node = bus_->AddNode(fmt::format("encoder{}", e.node_id));
+    encoders_.push_back(std::move(enc));
+  }
+  if (s_.sensors.gyro) {
+    GyroParams gp;
+    gp.rate_hz = s_.sensors.gyro_rate_hz;
+    gp.noise_density_rad_s_sqrt_hz = s_.sensors.gyro_noise_density_rad_s_sqrt_hz;
+    gp.bias_rad_s = s_.sensors.gyro_bias_rad_s;
+    gp.bias_random_walk_rad_s_sqrt_s = s_.sensors.gyro_bias_random_walk_rad_s_sqrt_s;
+    gp.seed = seed_ * 7919ull + 17;
+    imu_ = std::make_unique<Mm5ImuNode>(mm5_, gp, std::llround(1e9 / gp.rate_hz));
+    bus_imu_ = bus_->AddNode("imu");
+  }
+}
+
+void Run::OpenBus() {
+  bus::CanTransportOptions opt;
+  opt.receive_own = false;
+  if (o_.can_iface.empty()) {
+    runtime_dir_ = bus::CreateTempUcanRuntimeDir("wheelhil-run-");
+    bus::UcanBrokerOptions bo;
+    bo.runtime_dir = runtime_dir_;
+    bo.remove_runtime_dir = true;
+    broker_ = std::make_unique<bus::UcanBroker>(bo);
+    iface_ = "ucan0";
+    broker_->AddBus(iface_);
+    ::setenv("WHEELHIL_UCAN_DIR", runtime_dir_.c_str(), 1);
+  } else {
+    iface_ = o_.can_iface;
+  }
+  can_.emplace(bus::SocketCanTransport::Open(iface_, opt));
+  log_ = std::make_unique<bus::CandumpWriter>(out_ + "/can.log",
+                                              bus::CandumpWriter::FlushPolicy::kBuffered);
+}
+
+bool Run::WaitForFirmwareConnection(std::string& why) {
+  if (!broker_) {
+    // A kernel bus gives no way to see the other side: give it a moment to bind.
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    return true;
+  }
+  const auto t0 = Clock::now();
+  while (WallSeconds(t0) < s_.timing.timeout_s) {
+    for (const auto& st : broker_->Stats()) {
+      if (st.name == iface_ && st.clients >= 2) return true;
+    }
+    if (auto code = firmware_.Exited()) {
+      why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
+                        *code, iface_);
+      return false;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  why = fmt::format("the firmware did not open {} within {} s", iface_, s_.timing.timeout_s);
+  return false;
+}
+
+void Run::EnqueueNodeFrames(int bus_node, std::size_t encoder, std::vector<NodeFrame> frames) {
+  for (auto& nf : frames) {
+    if (encoder < encoders_.size() && encoders_[encoder].silent) {
+      ++silenced_;
+      continue;
+    }
+    const std::int64_t ready = std::max(nf.due_ns, bus_->now_ns());
+    if (bus_->Enqueue(bus_node, nf.frame, ready)) {
+      ++enqueued_;
+    } else {
+      ++enqueue_failures_;
+    }
+  }
+}
+
+void Run::OnWire(const WireFrame& w) {
+  ++completed_;
+  (void)log_->Write(w.complete_ns, iface_, w.frame);
+  if (w.node != bus_firmware_) {
+    if (can_->Send(w.frame)) ++enqueue_failures_;
+    // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
+    const std::uint32_t id = w.frame.id;
+    if (!w.frame.extended && ((id >= 0x701 && id <= 0x77F && w.frame.len == 1 &&
+                               w.frame.data[0] == 0) ||
+                              (id >= 0x581 && id <= 0x5FF))) {
+      awaiting_nodes_.insert(static_cast<int>(id & 0x7F));
+    }
+  }
+  // Every node hears every frame but its own.
+  for (std::size_t i = 0; i < encoders_.size(); ++i) {
+    if (encoders_[i].bus_node == w.node) continue;
+    EnqueueNodeFrames(encoders_[i].bus_node, i, encoders_[i].node->OnFrame(w.frame, w.complete_ns));
+  }
+}
+
+void Run::AdvanceBus(std::int64_t t_ns) {
+  constexpr std::int64_t kSlice = 20'000;
+  while (bus_->now_ns() < t_ns) {
+    const bool busy = enqueued_ > completed_;
+    const std::int64_t to = busy ? std::min(t_ns, bus_->now_ns() + kSlice) : t_ns;
+    for (const auto& w : bus_->AdvanceTo(to)) OnWire(w);
+  }
+}
+
+void Run::RecordTruth(bool force) {
+  if (!force && t_ns_ % truth_every_ns_ != 0) return;
+  const auto& b = vehicle_->body_truth();
+  const double t = static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_;
+  const double c = std::cos(-yaw0_), sn = std::sin(-yaw0_);
+  const Eigen::Vector3d d = b.p_WB - p0_;
+  TruthRow r;
+  r.t_s = t;
+  r.x_m = c * d.x() - sn * d.y();
+  r.y_m = sn * d.x() + c * d.y();
+  r.z_m = b.p_WB.z();
+  r.theta_rad = b.yaw_rad - yaw0_;
+  const Eigen::Vector3d v_B = b.q_WB.conjugate() * b.v_WB_W;
+  const Eigen::Vector3d w_B = b.q_WB.conjugate() * b.omega_WB_W;
+  r.vx_m_s = v_B.x();
+  r.vy_m_s = v_B.y();
+  r.omega_rad_s = w_B.z();
+  const auto& wt = vehicle_->wheel_truth();
+  for (std::size_t i = 0; i < drive_wheels_.size(); ++i) {
+    if (wt[drive_wheels_[i]].slipping) r.slipping_wheels |= 1 << i;
+  }
+  if (!truth_.empty() && truth_.back().t_s == t) return;
+  truth_.push_back(r);
+  truth_pose_.push_back({t, r.x_m, r.y_m, r.theta_rad});
+  truth_vel_.push_back({t, r.vx_m_s, r.vy_m_s, r.omega_rad_s});
+}
+
+void Run::Step(bool motion) {
+  const double t_s = static_cast<double>(t_ns_) * 1e-9;
+  // Command for the step.
+  if (motion) {
+    const double tm = t_s - t_motion0_s_;
+    double t0 = 0;
+    bool wheels = false;
+    for (const auto& m : s_.motion) {
+      if (tm >= t0 && tm < t0 + m.duration_s && m.kind == MotionSegment::Kind::kWheels) {
+        for (std::size_t i = 0; i < m.wheel_speeds_rad_s.size(); ++i) {
+          (void)vehicle_->SetWheelSpeedCommand(i, m.wheel_speeds_rad_s[i]);
+        }
+        wheels = true;
+      }
+      t0 += m.duration_s;
+    }
+    if (!wheels) platforms::CommandTwist(*vehicle_, s_.platform, TwistAt(s_.motion, tm));
+  } else {
+    platforms::CommandTwist(*vehicle_, s_.platform, platforms::BodyTwist{});
+  }
+  world_->Step();
+  t_ns_ += step_ns_;
+  const double t_now = static_cast<double>(t_ns_) * 1e-9;
+
+  // Faults.
+  for (const auto& f : s_.faults) {
+    const double t_start = t_motion0_s_ + f.start_s, t_end = t_motion0_s_ + f.end_s;
+    if (!motion) continue;
+    for (auto& e : encoders_) {
+      if (e.spec.node_id != f.node_id) continue;
+      const bool on = t_now >= t_start && t_now < t_end;
+      const bool was = t_now - static_cast<double>(step_ns_) * 1e-9 >= t_start &&
+                       t_now - static_cast<double>(step_ns_) * 1e-9 < t_end;
+      if (on == was) continue;
+      events_.push_back(json{{"t_s", t_now - t_motion0_s_},
+                             {"event", on ? "fault_start" : "fault_end"},
+                             {"fault", f.kind == FaultSpec::Kind::kEncoderEmcy ? "encoder_emcy"
+                                                                                : "encoder_silent"},
+                             {"node_id", f.node_id}});
+      if (f.kind == FaultSpec::Kind::kEncoderEmcy) {
+        if (on) {
+          e.node->RaiseFault(f.error_code, 0x81, t_ns_);
+        } else {
+          e.node->ClearFault(t_ns_);
+        }
+      } else {
+        e.silent = on;
+      }
+    }
+  }
+
+  // Sensors and devices.
+  const auto& wt = vehicle_->wheel_truth();
+  for (std::size_t i = 0; i < encoders_.size(); ++i) {
+    auto& e = encoders_[i];
+    const std::uint32_t counts = e.model->Sample(wt[e.wheel].angle_rad);
+    const double speed = wt[e.wheel].omega_rad_s * e.model->counts_per_rev() /
+                         (2.0 * std::numbers::pi) * e.spec.direction;
+    e.node->SetMeasurement(counts, speed);
+    EnqueueNodeFrames(e.bus_node, i, e.node->Poll(t_ns_));
+    if (e.node->state() != e.last_state) {
+      e.last_state = e.node->state();
+      events_.push_back(json{{"t_s", t_now - t_motion0_s_},
+                             {"event", "node_state"},
+                             {"node_id", e.spec.node_id},
+                             {"state", static_cast<int>(e.last_state)}});
+    }
+  }
+  if (imu_) {
+    while (imu_->next_sample_ns() <= t_ns_) {
+      const std::int64_t ts = imu_->next_sample_ns();
+      const auto& b = vehicle_->body_truth();
+      const Eigen::Vector3d w_B = b.q_WB.conjugate() * b.omega_WB_W;
+      const Eigen::Vector3d a_B = b.q_WB.conjugate() * b.a_WB_W;
+      bus::CanFrame f;
+      (void)imu_->Sample(w_B, a_B.y(), f);
+      if (bus_->Enqueue(bus_imu_, f, std::max(ts, bus_->now_ns()))) {
+        ++enqueued_;
+      } else {
+        ++enqueue_failures_;
+      }
+    }
+  }
+  if (motion) {
+    const auto& wt2 = vehicle_->wheel_truth();
+    bool slip = false;
+    for (std::size_t w : drive_wheels_) slip = slip || wt2[w].slipping;
+    slip_t_.push_back(t_now - step_ns_ * 1e-9 - t_motion0_s_);
+    slip_flag_.push_back(slip);
+  }
+}
+
+void Run::OnFirmwareFrame(const bus::CanFrame& f) {
+  ++fw_frames_;
+  // Into the bus model at the current virtual instant (it is logged when it completes).
+  if (bus_->Enqueue(bus_firmware_, f, bus_->now_ns())) {
+    ++enqueued_;
+  } else {
+    ++enqueue_failures_;
+  }
+  if (f.extended) return;
+  // Reactions the lockstep start-up waits for: SDO requests and NMT commands.
+  if (f.id >= 0x601 && f.id <= 0x67F) awaiting_nodes_.erase(static_cast<int>(f.id & 0x7F));
+  if (f.id == 0x000 && f.len >= 2) {
+    if (f.data[1] == 0) {
+      awaiting_nodes_.clear();
+    } else {
+      awaiting_nodes_.erase(f.data[1]);
+    }
+  }
+  const bus::DbcMessage* msg = fwdbc_->FindMessage(f.id, false);
+  if (msg == nullptr) return;
+  const auto v = bus::DecodeMessage(*msg, f);
+  auto get = [&](const char* name) {
+    auto it = v.find(name);
+    return it == v.end() ? 0.0 : it->second;
+  };
+  if (f.id == kFwStatusId) {
+    ++status_frames_;
+    last_status_cycle_ = static_cast<int>(get("Status_Cycle"));
+    const int state = static_cast<int>(get("Status_State"));
+    if (state != last_fw_state_) {
+      last_fw_state_ = state;
+      const double t = static_cast<double>(bus_->now_ns()) * 1e-9 - t_motion0_s_;
+      events_.push_back(json{{"t_s", t}, {"event", "firmware_state"}, {"state", state}});
+    }
+    return;
+  }
+  // Estimate frames: time of the SYNC that opened their cycle.
+  const std::string prefix_cycle = [&] {
+    for (const auto& sg : msg->signals) {
+      if (sg.name.size() > 6 && sg.name.ends_with("_Cycle")) return sg.name;
+    }
+    return std::string();
+  }();
+  if (prefix_cycle.empty()) return;
+  const int cycle = static_cast<int>(get(prefix_cycle.c_str()));
+  const auto it = sync_time_by_cycle_.find(cycle);
+  if (it == sync_time_by_cycle_.end()) return;
+  const double t = it->second - t_motion0_s_;
+  auto pose = [&](const std::string& stream, const char* p) {
+    const PoseSample ps{t, get(fmt::format("{}_X", p).c_str()), get(fmt::format("{}_Y", p).c_str()),
+                        get(fmt::format("{}_Theta", p).c_str())};
+    pose_streams_[stream].push_back(ps);
+    estimates_.push_back({t, cycle, stream, ps.x_m, ps.y_m, ps.theta_rad});
+  };
+  auto vel = [&](const std::string& stream, const char* p) {
+    const VelocitySample vs{t, get(fmt::format("{}_Vx", p).c_str()),
+                            get(fmt::format("{}_Vy", p).c_str()),
+                            get(fmt::format("{}_Omega", p).c_str())};
+    vel_streams_[stream].push_back(vs);
+    estimates_.push_back({t, cycle, stream, vs.vx_m_s, vs.vy_m_s, vs.omega_rad_s});
+  };
+  if (msg->name == "FW_Pose") pose("pose", "Pose");
+  if (msg->name == "FW_PoseRaw") pose("pose_raw", "PoseRaw");
+  if (msg->name == "FW_Velocity") vel("fused", "Vel");
+  if (msg->name == "FW_VelocityOdom") vel("odometry", "VelOdom");
+  if (msg->name == "FW_VelocityAccel") vel("accel", "VelAccel");
+  if (msg->name == "FW_SlipStatus") {
+    detections_.push_back({t, get("Slip_OutOfBand") != 0});
+    if (get("Slip_Calibrated") != 0) {
+      residual_t_.push_back(t);
+      residual_.push_back(get("Slip_Residual"));
+      band_lo_.push_back(get("Slip_BandLower"));
+      band_hi_.push_back(get("Slip_BandUpper"));
+    }
+  }
+}
+
+void Run::DrainFirmware(int timeout_ms) {
+  bus::ReceivedFrame rx;
+  int wait = timeout_ms;
+  while (!can_->Receive(rx, wait)) {
+    OnFirmwareFrame(rx.frame);
+    wait = 0;
+  }
+}
+
+bool Run::WaitFirmware(const std::function<bool()>& done, double timeout_s) {
+  const auto t0 = Clock::now();
+  while (!done()) {
+    const double left = timeout_s - WallSeconds(t0);
+    if (left <= 0) return false;
+    bus::ReceivedFrame rx;
+    const auto ec = can_->Receive(rx, std::max(1, std::min(50, static_cast<int>(left * 1000))));
+    if (!ec) {
+      OnFirmwareFrame(rx.frame);
+    } else if (firmware_.running() && firmware_.Exited()) {
+      failure_ = "the firmware exited during the run (see firmware.log)";
+      return false;
+    }
+  }
+  return true;
+}
+
+void Run::Progress(bool final) {
+  if (!o_.progress) return;
+  if (!final && WallSeconds(last_progress_) < 0.2) return;
+  last_progress_ = Clock::now();
+  const double sim = static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_;
+  const double wall = WallSeconds(wall0_);
+  fmt::print(stderr, "\r{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}",
+             s_.name, std::max(0.0, sim), s_.timing.duration_s, syncs_sent_,
+             wall > 0 ? std::max(0.0, sim) / wall : 0.0, final ? "\n" : "");
+}
+
+RunResult Run::Execute() {
+  RunResult result;
+  seed_ = o_.seed.value_or(s_.seed);
+  out_ = o_.out_dir;
+  std::error_code ec;
+  fs::create_directories(out_, ec);
+  if (ec || !fs::is_directory(out_)) {
+    throw std::invalid_argument(fmt::format("--out {}: cannot create the directory", out_));
+  }
+  if (!fs::exists(o_.dbc_dir + "/wheelhil_fw.dbc")) {
+    throw std::invalid_argument(
+        fmt::format("no DBC files in '{}' (set WHEELHIL_DBC_DIR)", o_.dbc_dir));
+  }
+  const bool lockstep = s_.timing.lockstep && !o_.realtime;
+  wall0_ = Clock::now();
+  last_progress_ = wall0_;
+  truth_every_ns_ = std::min<std::int64_t>(10'000'000, std::llround(s_.timing.sync_period_s * 1e9));
+  BuildWorld();
+  BuildDevices();
+  OpenBus();
+  events_.push_back(json{{"t_s", 0.0}, {"event", "run_start"}, {"seed", seed_},
+                         {"lockstep", lockstep}, {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
+
+  // The firmware.
+  if (!s_.firmware.command.empty()) {
+    std::string cmd = s_.firmware.command;
+    if (!s_.firmware.config.empty()) {
+      const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
+      WriteText(cfg_path, DerivedFirmwareConfig(s_.firmware, s_.timing));
+      cmd = Substitute(cmd, "${CONFIG}", cfg_path);
+    }
+    cmd = Substitute(Substitute(cmd, "${CAN}", iface_), "${BIN}", o_.bin_dir);
+    std::vector<std::pair<std::string, std::string>> env;
+    if (broker_ && o_.ucan_child_env) env = o_.ucan_child_env(runtime_dir_);
+    env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
+    firmware_.Start(cmd, env, out_ + "/firmware.log");
+    std::string why;
+    if (!WaitForFirmwareConnection(why)) failure_ = why;
+  } else if (broker_) {
+    std::string why;
+    if (!WaitForFirmwareConnection(why)) failure_ = "no firmware attached: " + why;
+  }
+
+  // Start-up: nodes boot, the firmware configures and starts them.
+  const std::int64_t boot_limit_ns = std::llround(10e9);
+  auto all_operational = [&] {
+    return std::all_of(encoders_.begin(), encoders_.end(), [](const Encoder& e) {
+      return e.node->state() == CanopenEncoderNode::NmtState::kOperational;
+    });
+  };
+  while (failure_.empty() && !(all_operational() && awaiting_nodes_.empty())) {
+    Step(false);
+    RecordTruth(false);
+    AdvanceBus(t_ns_);
+    if (lockstep) {
+      if (!awaiting_nodes_.empty() &&
+          !WaitFirmware([&] { return awaiting_nodes_.empty(); }, s_.timing.timeout_s)) {
+        if (failure_.empty()) {
+          failure_ = fmt::format(
+              "timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
+              *awaiting_nodes_.begin(), s_.timing.timeout_s);
+        }
+      }
+    } else {
+      DrainFirmware(0);
+      std::this_thread::sleep_until(wall0_ + std::chrono::nanoseconds(t_ns_));
+    }
+    if (t_ns_ > boot_limit_ns && failure_.empty()) {
+      failure_ = "the encoder nodes were not started (NMT start) within 10 s of virtual time";
+    }
+  }
+  // Let the settled vehicle define the start.
+  const std::int64_t settle_ns = std::llround(0.2e9);
+  for (std::int64_t until = t_ns_ + settle_ns; failure_.empty() && t_ns_ < until;) {
+    Step(false);
+    AdvanceBus(t_ns_);
+    if (!lockstep) DrainFirmware(0);
+  }
+  // Motion: SYNC every period; lockstep waits for the firmware's status of each cycle.
+  const std::int64_t period_ns = std::llround(s_.timing.sync_period_s * 1e9);
+  const std::int64_t steps_per_cycle = period_ns / step_ns_;
+  const std::int64_t cycles = std::llround(s_.timing.duration_s * 1e9) / period_ns;
+  t_motion0_s_ = static_cast<double>(t_ns_) * 1e-9;
+  p0_ = vehicle_->body_truth().p_WB;
+  yaw0_ = vehicle_->body_truth().yaw_rad;
+  events_.push_back(json{{"t_s", 0.0}, {"event", "motion_start"}});
+  in_motion_ = true;
+  truth_.clear();
+  truth_pose_.clear();
+  truth_vel_.clear();
+  const auto wall_motion0 = Clock::now();
+  for (std::int64_t k = 0; failure_.empty() && k <= cycles; ++k) {
+    // SYNC k at the start of the cycle.
+    RecordTruth(true);
+    bus::CanFrame sync;
+    sync.id = kSyncId;
+    sync.len = 0;
+    if (bus_->Enqueue(bus_emulator_, sync, t_ns_)) {
+      ++enqueued_;
+    } else {
+      ++enqueue_failures_;
+    }
+    sync_time_by_cycle_[static_cast<int>(syncs_sent_ % 256)] = static_cast<double>(t_ns_) * 1e-9;
+    const int want = static_cast<int>(syncs_sent_ % 256);
+    ++syncs_sent_;
+    // The SYNC and the TPDOs answering it (the encoder readings at this instant) go out
+    // before the physics moves on.
+    AdvanceBus(t_ns_ + step_ns_ / 2);
+    for (std::int64_t i = 0; i < steps_per_cycle && k < cycles; ++i) {
+      Step(true);
+      RecordTruth(false);
+      AdvanceBus(t_ns_);
+      if (i == 0 && lockstep) {
+        if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
+                          s_.timing.timeout_s) &&
+            failure_.empty()) {
+          failure_ = fmt::format(
+              "timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s", k,
+              s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
+        }
+      }
+      if (!lockstep) {
+        DrainFirmware(0);
+        std::this_thread::sleep_until(wall_motion0 +
+                                      std::chrono::nanoseconds(t_ns_ - std::llround(t_motion0_s_ * 1e9)));
+      }
+      Progress(false);
+    }
+    if (k == cycles && failure_.empty()) {
+      if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
+                        s_.timing.timeout_s)) {
+        if (failure_.empty()) {
+          failure_ = fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
+                                 s_.timing.timeout_s);
+        }
+      }
+    }
+  }
+  Progress(true);
+  for (const auto& w : bus_->Drain()) {
+    ++completed_;
+    (void)log_->Write(w.complete_ns, iface_, w.frame);
+  }
+  const double wall_s = WallSeconds(wall0_);
+  firmware_.Stop();
+  log_.reset();
+  if (!failure_.empty()) {
+    events_.push_back(json{{"t_s", static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_},
+                           {"event", "failure"},
+                           {"reason", failure_}});
+  }
+  json report = BuildReport(wall_s);
+  json expectations = json::array();
+  const bool all_ok = EvaluateExpectations(s_.expectations, report["metrics"], expectations);
+  report["expectations"] = expectations;
+  report["verdict"] = (all_ok && failure_.empty()) ? "pass" : "fail";
+  if (!failure_.empty()) report["failure"] = failure_;
+  WriteArtefacts(report);
+  result.report = report;
+  result.failure = failure_;
+  result.exit_code = (all_ok && failure_.empty()) ? 0 : 1;
+  if (broker_) {
+    can_.reset();
+    broker_.reset();
+  }
+  return result;
+}
+
+json Run::BuildReport(double wall_s) {
+  json r;
+  r["scenario"] = s_.name;
+  r["seed"] = seed_;
+  const double sim = std::max(0.0, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
+  r["sim_time_s"] = sim;
+  r["cycles"] = syncs_sent_;
+  r["sync_period_s"] = s_.timing.sync_period_s;
+  json metrics = json::object();
+  for (const auto& [name, est] : pose_streams_) {
+    const PoseMetrics m = ComputePoseMetrics(truth_pose_, est);
+    metrics[name] = json{{"final_position_error_m", m.final_position_error_m},
+                         {"final_heading_error_rad", m.final_heading_error_rad},
+                         {"ape_rmse_m", m.ape_rmse_m},
+                         {"distance_m", m.distance_m},
+                         {"rotation_rad", m.rotation_rad},
+                         {"samples", m.samples}};
+    if (m.distance_m > 0) {
+      metrics[name]["final_position_error_pct_of_distance"] =
+          100.0 * m.final_position_error_m / m.distance_m;
+    }
+  }
+  if (metrics.contains("pose") && metrics.contains("pose_raw")) {
+    const double c = metrics["pose"]["final_position_error_m"].get<double>();
+    const double u = metrics["pose_raw"]["final_position_error_m"].get<double>();
+    metrics["correction"] = json{{"uncorrected_over_corrected", c > 0 ? u / c : 0.0},
+                                 {"corrected_below_uncorrected", c < u}};
+  }
+  for (const auto& [name, est] : vel_streams_) {
+    metrics[name]["velocity_rmse_m_s"] = VelocityRmse(truth_vel_, est);
+    metrics[name]["samples"] = est.size();
+  }
+  const auto intervals = FlagsToIntervals(slip_t_, slip_flag_, static_cast<double>(step_ns_) * 1e-9,
+                                          0.02, 0.0);
+  for (const auto& iv : intervals) {
+    events_.push_back(json{{"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s},
+                           {"end_s", iv.end_s}});
+  }
+  std::stable_sort(events_.begin(), events_.end(), [](const json& a, const json& b) {
+    return a["t_s"].get<double>() < b["t_s"].get<double>();
+  });
+  if (!detections_.empty()) {
+    const SlipMetrics sm = ComputeSlipMetrics(intervals, detections_, s_.timing.sync_period_s);
+    json j{{"precision", sm.precision}, {"recall", sm.recall},
+           {"true_positive", sm.true_positive}, {"false_positive", sm.false_positive},
+           {"false_negative", sm.false_negative}, {"true_negative", sm.true_negative},
+           {"truth_intervals", sm.intervals}, {"intervals_detected", sm.intervals_detected},
+           {"detections", std::count_if(detections_.begin(), detections_.end(),
+                                        [](const DetectionSample& d) { return d.detected; })}};
+    if (sm.mean_latency_s) j["mean_latency_s"] = *sm.mean_latency_s;
+    if (sm.max_latency_s) j["max_latency_s"] = *sm.max_latency_s;
+    metrics["slip"] = j;
+    if (!residual_.empty()) {
+      const NormalityResult n = NormalityTest(residual_);
+      metrics["residual"] = json{{"samples", n.n}, {"skewness_g1", n.g1},
+                                 {"excess_kurtosis_g2", n.g2}, {"u1", n.u1}, {"u2", n.u2},
+                                 {"normality_accepted", n.accepted}};
+    }
+  } else if (!intervals.empty()) {
+    metrics["slip"] = json{{"truth_intervals", intervals.size()}};
+  }
+  double slip_time = 0;
+  for (const auto& iv : intervals) slip_time += iv.end_s - iv.start_s;
+  metrics["truth"] = json{{"slip_intervals", intervals.size()}, {"slip_time_s", slip_time},
+                          {"distance_m", PathLength(truth_pose_)},
+                          {"rotation_rad", TotalRotation(truth_pose_)}};
+  metrics["bus"] = json{{"frames", bus_->frames_sent()},
+                        {"load", bus_->BusLoad()},
+                        {"drops", bus_->frames_dropped() + enqueue_failures_},
+                        {"silenced_frames", silenced_},
+                        {"firmware_frames", fw_frames_},
+                        {"max_queue_delay_s", static_cast<double>(bus_->max_queue_delay_ns()) * 1e-9}};
+  r["metrics"] = metrics;
+  r["wall"] = json{{"wall_time_s", wall_s}, {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0}};
+  return r;
+}
+
+void Run::WriteArtefacts(const json& report) {
+  WriteTruthCsv(out_ + "/truth.csv", truth_);
+  WriteEstimateCsv(out_ + "/estimate.csv", estimates_);
+  WriteTum(out_ + "/truth.tum", truth_pose_);
+  if (pose_streams_.count("pose")) WriteTum(out_ + "/estimate.tum", pose_streams_["pose"]);
+  if (pose_streams_.count("pose_raw")) {
+    WriteTum(out_ + "/estimate_raw.tum", pose_streams_["pose_raw"]);
+  }
+  WriteJsonLines(out_ + "/events.jsonl", events_);
+  WriteText(out_ + "/report.json", report.dump(2) + "\n");
+
+  const char* colors[] = {"#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"};
+  std::vector<std::string> plots;
+  {
+    std::vector<Series> ss;
+    Series t{"truth", "#1f77b4", {}, {}};
+    for (const auto& p : truth_pose_) t.x.push_back(p.x_m), t.y.push_back(p.y_m);
+    ss.push_back(t);
+    int c = 0;
+    for (const auto& [name, est] : pose_streams_) {
+      Series e{name, colors[c++ % 5], {}, {}, true};
+      for (const auto& p : est) e.x.push_back(p.x_m), e.y.push_back(p.y_m);
+      ss.push_back(e);
+    }
+    plots.push_back(SvgPlot("Trajectory: truth vs estimates", "x [m]", "y [m]", ss, false));
+  }
+  if (!residual_.empty()) {
+    std::vector<Series> ss{{"residual r", "#1f77b4", residual_t_, residual_},
+                           {"band lower", "#d62728", residual_t_, band_lo_, true},
+                           {"band upper", "#d62728", residual_t_, band_hi_, true}};
+    plots.push_back(SvgPlot("Paper 000 residual against its band (cf. fig 8)", "t [s]",
+                            "r [rad]", ss));
+  }
+  if (!vel_streams_.empty()) {
+    std::vector<Series> ss;
+    Series t{"truth vx", "#1f77b4", {}, {}};
+    for (const auto& v : truth_vel_) t.x.push_back(v.t_s), t.y.push_back(v.vx_m_s);
+    ss.push_back(t);
+    int c = 0;
+    for (const auto& [name, est] : vel_streams_) {
+      Series e{name + " vx", colors[c++ % 5], {}, {}, true};
+      for (const auto& v : est) e.x.push_back(v.t_s), e.y.push_back(v.vx_m_s);
+      ss.push_back(e);
+    }
+    plots.push_back(SvgPlot("Forward velocity (cf. paper 002 figs 2-4)", "t [s]", "vx [m/s]", ss));
+  }
+  if (!pose_streams_.empty() && !truth_pose_.empty()) {
+    std::vector<Series> ss;
+    int c = 0;
+    for (const auto& [name, est] : pose_streams_) {
+      Series e{name, colors[c++ % 5], {}, {}};
+      // Distance travelled (truth) at each estimate sample vs the position error there.
+      std::size_t j = 0;
+      double dist = 0;
+      for (const auto& p : est) {
+        while (j + 1 < truth_pose_.size() && truth_pose_[j + 1].t_s <= p.t_s) {
+          dist += std::hypot(truth_pose_[j + 1].x_m - truth_pose_[j].x_m,
+                             truth_pose_[j + 1].y_m - truth_pose_[j].y_m);
+          ++j;
+        }
+        const PoseSample t = InterpolatePose(truth_pose_, p.t_s);
+        e.x.push_back(dist);
+        e.y.push_back(std::hypot(p.x_m - t.x_m, p.y_m - t.y_m));
+      }
+      ss.push_back(e);
+    }
+    plots.push_back(SvgPlot("Position error over distance travelled", "distance [m]",
+                            "error [m]", ss));
+  }
+  WriteText(out_ + "/report.html", HtmlReport(report, plots));
+}
+
+}  // namespace
+
+std::vector<std::pair<std::string, double>> FlattenMetrics(const json& metrics) {
+  std::vector<std::pair<std::string, double>> out;
+  for (const auto& [stream, m] : metrics.items()) {
+    if (!m.is_object()) continue;
+    for (const auto& [k, v] : m.items()) {
+      if (v.is_number()) out.emplace_back(stream + "." + k, v.get<double>());
+      if (v.is_boolean()) out.emplace_back(stream + "." + k, v.get<bool>() ? 1.0 : 0.0);
+    }
+  }
+  return out;
+}
+
+bool EvaluateExpectations(const std::vector<Expectation>& expectations, const json& metrics,
+                          json& out) {
+  const auto flat = FlattenMetrics(metrics);
+  auto find = [&](const std::string& name) -> std::optional<double> {
+    for (const auto& [k, v] : flat) {
+      if (k == name) return v;
+    }
+    return std::nullopt;
+  };
+  bool all = true;
+  out = json::array();
+  for (const auto& e : expectations) {
+    const auto value = find(e.metric);
+    std::optional<double> limit = e.value;
+    if (!e.other_metric.empty()) limit = find(e.other_metric);
+    bool ok = false;
+    if (value && limit) {
+      if (e.op == "<") ok = *value < *limit;
+      if (e.op == "<=") ok = *value <= *limit;
+      if (e.op == ">") ok = *value > *limit;
+      if (e.op == ">=") ok = *value >= *limit;
+    }
+    const std::string rhs =
+        e.other_metric.empty() ? fmt::format("{}", e.value.value_or(0.0)) : e.other_metric;
+    json j{{"metric", e.metric}, {"op", e.op}, {"text", fmt::format("{} {} {}", e.metric, e.op, rhs)},
+           {"passed", ok}};
+    if (value) j["value"] = *value;
+    if (limit) j["limit"] = *limit;
+    if (!value) j["problem"] = "metric not produced by this run";
+    if (value && !limit) j["problem"] = "comparison metric not produced by this run";
+    out.push_back(j);
+    all = all && ok;
+  }
+  return all;
+}
+
+std::string DerivedFirmwareConfig(const FirmwareSpec& firmware, const TimingSpec& timing) {
+  YAML::Node cfg = YAML::LoadFile(firmware.config);
+  if (!firmware.overrides_yaml.empty()) Merge(cfg, YAML::Load(firmware.overrides_yaml));
+  if (cfg["dbc_dir"] && cfg["dbc_dir"].IsScalar()) {
+    const fs::path p(cfg["dbc_dir"].Scalar());
+    if (p.is_relative()) {
+      cfg["dbc_dir"] = (fs::path(firmware.config).parent_path() / p).lexically_normal().string();
+    }
+  }
+  cfg["sync"]["produce"] = false;
+  cfg["sync"]["period_s"] = timing.sync_period_s;
+  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames.
+  cfg["sync"]["deadline_s"] = timing.sync_period_s;
+  YAML::Emitter e;
+  e << cfg;
+  return std::string("# Derived by wheelhil run from ") + firmware.config + "\n" + e.c_str() + "\n";
+}
+
+RunResult RunScenario(const Scenario& scenario, const RunOptions& options) {
+  Run run(scenario, options);
+  return run.Execute();
+}
+
+}  // namespace wheelhil::emulator::scenario

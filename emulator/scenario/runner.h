@@ -1,0 +1,72 @@
+#pragma once
+/// Runs a scenario end to end: physics at the scenario's rate (1 kHz default), CiA 406 encoder
+/// nodes and the MM5.10 yaw-rate node sampled from the ground truth, every frame timed by the
+/// CAN bus model (completion timestamps) and put on a real bus - a private userspace bus
+/// (UcanBroker in a fresh runtime directory) by default, or a SocketCAN interface - where the
+/// firmware under test runs (started from the scenario's command line, `${CAN}`, `${CONFIG}`
+/// and `${BIN}` substituted, LD_PRELOAD + WHEELHIL_UCAN_DIR set on the userspace bus).
+///
+/// Lockstep (default): the emulator is the SYNC producer; after each SYNC cycle it waits
+/// (wall-clock timeout) for the firmware's FW_Status of that cycle (wheelhil_fw.dbc, cycle
+/// counter mod 256) before virtual time goes on; during start-up it waits for the firmware's
+/// reaction to every boot-up and SDO response. Frames from the firmware enter the bus model at
+/// the virtual instant they were received, so the same scenario and seed give the same can.log
+/// byte for byte. Realtime: virtual time is paced to the wall clock, nothing is waited for.
+///
+/// Leaves in out_dir: can.log, truth.csv, estimate.csv, truth.tum, estimate.tum (pose stream),
+/// estimate_raw.tum (pose_raw), events.jsonl, report.json, report.html, firmware.log, and the
+/// firmware config actually used (firmware_config.yaml). Thread-compatible (one run at a time
+/// per process: it sets WHEELHIL_UCAN_DIR in this process's environment).
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "emulator/scenario/scenario.h"
+
+namespace wheelhil::emulator::scenario {
+
+struct RunOptions {
+  std::string out_dir = "out";
+  std::optional<std::uint64_t> seed;  ///< Overrides the scenario's seed.
+  std::string can_iface;              ///< Empty: private userspace bus "ucan0".
+  bool realtime = false;              ///< Overrides timing.mode.
+  bool progress = false;              ///< Progress line on stderr (a terminal).
+  std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
+  std::string dbc_dir;                ///< Directory of the bus/dbc files.
+  /// Environment a child needs on a private userspace bus in `runtime_dir` (LD_PRELOAD ...).
+  std::function<std::vector<std::pair<std::string, std::string>>(const std::string&)>
+      ucan_child_env;
+};
+
+struct RunResult {
+  /// 0 every expectation holds; 1 an expectation failed or the run failed (timeout, firmware
+  /// exit, bus error); 2 usage or input error.
+  int exit_code = 1;
+  std::string failure;  ///< Why the run failed (empty when it ran to the end).
+  nlohmann::json report;
+};
+
+/// Runs the scenario; never throws for run-time failures (they are in RunResult.failure);
+/// input errors (bad DBC directory, unwritable out_dir) throw std::invalid_argument.
+RunResult RunScenario(const Scenario& scenario, const RunOptions& options);
+
+/// Flattens report["metrics"] into "stream.metric" -> value (numbers and booleans only).
+std::vector<std::pair<std::string, double>> FlattenMetrics(const nlohmann::json& metrics);
+
+/// Evaluates the expectations against flattened metrics; fills report["expectations"] and
+/// returns true when all hold (a missing metric fails its expectation).
+bool EvaluateExpectations(const std::vector<Expectation>& expectations,
+                          const nlohmann::json& metrics, nlohmann::json& out);
+
+/// The firmware config the run hands to the firmware: the scenario's firmware.config with its
+/// overrides merged in, sync.produce forced to false (the emulator produces SYNC) and
+/// sync.period_s set to the scenario's timing.sync_period_s. YAML text.
+std::string DerivedFirmwareConfig(const FirmwareSpec& firmware, const TimingSpec& timing);
+
+}  // namespace wheelhil::emulator::scenario

@@ -1,0 +1,492 @@
+#include "emulator/scenario/scenario.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+namespace wheelhil::emulator::scenario {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {
+    base_dir_ = fs::path(file_).parent_path();
+  }
+
+  std::string Where(const YAML::Node& node) const {
+    if (!node.IsDefined()) return fmt::format("{}:0:0", file_);
+    return fmt::format("{}:{}:{}", file_, node.Mark().line + 1, node.Mark().column + 1);
+  }
+
+  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
+                         const std::string& problem) const {
+    throw std::invalid_argument(fmt::format("{}: {}: {}", Where(node), field, problem));
+  }
+
+  void CheckKeys(const YAML::Node& map, const std::string& field,
+                 const std::set<std::string>& allowed) const {
+    if (!map.IsMap()) Fail(map, field, "must be a mapping");
+    for (const auto& kv : map) {
+      const auto key = kv.first.as<std::string>();
+      if (allowed.count(key) == 0) {
+        Fail(kv.first, field.empty() ? key : field + "." + key, "unknown key");
+      }
+    }
+  }
+
+  double Number(const YAML::Node& parent, const std::string& key, const std::string& field,
+                double min, double max, std::optional<double> def) const {
+    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
+    const std::string f = field.empty() ? key : field + "." + key;
+    if (!n.IsDefined() || n.IsNull()) {
+      if (def) return *def;
+      Fail(parent, f, "is required");
+    }
+    if (!n.IsScalar()) Fail(n, f, "must be a number");
+    double v = 0;
+    try {
+      v = n.as<double>();
+    } catch (const YAML::Exception&) {
+      Fail(n, f, fmt::format("'{}' is not a number", n.Scalar()));
+    }
+    if (!std::isfinite(v)) Fail(n, f, "must be finite");
+    if (v < min || v > max) Fail(n, f, fmt::format("{} is outside [{}, {}]", v, min, max));
+    return v;
+  }
+
+  std::string String(const YAML::Node& parent, const std::string& key, const std::string& field,
+                     std::optional<std::string> def) const {
+    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
+    const std::string f = field.empty() ? key : field + "." + key;
+    if (!n.IsDefined() || n.IsNull()) {
+      if (def) return *def;
+      Fail(parent, f, "is required");
+    }
+    if (!n.IsScalar()) Fail(n, f, "must be a string");
+    return n.Scalar();
+  }
+
+  bool Bool(const YAML::Node& parent, const std::string& key, const std::string& field,
+            bool def) const {
+    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
+    if (!n.IsDefined() || n.IsNull()) return def;
+    try {
+      return n.as<bool>();
+    } catch (const YAML::Exception&) {
+      Fail(n, field + "." + key, "must be true or false");
+    }
+  }
+
+  std::string Path(const std::string& p) const {
+    if (p.empty() || fs::path(p).is_absolute()) return p;
+    return (base_dir_ / p).lexically_normal().string();
+  }
+
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+  fs::path base_dir_;
+};
+
+Friction ReadFriction(const Reader& r, const YAML::Node& n, const std::string& field,
+                      Friction def) {
+  Friction f;
+  f.mu_peak = r.Number(n, "mu_peak", field, 0, 10, def.mu_peak);
+  f.mu_slide = r.Number(n, "mu_slide", field, 0, 10, std::min(def.mu_slide, f.mu_peak));
+  if (f.mu_slide > f.mu_peak) {
+    r.Fail(n["mu_slide"], field + ".mu_slide", "must not exceed mu_peak");
+  }
+  return f;
+}
+
+std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& n,
+                                         const std::string& field) {
+  if (!n.IsSequence() || n.size() < 3) r.Fail(n, field, "must be a list of >= 3 [x, y] points");
+  std::vector<Eigen::Vector2d> out;
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const YAML::Node p = n[i];
+    const std::string f = fmt::format("{}[{}]", field, i);
+    if (!p.IsSequence() || p.size() != 2) r.Fail(p, f, "must be [x, y]");
+    try {
+      out.emplace_back(p[0].as<double>(), p[1].as<double>());
+    } catch (const YAML::Exception&) {
+      r.Fail(p, f, "must hold two numbers");
+    }
+  }
+  return out;
+}
+
+TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
+  TerrainSpec t;
+  if (!n.IsDefined()) return t;
+  r.CheckKeys(n, "terrain", {"friction", "meshes", "patches", "random_patches"});
+  if (n["friction"]) t.friction = ReadFriction(r, n["friction"], "terrain.friction", Friction{});
+  if (const auto m = n["meshes"]) {
+    if (!m.IsSequence()) r.Fail(m, "terrain.meshes", "must be a list of files");
+    for (std::size_t i = 0; i < m.size(); ++i) {
+      const std::string p = r.Path(m[i].as<std::string>());
+      if (!fs::exists(p)) r.Fail(m[i], fmt::format("terrain.meshes[{}]", i), p + " not found");
+      t.meshes.push_back(p);
+    }
+  }
+  if (const auto ps = n["patches"]) {
+    if (!ps.IsSequence()) r.Fail(ps, "terrain.patches", "must be a list");
+    for (std::size_t i = 0; i < ps.size(); ++i) {
+      const std::string f = fmt::format("terrain.patches[{}]", i);
+      r.CheckKeys(ps[i], f, {"name", "polygon_m", "mu_peak", "mu_slide"});
+      PatchSpec p;
+      p.name = r.String(ps[i], "name", f, fmt::format("patch{}", i));
+      p.polygon_m = ReadPolygon(r, ps[i]["polygon_m"], f + ".polygon_m");
+      p.friction = ReadFriction(r, ps[i], f, Friction{0.1, 0.08});
+      t.patches.push_back(std::move(p));
+    }
+  }
+  if (const auto rp = n["random_patches"]) {
+    const std::string f = "terrain.random_patches";
+    r.CheckKeys(rp, f,
+                {"count", "x_min_m", "x_max_m", "length_min_m", "length_max_m", "width_m",
+                 "track_y_m", "mu_peak", "mu_slide"});
+    auto& s = t.random_patches;
+    s.count = static_cast<int>(r.Number(rp, "count", f, 0, 1000, std::nullopt));
+    s.x_min_m = r.Number(rp, "x_min_m", f, -1e4, 1e4, std::nullopt);
+    s.x_max_m = r.Number(rp, "x_max_m", f, s.x_min_m, 1e4, std::nullopt);
+    s.length_min_m = r.Number(rp, "length_min_m", f, 1e-3, 100, 0.05);
+    s.length_max_m = r.Number(rp, "length_max_m", f, s.length_min_m, 100, 0.2);
+    s.width_m = r.Number(rp, "width_m", f, 1e-3, 10, 0.1);
+    const auto ty = rp["track_y_m"];
+    if (!ty.IsSequence() || ty.size() == 0) r.Fail(ty, f + ".track_y_m", "must be a list of y");
+    for (const auto& y : ty) s.track_y_m.push_back(y.as<double>());
+    s.friction = ReadFriction(r, rp, f, Friction{0.05, 0.03});
+  }
+  return t;
+}
+
+std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n, std::size_t wheels) {
+  if (!n.IsSequence() || n.size() == 0) r.Fail(n, "motion", "must be a non-empty list of segments");
+  std::vector<MotionSegment> out;
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const YAML::Node s = n[i];
+    const std::string f = fmt::format("motion[{}]", i);
+    const std::string type = r.String(s, "type", f, std::nullopt);
+    MotionSegment m;
+    if (type == "twist") {
+      r.CheckKeys(s, f, {"type", "duration_s", "vx_m_s", "vy_m_s", "wz_rad_s"});
+      m.kind = MotionSegment::Kind::kTwist;
+      m.duration_s = r.Number(s, "duration_s", f, 0, 1e6, std::nullopt);
+      m.twist.vx_m_s = r.Number(s, "vx_m_s", f, -20, 20, 0.0);
+      m.twist.vy_m_s = r.Number(s, "vy_m_s", f, -20, 20, 0.0);
+      m.twist.wz_rad_s = r.Number(s, "wz_rad_s", f, -50, 50, 0.0);
+    } else if (type == "hold") {
+      r.CheckKeys(s, f, {"type", "duration_s"});
+      m.kind = MotionSegment::Kind::kHold;
+      m.duration_s = r.Number(s, "duration_s", f, 0, 1e6, std::nullopt);
+    } else if (type == "trapezoid") {
+      r.CheckKeys(s, f, {"type", "direction", "distance", "speed", "accel"});
+      m.kind = MotionSegment::Kind::kTrapezoid;
+      const auto d = s["direction"];
+      if (!d.IsSequence() || d.size() != 3) {
+        r.Fail(d.IsDefined() ? d : s, f + ".direction", "must be [vx, vy, wz]");
+      }
+      m.direction = Eigen::Vector3d(d[0].as<double>(), d[1].as<double>(), d[2].as<double>());
+      if (!(m.direction.norm() > 0)) r.Fail(d, f + ".direction", "must not be zero");
+      m.direction.normalize();
+      m.distance = r.Number(s, "distance", f, 0, 1e5, std::nullopt);
+      m.speed = r.Number(s, "speed", f, 1e-6, 50, std::nullopt);
+      m.accel = r.Number(s, "accel", f, 1e-6, 1e3, std::nullopt);
+      m.duration_s = TrapezoidDuration(m.distance, m.speed, m.accel);
+    } else if (type == "wheels") {
+      r.CheckKeys(s, f, {"type", "duration_s", "omega_rad_s"});
+      m.kind = MotionSegment::Kind::kWheels;
+      m.duration_s = r.Number(s, "duration_s", f, 0, 1e6, std::nullopt);
+      const auto w = s["omega_rad_s"];
+      if (!w.IsSequence() || w.size() != wheels) {
+        r.Fail(w.IsDefined() ? w : s, f + ".omega_rad_s",
+               fmt::format("must list {} wheel speeds (platform wheel order)", wheels));
+      }
+      for (const auto& x : w) m.wheel_speeds_rad_s.push_back(x.as<double>());
+    } else {
+      r.Fail(s["type"], f + ".type",
+             fmt::format("'{}' is not one of twist, trapezoid, hold, wheels", type));
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
+SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
+                        const platforms::Platform& platform) {
+  SensorsSpec s;
+  if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
+  r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus"});
+  const auto e = n["encoders"];
+  if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
+  r.CheckKeys(e, "sensors.encoders",
+              {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
+  s.encoder_lines_per_rev =
+      static_cast<int>(r.Number(e, "lines_per_rev", "sensors.encoders", 1, 1e7, 500.0));
+  s.encoder_quadrature_x4 = r.Bool(e, "quadrature_x4", "sensors.encoders", true);
+  s.encoder_missed_count_prob = r.Number(e, "missed_count_prob", "sensors.encoders", 0, 1, 0.0);
+  s.encoder_glitch_prob = r.Number(e, "glitch_prob", "sensors.encoders", 0, 1, 0.0);
+  const auto nodes = e["nodes"];
+  if (!nodes.IsSequence() || nodes.size() == 0) {
+    r.Fail(nodes.IsDefined() ? nodes : e, "sensors.encoders.nodes",
+           "must list the encoder nodes ({wheel, node_id})");
+  }
+  std::set<int> ids;
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const std::string f = fmt::format("sensors.encoders.nodes[{}]", i);
+    r.CheckKeys(nodes[i], f, {"wheel", "node_id", "direction"});
+    EncoderDeviceSpec d;
+    d.wheel = r.String(nodes[i], "wheel", f, std::nullopt);
+    try {
+      (void)platform.wheel_index(d.wheel);
+    } catch (const std::exception&) {
+      r.Fail(nodes[i]["wheel"], f + ".wheel",
+             fmt::format("platform {} has no wheel '{}'", platform.name, d.wheel));
+    }
+    d.node_id = static_cast<int>(r.Number(nodes[i], "node_id", f, 1, 127, std::nullopt));
+    if (!ids.insert(d.node_id).second) r.Fail(nodes[i]["node_id"], f + ".node_id", "repeated");
+    const double dir = r.Number(nodes[i], "direction", f, -1, 1, 1.0);
+    if (dir != 1.0 && dir != -1.0) r.Fail(nodes[i]["direction"], f + ".direction", "must be 1 or -1");
+    d.direction = static_cast<int>(dir);
+    s.encoders.push_back(d);
+  }
+  if (const auto g = n["gyro"]) {
+    const std::string f = "sensors.gyro";
+    r.CheckKeys(g, f, {"rate_hz", "noise_density_rad_s_sqrt_hz", "bias_rad_s",
+                       "bias_random_walk_rad_s_sqrt_s"});
+    s.gyro = true;
+    s.gyro_rate_hz = r.Number(g, "rate_hz", f, 1e-3, 1e4, 100.0);
+    s.gyro_noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", f, 0, 1, 0.0);
+    s.gyro_bias_rad_s = r.Number(g, "bias_rad_s", f, -10, 10, 0.0);
+    s.gyro_bias_random_walk_rad_s_sqrt_s =
+        r.Number(g, "bias_random_walk_rad_s_sqrt_s", f, 0, 1, 0.0);
+  }
+  if (const auto b = n["bus"]) {
+    r.CheckKeys(b, "sensors.bus", {"bitrate_bps", "heartbeat_ms"});
+    s.bitrate_bps = static_cast<std::uint32_t>(
+        r.Number(b, "bitrate_bps", "sensors.bus", 125000, 1000000, 1000000.0));
+    s.heartbeat_ms = static_cast<int>(r.Number(b, "heartbeat_ms", "sensors.bus", 0, 65535, 100.0));
+  }
+  return s;
+}
+
+std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const SensorsSpec& s) {
+  std::vector<FaultSpec> out;
+  if (!n.IsDefined()) return out;
+  if (!n.IsSequence()) r.Fail(n, "faults", "must be a list");
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const std::string f = fmt::format("faults[{}]", i);
+    r.CheckKeys(n[i], f, {"type", "node_id", "start_s", "end_s", "error_code"});
+    FaultSpec x;
+    const std::string type = r.String(n[i], "type", f, std::nullopt);
+    if (type == "encoder_emcy") {
+      x.kind = FaultSpec::Kind::kEncoderEmcy;
+    } else if (type == "encoder_silent") {
+      x.kind = FaultSpec::Kind::kEncoderSilent;
+    } else {
+      r.Fail(n[i]["type"], f + ".type",
+             fmt::format("'{}' is not one of encoder_emcy, encoder_silent", type));
+    }
+    x.node_id = static_cast<int>(r.Number(n[i], "node_id", f, 1, 127, std::nullopt));
+    const bool known = std::any_of(s.encoders.begin(), s.encoders.end(),
+                                   [&](const auto& e) { return e.node_id == x.node_id; });
+    if (!known) r.Fail(n[i]["node_id"], f + ".node_id", "no encoder node has this id");
+    x.start_s = r.Number(n[i], "start_s", f, 0, 1e6, std::nullopt);
+    x.end_s = r.Number(n[i], "end_s", f, x.start_s, 1e6, std::nullopt);
+    x.error_code = static_cast<std::uint16_t>(r.Number(n[i], "error_code", f, 1, 65535, 0x7305));
+    out.push_back(x);
+  }
+  return out;
+}
+
+FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
+  FirmwareSpec fw;
+  if (!n.IsDefined() || n.IsNull()) return fw;
+  r.CheckKeys(n, "firmware", {"command", "config", "overrides"});
+  fw.command = r.String(n, "command", "firmware", std::string());
+  const std::string cfg = r.String(n, "config", "firmware", std::string());
+  if (!cfg.empty()) {
+    fw.config = r.Path(cfg);
+    if (!fs::exists(fw.config)) r.Fail(n["config"], "firmware.config", fw.config + " not found");
+  }
+  if (const auto o = n["overrides"]) {
+    if (!o.IsMap()) r.Fail(o, "firmware.overrides", "must be a mapping");
+    if (fw.config.empty()) r.Fail(o, "firmware.overrides", "needs firmware.config");
+    YAML::Emitter e;
+    e << o;
+    fw.overrides_yaml = e.c_str();
+  }
+  if (fw.command.find("${CONFIG}") != std::string::npos && fw.config.empty()) {
+    r.Fail(n["command"], "firmware.command", "uses ${CONFIG} but firmware.config is not set");
+  }
+  return fw;
+}
+
+TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
+  TimingSpec t;
+  t.duration_s = motion_s;
+  if (!n.IsDefined()) return t;
+  r.CheckKeys(n, "timing",
+              {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s"});
+  const std::string mode = r.String(n, "mode", "timing", std::string("lockstep"));
+  if (mode == "lockstep") {
+    t.lockstep = true;
+  } else if (mode == "realtime") {
+    t.lockstep = false;
+  } else {
+    r.Fail(n["mode"], "timing.mode", fmt::format("'{}' is not lockstep or realtime", mode));
+  }
+  t.duration_s = r.Number(n, "duration_s", "timing", 1e-3, 1e6, motion_s);
+  t.physics_rate_hz = r.Number(n, "physics_rate_hz", "timing", 100, 10000, 1000.0);
+  t.sync_period_s = r.Number(n, "sync_period_s", "timing", 1e-4, 10, 0.01);
+  const double steps = t.sync_period_s * t.physics_rate_hz;
+  if (std::abs(steps - std::round(steps)) > 1e-6) {
+    r.Fail(n["sync_period_s"], "timing.sync_period_s",
+           "must be a whole number of physics steps");
+  }
+  t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
+  return t;
+}
+
+std::vector<Expectation> ReadExpectations(const Reader& r, const YAML::Node& n) {
+  std::vector<Expectation> out;
+  if (!n.IsDefined()) return out;
+  if (!n.IsSequence()) r.Fail(n, "expectations", "must be a list");
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const std::string f = fmt::format("expectations[{}]", i);
+    r.CheckKeys(n[i], f, {"metric", "<", "<=", ">", ">="});
+    Expectation e;
+    e.where = r.Where(n[i]);
+    e.metric = r.String(n[i], "metric", f, std::nullopt);
+    int ops = 0;
+    for (const char* op : {"<", "<=", ">", ">="}) {
+      const auto v = n[i][op];
+      if (!v.IsDefined()) continue;
+      ++ops;
+      e.op = op;
+      double x = 0;
+      try {
+        x = v.as<double>();
+        e.value = x;
+      } catch (const YAML::Exception&) {
+        e.other_metric = v.Scalar();
+      }
+    }
+    if (ops != 1) r.Fail(n[i], f, "needs exactly one of <, <=, >, >= (a number or a metric)");
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+}  // namespace
+
+double TrapezoidDuration(double distance, double speed, double accel) {
+  if (distance <= 0) return 0;
+  const double d_ramp = speed * speed / accel;  // accelerate + decelerate
+  if (distance <= d_ramp) return 2.0 * std::sqrt(distance / accel);
+  return 2.0 * speed / accel + (distance - d_ramp) / speed;
+}
+
+double TrapezoidSpeed(double distance, double speed, double accel, double t_s) {
+  const double total = TrapezoidDuration(distance, speed, accel);
+  if (t_s <= 0 || t_s >= total) return 0;
+  const double peak = std::min(speed, std::sqrt(distance * accel));
+  return std::min({peak, accel * t_s, accel * (total - t_s)});
+}
+
+double MotionDuration(const std::vector<MotionSegment>& motion) {
+  double t = 0;
+  for (const auto& m : motion) t += m.duration_s;
+  return t;
+}
+
+platforms::BodyTwist TwistAt(const std::vector<MotionSegment>& motion, double t_s) {
+  double t0 = 0;
+  for (const auto& m : motion) {
+    if (t_s < t0 + m.duration_s) {
+      const double t = t_s - t0;
+      switch (m.kind) {
+        case MotionSegment::Kind::kTwist:
+          return m.twist;
+        case MotionSegment::Kind::kTrapezoid: {
+          const double v = TrapezoidSpeed(m.distance, m.speed, m.accel, t);
+          return {v * m.direction.x(), v * m.direction.y(), v * m.direction.z()};
+        }
+        case MotionSegment::Kind::kHold:
+        case MotionSegment::Kind::kWheels:
+          return {};
+      }
+    }
+    t0 += m.duration_s;
+  }
+  return {};
+}
+
+Scenario ParseScenario(const std::string& text, const std::string& file) {
+  Reader r(file);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw std::invalid_argument(fmt::format("{}:{}:{}: (document): YAML syntax error: {}", file,
+                                            e.mark.line + 1, e.mark.column + 1, e.msg));
+  }
+  if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
+  r.CheckKeys(root, "",
+              {"name", "description", "seed", "platform", "terrain", "motion", "sensors",
+               "faults", "firmware", "timing", "expectations"});
+  Scenario s;
+  s.source_path = file;
+  s.name = r.String(root, "name", "", std::nullopt);
+  s.description = r.String(root, "description", "", std::string());
+  s.seed = static_cast<std::uint64_t>(r.Number(root, "seed", "", 0, 9e15, 1.0));
+
+  const auto p = root["platform"];
+  if (!p.IsDefined()) r.Fail(root, "platform", "is required");
+  if (p.IsScalar()) {
+    const std::string path = r.Path(p.Scalar());
+    try {
+      s.platform = platforms::LoadPlatformFile(path);
+    } catch (const std::invalid_argument& e) {
+      r.Fail(p, "platform", e.what());
+    }
+  } else {
+    r.CheckKeys(p, "platform", {"file"});
+    const std::string path = r.Path(r.String(p, "file", "platform", std::nullopt));
+    try {
+      s.platform = platforms::LoadPlatformFile(path);
+    } catch (const std::invalid_argument& e) {
+      r.Fail(p["file"], "platform.file", e.what());
+    }
+  }
+  s.terrain = ReadTerrain(r, root["terrain"]);
+  s.motion = ReadMotion(r, root["motion"], s.platform.vehicle.wheels.size());
+  s.sensors = ReadSensors(r, root["sensors"], s.platform);
+  s.faults = ReadFaults(r, root["faults"], s.sensors);
+  s.firmware = ReadFirmware(r, root["firmware"]);
+  s.timing = ReadTiming(r, root["timing"], MotionDuration(s.motion));
+  s.expectations = ReadExpectations(r, root["expectations"]);
+  return s;
+}
+
+Scenario LoadScenarioFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::invalid_argument(fmt::format("{}:0:0: (file): cannot be read", path));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ParseScenario(ss.str(), path);
+}
+
+}  // namespace wheelhil::emulator::scenario

@@ -1,0 +1,154 @@
+#pragma once
+/// A scenario file (scenarios/*.yaml, every field in docs/scenarios.md): which platform drives
+/// over which floor along which motion, with which sensors, devices and injected faults, which
+/// firmware runs in the loop, how time advances and which metric thresholds decide the verdict.
+/// SI units with the unit in each key (`speed_m_s`, `duration_s`); relative paths are taken
+/// relative to the scenario file's directory. Loading validates everything and throws
+/// std::invalid_argument reading "file:line:column: field: problem" (unknown keys included, so
+/// typos are caught). Value types; thread-compatible.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "emulator/platforms/platform.h"
+#include "emulator/terrain.h"
+
+namespace wheelhil::emulator::scenario {
+
+/// One piece of the commanded motion, in the body frame B (x forward, y left, z up).
+struct MotionSegment {
+  enum class Kind {
+    kTwist,      ///< Constant body twist for duration_s.
+    kTrapezoid,  ///< Travel `distance` along `direction` with a trapezoidal speed profile.
+    kHold,       ///< Standstill for duration_s.
+    kWheels,     ///< Direct driven-wheel speeds (rad/s, platform wheel order) for duration_s.
+  };
+  Kind kind = Kind::kHold;
+  double duration_s = 0;
+  platforms::BodyTwist twist;  ///< kTwist.
+  /// kTrapezoid: unit direction in (vx, vy, wz) space; distance in m (or rad for pure turns),
+  /// cruise speed (m/s or rad/s) and acceleration = deceleration (m/s^2 or rad/s^2).
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitX();
+  double distance = 0;
+  double speed = 0;
+  double accel = 0;
+  std::vector<double> wheel_speeds_rad_s;  ///< kWheels.
+};
+
+/// A low-friction spot on the floor (terrain patch).
+struct PatchSpec {
+  std::string name;
+  std::vector<Eigen::Vector2d> polygon_m;
+  Friction friction;
+};
+
+/// Randomly placed (seeded) small low-friction spots under the drive wheels' tracks along a
+/// straight run: the paper-000 floor where the wheels "slip now and then".
+struct RandomPatchesSpec {
+  int count = 0;
+  double x_min_m = 0, x_max_m = 0;       ///< Along the world x axis.
+  double length_min_m = 0.05, length_max_m = 0.2;
+  double width_m = 0.1;                   ///< Across, centred on a wheel track.
+  std::vector<double> track_y_m;          ///< Wheel track lines (world y) to choose from.
+  Friction friction{0.05, 0.03};
+};
+
+struct TerrainSpec {
+  Friction friction;  ///< The floor plane.
+  std::vector<std::string> meshes;  ///< Optional mesh floors (absolute paths after loading).
+  std::vector<PatchSpec> patches;
+  RandomPatchesSpec random_patches;
+};
+
+/// Wheel encoders (one CiA 406 node per encoder wheel).
+struct EncoderDeviceSpec {
+  std::string wheel;
+  int node_id = 1;
+  int direction = 1;
+};
+
+struct SensorsSpec {
+  int encoder_lines_per_rev = 500;
+  bool encoder_quadrature_x4 = true;
+  double encoder_missed_count_prob = 0;
+  double encoder_glitch_prob = 0;
+  std::vector<EncoderDeviceSpec> encoders;
+  bool gyro = false;  ///< Bosch MM5.10 yaw-rate node present.
+  double gyro_rate_hz = 100;
+  double gyro_noise_density_rad_s_sqrt_hz = 0;
+  double gyro_bias_rad_s = 0;
+  double gyro_bias_random_walk_rad_s_sqrt_s = 0;
+  std::uint32_t bitrate_bps = 1'000'000;
+  int heartbeat_ms = 100;
+};
+
+/// A fault injected at a time: a node's device fault (EMCY) or a node falling silent.
+struct FaultSpec {
+  enum class Kind { kEncoderEmcy, kEncoderSilent };
+  Kind kind = Kind::kEncoderEmcy;
+  int node_id = 0;
+  double start_s = 0;
+  double end_s = 0;
+  std::uint16_t error_code = 0x7305;
+};
+
+struct FirmwareSpec {
+  /// Command line; `${CAN}`, `${CONFIG}` and `${BIN}` (directory of the wheelhil executable)
+  /// are substituted. Empty: none started (attach an external firmware to the bus).
+  std::string command;
+  std::string config;        ///< Firmware config file (absolute after loading); may be empty.
+  std::string overrides_yaml;  ///< YAML map merged into the config (as text), may be empty.
+};
+
+struct TimingSpec {
+  bool lockstep = true;
+  double duration_s = 10;       ///< Virtual time of the motion phase.
+  double physics_rate_hz = 1000;
+  double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
+  double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
+};
+
+/// `metric OP value`, or `metric < other_metric`.
+struct Expectation {
+  std::string metric;  ///< e.g. "pose.final_position_error_m".
+  std::string op;      ///< "<", "<=", ">", ">=".
+  std::optional<double> value;
+  std::string other_metric;  ///< When set, compare against this metric instead of value.
+  std::string where;         ///< file:line:column, for messages.
+};
+
+struct Scenario {
+  std::string source_path;
+  std::string name;
+  std::string description;
+  std::uint64_t seed = 1;
+  platforms::Platform platform;
+  TerrainSpec terrain;
+  std::vector<MotionSegment> motion;
+  SensorsSpec sensors;
+  std::vector<FaultSpec> faults;
+  FirmwareSpec firmware;
+  TimingSpec timing;
+  std::vector<Expectation> expectations;
+};
+
+/// Reads and validates a scenario file.
+Scenario LoadScenarioFile(const std::string& path);
+/// Parses scenario text; `file` names it in messages and anchors relative paths.
+Scenario ParseScenario(const std::string& text, const std::string& file);
+
+/// Commanded body twist at time t_s into the motion (zero after the last segment).
+platforms::BodyTwist TwistAt(const std::vector<MotionSegment>& motion, double t_s);
+/// Total duration of the motion segments (trapezoids: their profile's duration).
+double MotionDuration(const std::vector<MotionSegment>& motion);
+/// Duration of a trapezoidal profile over `distance` with cruise `speed` and `accel`
+/// (triangular when the distance is too short to reach the cruise speed).
+double TrapezoidDuration(double distance, double speed, double accel);
+/// Speed along the profile at time t (0 outside [0, duration]).
+double TrapezoidSpeed(double distance, double speed, double accel, double t_s);
+
+}  // namespace wheelhil::emulator::scenario
