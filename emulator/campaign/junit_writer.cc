@@ -1,0 +1,98 @@
+#include "emulator/campaign/junit_writer.h"
+
+#include <fmt/format.h>
+
+#include <fstream>
+#include <stdexcept>
+
+namespace wheelhil::emulator::campaign {
+namespace {
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  out.reserve(s.size());
+  for (unsigned char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&apos;"; break;
+      default:
+        // XML 1.0 forbids most C0 controls even as references.
+        if (c < 0x20 && c != '\n' && c != '\t' && c != '\r') continue;
+        out += static_cast<char>(c);
+    }
+  }
+  return out;
+}
+
+std::string FirstLine(const std::string& s) {
+  const auto nl = s.find('\n');
+  std::string line = nl == std::string::npos ? s : s.substr(0, nl);
+  if (line.size() > 500) line = line.substr(0, 500) + "...";
+  return line;
+}
+
+}  // namespace
+
+std::string JUnitXml(const std::vector<JUnitSuite>& suites, const std::string& name) {
+  std::size_t tests = 0, failures = 0, errors = 0;
+  double time_s = 0;
+  std::string body;
+  for (const auto& suite : suites) {
+    std::size_t f = 0, e = 0;
+    double t = 0;
+    std::string cases;
+    for (const auto& c : suite.cases) {
+      t += c.time_s;
+      cases += fmt::format("    <testcase classname=\"{}\" name=\"{}\" time=\"{:.3f}\"",
+                           Escape(c.classname), Escape(c.name), c.time_s);
+      if (c.failure.empty() && c.error.empty() && c.system_out.empty()) {
+        cases += "/>\n";
+        continue;
+      }
+      cases += ">\n";
+      if (!c.error.empty()) {
+        ++e;
+        cases += fmt::format("      <error message=\"{}\" type=\"error\">{}</error>\n",
+                             Escape(FirstLine(c.error)), Escape(c.error));
+      } else if (!c.failure.empty()) {
+        ++f;
+        cases += fmt::format("      <failure message=\"{}\" type=\"failure\">{}</failure>\n",
+                             Escape(FirstLine(c.failure)), Escape(c.failure));
+      }
+      if (!c.system_out.empty()) {
+        cases += fmt::format("      <system-out>{}</system-out>\n", Escape(c.system_out));
+      }
+      cases += "    </testcase>\n";
+    }
+    body += fmt::format(
+        "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{}\" errors=\"{}\" skipped=\"0\" "
+        "time=\"{:.3f}\">\n{}  </testsuite>\n",
+        Escape(suite.name), suite.cases.size(), f, e, t, cases);
+    tests += suite.cases.size();
+    failures += f;
+    errors += e;
+    time_s += t;
+  }
+  return fmt::format(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<testsuites name=\"{}\" tests=\"{}\" failures=\"{}\" errors=\"{}\" time=\"{:.3f}\">\n"
+      "{}</testsuites>\n",
+      Escape(name), tests, failures, errors, time_s, body);
+}
+
+void WriteJUnit(const std::filesystem::path& file, const std::vector<JUnitSuite>& suites,
+                const std::string& name) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  const auto tmp = file.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    out << JUnitXml(suites, name);
+    if (!out) throw std::runtime_error(fmt::format("cannot write {}", tmp));
+  }
+  std::filesystem::rename(tmp, file);
+}
+
+}  // namespace wheelhil::emulator::campaign

@@ -1,0 +1,166 @@
+#include "emulator/campaign/scenario_writer.h"
+
+#include <fmt/format.h>
+
+#include <cctype>
+#include <fstream>
+#include <stdexcept>
+#include <variant>
+#include <vector>
+
+#include "emulator/campaign/campaign_spec.h"
+
+namespace wheelhil::emulator::campaign {
+namespace {
+
+namespace fs = std::filesystem;
+using Segment = std::variant<std::string, std::size_t>;
+
+std::vector<Segment> SplitPath(const std::string& path, const std::string& where) {
+  std::vector<Segment> out;
+  std::size_t i = 0;
+  auto fail = [&](const std::string& problem) {
+    throw std::invalid_argument(fmt::format("{}: {}: {}", where, path, problem));
+  };
+  while (i < path.size()) {
+    if (path[i] == '[') {
+      const auto close = path.find(']', i);
+      if (close == std::string::npos) fail("unclosed '['");
+      const std::string num = path.substr(i + 1, close - i - 1);
+      if (num.empty() || num.find_first_not_of("0123456789") != std::string::npos) {
+        fail(fmt::format("index '{}' is not a number", num));
+      }
+      out.emplace_back(static_cast<std::size_t>(std::stoul(num)));
+      i = close + 1;
+      if (i < path.size() && path[i] == '.') ++i;
+    } else {
+      std::size_t end = i;
+      while (end < path.size() && path[end] != '.' && path[end] != '[') ++end;
+      if (end == i) fail("empty segment");
+      out.emplace_back(path.substr(i, end - i));
+      i = end;
+      if (i < path.size() && path[i] == '.') {
+        ++i;
+        if (i == path.size()) fail("ends with '.'");
+      }
+    }
+  }
+  if (out.empty()) fail("empty path");
+  return out;
+}
+
+YAML::Node ToYaml(const nlohmann::json& v) {
+  if (v.is_boolean()) return YAML::Node(v.get<bool>());
+  if (v.is_number_integer()) return YAML::Node(v.get<long long>());
+  if (v.is_number()) {
+    // Shortest text that reads back as the same double.
+    const double d = v.get<double>();
+    return YAML::Node(fmt::format("{}", d));
+  }
+  if (v.is_string()) return YAML::Node(v.get<std::string>());
+  return YAML::Node(v.dump());
+}
+
+// Recursive so that every step works on a fresh YAML::Node handle (assigning one Node to
+// another rebinds the tree in yaml-cpp).
+void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
+            const nlohmann::json& value, const std::string& path, const std::string& where,
+            std::string& prefix) {
+  const Segment& seg = segs[i];
+  const bool last = i + 1 == segs.size();
+  if (const auto* key = std::get_if<std::string>(&seg)) {
+    const std::string here = prefix.empty() ? *key : prefix + "." + *key;
+    if (!node.IsMap() || !node[*key]) {
+      throw std::invalid_argument(fmt::format(
+          "{}: {}: '{}' does not exist in the base scenario{}", where, path, here,
+          node.IsMap() ? "" : fmt::format(" ('{}' is not a mapping)", prefix)));
+    }
+    prefix = here;
+    if (last) {
+      if (!node[*key].IsScalar() && !node[*key].IsNull()) {
+        throw std::invalid_argument(
+            fmt::format("{}: {}: '{}' is not a scalar in the base scenario", where, path, here));
+      }
+      node[*key] = ToYaml(value);
+    } else {
+      SetRec(node[*key], segs, i + 1, value, path, where, prefix);
+    }
+  } else {
+    const std::size_t idx = std::get<std::size_t>(seg);
+    const std::string here = fmt::format("{}[{}]", prefix, idx);
+    if (!node.IsSequence() || idx >= node.size()) {
+      throw std::invalid_argument(fmt::format(
+          "{}: {}: '{}' does not exist in the base scenario ({})", where, path, here,
+          node.IsSequence() ? fmt::format("'{}' has {} entries", prefix, node.size())
+                            : fmt::format("'{}' is not a list", prefix)));
+    }
+    prefix = here;
+    if (last) {
+      node[idx] = ToYaml(value);
+    } else {
+      SetRec(node[idx], segs, i + 1, value, path, where, prefix);
+    }
+  }
+}
+
+void AbsolutizeRelativePaths(YAML::Node node, const fs::path& base_dir) {
+  if (node.IsMap()) {
+    for (auto kv : node) AbsolutizeRelativePaths(kv.second, base_dir);
+  } else if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) AbsolutizeRelativePaths(node[i], base_dir);
+  } else if (node.IsScalar()) {
+    const std::string& s = node.Scalar();
+    if (s.empty() || s.size() > 4096 || s.front() == '/' ||
+        s.find_first_of("/.") == std::string::npos || s.find('\n') != std::string::npos) {
+      return;
+    }
+    std::error_code ec;
+    const fs::path candidate = (base_dir / s).lexically_normal();
+    if (fs::exists(candidate, ec)) node = candidate.string();
+  }
+}
+
+YAML::Node LoadBase(const CampaignSpec& spec) {
+  try {
+    return YAML::LoadFile(spec.base_scenario.string());
+  } catch (const YAML::Exception& e) {
+    throw std::invalid_argument(fmt::format("{}:{}: {}", spec.base_scenario.string(),
+                                            e.mark.line + 1, e.msg));
+  }
+}
+
+}  // namespace
+
+void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& value,
+               const std::string& where) {
+  const auto segs = SplitPath(path, where);
+  std::string prefix;
+  SetRec(root, segs, 0, value, path, where, prefix);
+}
+
+void CheckParameterPaths(const CampaignSpec& spec) {
+  YAML::Node base = LoadBase(spec);
+  for (const auto& p : spec.parameters) {
+    SetAtPath(base, p.path, p.kind == ParameterSpec::Kind::kList ? p.values.front()
+                                                                 : nlohmann::json(p.from),
+              fmt::format("{}:{}: path", spec.file, p.line));
+  }
+}
+
+void WriteRunScenario(const CampaignSpec& spec, const RunSpec& run, const fs::path& out_file) {
+  YAML::Node root = LoadBase(spec);
+  AbsolutizeRelativePaths(root, spec.base_scenario.parent_path());
+  for (std::size_t i = 0; i < spec.parameters.size(); ++i) {
+    SetAtPath(root, spec.parameters[i].path, run.values.at(i),
+              fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));
+  }
+  YAML::Emitter out;
+  out << root;
+  std::ofstream f(out_file, std::ios::trunc);
+  f << "# Generated by `wheelhil campaign` from " << spec.base_scenario.string() << "\n"
+    << "# campaign " << spec.name << ", run " << run.key << ", seed " << run.seed << "\n"
+    << out.c_str() << "\n";
+  if (!f) throw std::runtime_error(fmt::format("cannot write {}", out_file.string()));
+}
+
+}  // namespace wheelhil::emulator::campaign
