@@ -25,7 +25,6 @@ bool NoBroker(std::error_code ec) {
 
 /// Child side of the daemon: detached, stdio on /dev/null, serves until the last bus is down.
 [[noreturn]] void RunDaemon(const std::string& dir) {
-  ::setsid();
   const int null_fd = ::open("/dev/null", O_RDWR | O_CLOEXEC);
   if (null_fd >= 0) {
     ::dup2(null_fd, 0);
@@ -60,15 +59,19 @@ void EnsureDaemon(const std::string& dir) {
         "use another)",
         dir, dir_ec.message()));
   }
+  // Double fork: the daemon is nobody's child (no zombie under the program `exec` starts).
   const pid_t pid = ::fork();
   if (pid < 0) throw std::runtime_error(fmt::format("fork: {}", std::strerror(errno)));
-  if (pid == 0) RunDaemon(dir);
-  // The daemon is a grandchild of nobody: reap our direct child if it exits early.
+  if (pid == 0) {
+    ::setsid();
+    if (::fork() == 0) RunDaemon(dir);
+    ::_exit(0);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
   for (int attempt = 0; attempt < 500; ++attempt) {
     ec = bus::UcanListBuses(dir, &stats);
     if (!ec) return;
-    int status = 0;
-    ::waitpid(pid, &status, WNOHANG);
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   throw std::runtime_error(fmt::format("ucan broker in {} did not start: {}", dir, ec.message()));
