@@ -419,7 +419,10 @@ void Run::RecordTruth(bool force) {
   r.omega_rad_s = w_B.z();
   const auto& wt = vehicle_->wheel_truth();
   for (std::size_t i = 0; i < drive_wheels_.size(); ++i) {
-    if (wt[drive_wheels_[i]].slipping) r.slipping_wheels |= 1 << i;
+    const bool slipping = s_.slip_threshold_m_s
+                              ? wt[drive_wheels_[i]].slip_speed_m_s > *s_.slip_threshold_m_s
+                              : wt[drive_wheels_[i]].slipping;
+    if (slipping) r.slipping_wheels |= 1 << i;
   }
   if (!truth_.empty() && truth_.back().t_s == t) return;
   truth_.push_back(r);
@@ -513,7 +516,10 @@ void Run::Step(bool motion) {
   if (motion) {
     const auto& wt2 = vehicle_->wheel_truth();
     bool slip = false;
-    for (std::size_t w : drive_wheels_) slip = slip || wt2[w].slipping;
+    for (std::size_t w : drive_wheels_) {
+      slip = slip || (s_.slip_threshold_m_s ? wt2[w].slip_speed_m_s > *s_.slip_threshold_m_s
+                                            : wt2[w].slipping);
+    }
     slip_t_.push_back(t_now - step_ns_ * 1e-9 - t_motion0_s_);
     slip_flag_.push_back(slip);
   }

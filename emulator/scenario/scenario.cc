@@ -446,7 +446,7 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
   r.CheckKeys(root, "",
               {"name", "description", "seed", "platform", "terrain", "motion", "sensors",
-               "faults", "firmware", "timing", "expectations"});
+               "faults", "firmware", "timing", "expectations", "slip_threshold_m_s"});
   Scenario s;
   s.source_path = file;
   s.name = r.String(root, "name", "", std::nullopt);
@@ -478,6 +478,9 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   s.firmware = ReadFirmware(r, root["firmware"]);
   s.timing = ReadTiming(r, root["timing"], MotionDuration(s.motion));
   s.expectations = ReadExpectations(r, root["expectations"]);
+  if (root["slip_threshold_m_s"]) {
+    s.slip_threshold_m_s = r.Number(root, "slip_threshold_m_s", "", 1e-6, 10, std::nullopt);
+  }
   return s;
 }
 

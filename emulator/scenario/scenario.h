@@ -134,6 +134,9 @@ struct Scenario {
   FirmwareSpec firmware;
   TimingSpec timing;
   std::vector<Expectation> expectations;
+  /// Ground-truth slip for scoring: a drive wheel slips while its contact slip speed exceeds
+  /// this (m/s); unset: the platform's solver.slip_threshold_m_s flag.
+  std::optional<double> slip_threshold_m_s;
 };
 
 /// Reads and validates a scenario file.
