@@ -119,7 +119,8 @@ void FrameFaultFilter::Filter(NodeFrame f, std::vector<NodeFrame>& out) {
         break;
       case FrameFaultKind::kCorrupt: {
         if (fr.len == 0 || !Chance(x.probability)) break;
-        const int bits = 8 * fr.len;
+        // Classic payload bits (the first 8 bytes of a longer FD payload).
+        const int bits = 8 * std::min<int>(fr.len, 8);
         const int flips = std::min(x.bit_flips, bits);
         std::uint64_t used = 0;  // bits already flipped (<= 64 payload bits)
         for (int i = 0; i < flips;) {

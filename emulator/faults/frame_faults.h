@@ -5,7 +5,8 @@
 ///   kDrop           the frame is not sent, with probability `probability` (seeded RNG);
 ///   kDelay          the frame becomes due delay_ns later (held by the filter until then);
 ///   kDuplicate      a second copy follows, due delay_ns after the first (with probability);
-///   kCorrupt        bit_flips distinct payload bits flipped at random (with probability);
+///   kCorrupt        bit_flips distinct bits of the (first 8) payload bytes flipped at random
+///                   (with probability);
 ///   kWrongCounter   the DBC counter signal re-encoded as (counter + counter_offset) mod 2^n
 ///                   (default -1: the previous counter repeated), then the checksum signal
 ///                   re-computed when one is named, so only the counter is wrong;
