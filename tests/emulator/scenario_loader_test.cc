@@ -112,7 +112,8 @@ TEST(ScenarioLoader, ShippedPaper000Loads) {
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");
   EXPECT_EQ(s.name, "paper000_slip");
   EXPECT_DOUBLE_EQ(s.timing.sync_period_s, 0.25);
-  EXPECT_EQ(s.terrain.random_patches.count, 12);
+  EXPECT_EQ(s.terrain.random_patches.count, 16);
+  ASSERT_TRUE(s.slip_threshold_m_s.has_value());
   EXPECT_FALSE(s.firmware.overrides_yaml.empty());
 }
 
