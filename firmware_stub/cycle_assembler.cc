@@ -19,7 +19,7 @@ CycleAssembler::CycleAssembler(const CycleAssemblerConfig& config) : config_(con
       throw std::invalid_argument(fmt::format("node_id {} is used twice", n));
     }
   }
-  if (config_.deadline_ns <= 0) throw std::invalid_argument("deadline_s must be > 0");
+  if (config_.deadline_ns < 0) throw std::invalid_argument("deadline_s must be >= 0");
   all_mask_ = config_.tpdo_nodes.empty()
                   ? 0u
                   : static_cast<std::uint32_t>((1ull << config_.tpdo_nodes.size()) - 1);
@@ -113,14 +113,15 @@ void CycleAssembler::OnAccel(const std::array<double, 4>& a_m_s2, std::int64_t /
 }
 
 std::optional<AssembledCycle> CycleAssembler::Poll(std::int64_t t_ns) {
-  if (open_ && t_ns >= cur_.sync_ns + config_.deadline_ns) {
+  if (open_ && config_.deadline_ns > 0 && t_ns >= cur_.sync_ns + config_.deadline_ns) {
     return Close(AssembledCycle::Close::kDeadline);
   }
   return std::nullopt;
 }
 
 std::int64_t CycleAssembler::NextDeadlineNs() const {
-  return open_ ? cur_.sync_ns + config_.deadline_ns : std::numeric_limits<std::int64_t>::max();
+  if (!open_ || config_.deadline_ns == 0) return std::numeric_limits<std::int64_t>::max();
+  return cur_.sync_ns + config_.deadline_ns;
 }
 
 }  // namespace wheelhil::fw

@@ -30,7 +30,7 @@ namespace wheelhil::fw {
 
 struct CycleAssemblerConfig {
   std::vector<std::uint8_t> tpdo_nodes;  ///< Encoder node ids, at most kMaxNodes, distinct.
-  std::int64_t deadline_ns = 0;          ///< > 0: close a cycle this long after its SYNC.
+  std::int64_t deadline_ns = 0;  ///< > 0: close a cycle this long after its SYNC; 0: never.
 };
 
 struct EncoderReading {
@@ -61,7 +61,7 @@ struct AssembledCycle {
 
 class CycleAssembler {
  public:
-  /// Throws std::invalid_argument on too many or repeated nodes, or deadline_ns <= 0.
+  /// Throws std::invalid_argument on too many or repeated nodes, or deadline_ns < 0.
   explicit CycleAssembler(const CycleAssemblerConfig& config);
 
   /// A SYNC at t_ns (sent by us or seen on the bus). Returns the cycle it closes, if one was

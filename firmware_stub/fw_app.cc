@@ -47,9 +47,7 @@ CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config) {
   for (const auto& n : config.encoder_nodes()) {
     a.tpdo_nodes.push_back(static_cast<std::uint8_t>(n.node_id));
   }
-  const double deadline_s =
-      config.sync.deadline_s > 0 ? config.sync.deadline_s : 0.9 * config.sync.period_s;
-  a.deadline_ns = ToNs(deadline_s);
+  a.deadline_ns = ToNs(config.sync.deadline_s);  // 0: no deadline.
   return a;
 }
 

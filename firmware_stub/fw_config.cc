@@ -175,7 +175,7 @@ void ReadSync(const Section& s, SyncSettings& c) {
   s.Allow({"produce", "period_s", "deadline_s"});
   c.produce = s.Bool("produce", c.produce);
   c.period_s = s.Number("period_s", c.period_s, true, true);
-  c.deadline_s = s.Number("deadline_s", 0.9 * c.period_s, false, true);
+  c.deadline_s = s.Number("deadline_s", 0.9 * c.period_s, false, false, true);
   if (c.deadline_s > c.period_s) {
     s.FailHere("deadline_s",
                fmt::format("({}) must be <= period_s ({})", c.deadline_s, c.period_s));

@@ -37,7 +37,9 @@ struct CanopenSettings {
 struct SyncSettings {
   bool produce = true;     ///< The firmware is the SYNC producer (else it follows 0x080).
   double period_s = 0.01;  ///< SYNC / estimator cycle period [s], > 0.
-  /// A cycle closes at the latest this long after its SYNC [s]; (0, period]. Default: 0.9 period.
+  /// A cycle closes at the latest this long after its SYNC [s], in [0, period]; 0 = no deadline
+  /// (a cycle then waits for its frames or the next SYNC: the choice for replayed traffic,
+  /// which cannot depend on scheduling). The loader's default is 0.9 period.
   double deadline_s = 0.0;
 };
 

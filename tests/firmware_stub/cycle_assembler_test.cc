@@ -84,6 +84,18 @@ TEST(CycleAssembler, DeadlineClosesAnIncompleteCycleAndLateFramesAreCounted) {
   EXPECT_FALSE(a.OnSync(110 * kMs));  // Nothing was open any more.
 }
 
+TEST(CycleAssembler, WithoutDeadlineOnlyTheNextSyncClosesAnIncompleteCycle) {
+  CycleAssembler a({{1, 2}, 0});
+  a.OnSync(0);
+  a.OnTpdo(1, 1, 0, 1);
+  EXPECT_EQ(a.NextDeadlineNs(), std::numeric_limits<std::int64_t>::max());
+  EXPECT_FALSE(a.Poll(1'000'000 * kMs));
+  const auto c = a.OnSync(1'000'000 * kMs);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->close, AssembledCycle::Close::kNextSync);
+  EXPECT_EQ(c->missing_mask, 0b10u);
+}
+
 TEST(CycleAssembler, UnknownNodeIsCountedAndIgnored) {
   auto a = Make({1});
   a.OnSync(0);
@@ -176,7 +188,7 @@ TEST(CycleAssembler, RandomisedTrafficClosesEveryCycleOnceInOrder) {
 
 TEST(CycleAssembler, RejectsBadConfig) {
   EXPECT_THROW(CycleAssembler({{1, 1}, kMs}), std::invalid_argument);
-  EXPECT_THROW(CycleAssembler({{1}, 0}), std::invalid_argument);
+  EXPECT_THROW(CycleAssembler({{1}, -1}), std::invalid_argument);
   EXPECT_THROW(CycleAssembler({{1, 2, 3, 4, 5, 6, 7, 8, 9}, kMs}), std::invalid_argument);
 }
 

@@ -48,12 +48,14 @@ std::vector<bus::CandumpRecord> BuildTrace() {
   for (std::size_t i = 0; i < requests.size(); ++i) {
     for (int node : {1, 2}) {
       const auto req = testing::Frame(fmt::format("{:03X}#{}", 0x600 + node, requests[i]));
-      add((70 + 20 * static_cast<std::int64_t>(i)) * kMs, dev.SdoAnswer(req));
+      // Answers 150 ms apart: a recorded trace cannot wait for the request, so leave a slow
+      // (e.g. user-mode-linux) firmware time to send it first.
+      add((200 + 150 * static_cast<std::int64_t>(i)) * kMs, dev.SdoAnswer(req));
     }
   }
-  const std::int64_t t0 = 500 * kMs;
+  const std::int64_t t0 = 700 * kMs;
   const std::int64_t period = static_cast<std::int64_t>(kPeriodS * 1e3) * kMs;
-  std::int64_t next_beat = 150 * kMs;
+  std::int64_t next_beat = 450 * kMs;
   double left = 0.0, right = 0.0;
   for (int k = 0; k < kCycles; ++k) {
     const std::int64_t sync = t0 + k * period;

@@ -62,6 +62,8 @@ TEST(FwProgramConfig, ReadsEverySection) {
 TEST(FwProgramConfig, ErrorsNameFileLineAndField) {
   ExpectError(Replace(kOk, "track_width_m: 0.5", "track_width_m: -0.5"),
               "fw.yaml:5:18: paper000.track_width_m: (-0.5) must be > 0");
+  ExpectError(Replace(kOk, "{period_s: 0.25}", "{period_s: 0.25, deadline_s: -1}"),
+              "sync.deadline_s: (-1) must be >= 0");
   ExpectError(Replace(kOk, "track_width_m: 0.5", "trackwidth_m: 0.5"),
               "fw.yaml:5:3: paper000.trackwidth_m: unknown field");
   ExpectError(Replace(kOk, "counts_per_rev: 2000", "counts_per_rev: lots"),
