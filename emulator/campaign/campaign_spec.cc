@@ -244,7 +244,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   }
   L.OnlyKeys(root, "",
              {"campaign", "description", "base", "sampling", "runs", "seed", "repeats",
-              "parameters", "pass", "rank_by", "timeout_s"});
+              "set", "parameters", "pass", "rank_by", "timeout_s"});
   CampaignSpec spec;
   spec.file = file;
   spec.name = root["campaign"] ? L.String(root["campaign"], "campaign")
@@ -285,6 +285,17 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   if (root["timeout_s"]) {
     spec.timeout_s = L.Number(root["timeout_s"], "timeout_s");
     if (spec.timeout_s <= 0) L.Fail(root["timeout_s"], "timeout_s", "must be > 0");
+  }
+
+  if (const auto set = root["set"]) {
+    if (!set.IsMap()) L.Fail(set, "set", "must be a mapping of path: value");
+    for (const auto& kv : set) {
+      Override o;
+      o.path = kv.first.as<std::string>();
+      o.line = L.Line(kv.first);
+      o.value = L.Scalar(kv.second, "set." + o.path);
+      spec.overrides.push_back(std::move(o));
+    }
   }
 
   const YAML::Node params = root["parameters"];
@@ -406,6 +417,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   json fp = {{"sampling", sampling},      {"runs", spec.runs},
              {"seed", spec.seed},         {"repeats", spec.repeats},
              {"base", Hex64(Fnv1a64(base_text.str()))}};
+  for (const auto& o : spec.overrides) fp["set"].push_back({o.path, o.value});
   for (const auto& p : spec.parameters) {
     fp["parameters"].push_back({{"path", p.path},
                                 {"kind", static_cast<int>(p.kind)},

@@ -57,11 +57,21 @@ struct CampaignCriterion {
   std::string Describe() const;
 };
 
+/// A fixed value written into every run's scenario before the varied parameters (`set:`), e.g.
+/// to cut a run short or to add a key the base leaves at its default. Unlike a parameter path,
+/// its last segment may be missing from the base (its parent must exist).
+struct Override {
+  std::string path;
+  nlohmann::json value;
+  int line = 0;
+};
+
 struct CampaignSpec {
   enum class Sampling { kGrid, kRandom, kLatinHypercube };
   std::string file;                     ///< campaign file path as given
   std::string name;                     ///< `campaign:` (default: file stem)
   std::filesystem::path base_scenario;  ///< absolute
+  std::vector<Override> overrides;  ///< `set:`, applied first
   std::vector<ParameterSpec> parameters;
   Sampling sampling = Sampling::kGrid;
   int runs = 0;             ///< random/LHS: number of points (grid: product of the grids)

@@ -65,25 +65,26 @@ YAML::Node ToYaml(const nlohmann::json& v) {
 // another rebinds the tree in yaml-cpp).
 void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
             const nlohmann::json& value, const std::string& path, const std::string& where,
-            std::string& prefix) {
+            std::string& prefix, bool create_leaf) {
   const Segment& seg = segs[i];
   const bool last = i + 1 == segs.size();
   if (const auto* key = std::get_if<std::string>(&seg)) {
     const std::string here = prefix.empty() ? *key : prefix + "." + *key;
-    if (!node.IsMap() || !node[*key]) {
+    const bool create = create_leaf && last && node.IsMap();
+    if (!create && (!node.IsMap() || !node[*key])) {
       throw std::invalid_argument(fmt::format(
           "{}: {}: '{}' does not exist in the base scenario{}", where, path, here,
           node.IsMap() ? "" : fmt::format(" ('{}' is not a mapping)", prefix)));
     }
     prefix = here;
     if (last) {
-      if (!node[*key].IsScalar() && !node[*key].IsNull()) {
+      if (node[*key] && !node[*key].IsScalar() && !node[*key].IsNull()) {
         throw std::invalid_argument(
             fmt::format("{}: {}: '{}' is not a scalar in the base scenario", where, path, here));
       }
       node[*key] = ToYaml(value);
     } else {
-      SetRec(node[*key], segs, i + 1, value, path, where, prefix);
+      SetRec(node[*key], segs, i + 1, value, path, where, prefix, create_leaf);
     }
   } else {
     const std::size_t idx = std::get<std::size_t>(seg);
@@ -98,7 +99,7 @@ void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
     if (last) {
       node[idx] = ToYaml(value);
     } else {
-      SetRec(node[idx], segs, i + 1, value, path, where, prefix);
+      SetRec(node[idx], segs, i + 1, value, path, where, prefix, create_leaf);
     }
   }
 }
@@ -132,14 +133,24 @@ YAML::Node LoadBase(const CampaignSpec& spec) {
 }  // namespace
 
 void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& value,
-               const std::string& where) {
+               const std::string& where, bool create_leaf) {
   const auto segs = SplitPath(path, where);
   std::string prefix;
-  SetRec(root, segs, 0, value, path, where, prefix);
+  SetRec(root, segs, 0, value, path, where, prefix, create_leaf);
 }
+
+namespace {
+void ApplyOverrides(const CampaignSpec& spec, YAML::Node root) {
+  for (const auto& o : spec.overrides) {
+    SetAtPath(root, o.path, o.value, fmt::format("{}:{}: set", spec.file, o.line),
+              /*create_leaf=*/true);
+  }
+}
+}  // namespace
 
 void CheckParameterPaths(const CampaignSpec& spec) {
   YAML::Node base = LoadBase(spec);
+  ApplyOverrides(spec, base);
   for (const auto& p : spec.parameters) {
     SetAtPath(base, p.path, p.kind == ParameterSpec::Kind::kList ? p.values.front()
                                                                  : nlohmann::json(p.from),
@@ -150,6 +161,7 @@ void CheckParameterPaths(const CampaignSpec& spec) {
 void WriteRunScenario(const CampaignSpec& spec, const RunSpec& run, const fs::path& out_file) {
   YAML::Node root = LoadBase(spec);
   AbsolutizeRelativePaths(root, spec.base_scenario.parent_path());
+  ApplyOverrides(spec, root);
   for (std::size_t i = 0; i < spec.parameters.size(); ++i) {
     SetAtPath(root, spec.parameters[i].path, run.values.at(i),
               fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));

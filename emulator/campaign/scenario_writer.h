@@ -19,10 +19,11 @@ struct RunSpec;
 /// value there. The path must already exist in `root` (a campaign varies what the base defines):
 /// otherwise throws std::invalid_argument "<where>: <path>: <problem>", where `where` is e.g.
 /// "campaign.yaml:12" and the problem names the first missing segment.
+/// With `create_leaf`, a missing last mapping key is added (its parent must exist).
 void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& value,
-               const std::string& where);
+               const std::string& where, bool create_leaf = false);
 
-/// Throws like SetAtPath when any parameter path of `spec` is missing from the base scenario;
+/// Throws like SetAtPath when any `set:` or parameter path of `spec` is missing from the base scenario;
 /// call once before running so that errors come before any run starts.
 void CheckParameterPaths(const CampaignSpec& spec);
 

@@ -216,6 +216,27 @@ parameters:
                   HasSubstr("camp.yaml:3: path: terrain.frict: 'terrain.frict' does not exist")));
 }
 
+TEST_F(CampaignSpecTest, SetOverridesMayAddALeafThatParametersThenVary) {
+  const auto spec = Parse(R"(base: base.yaml
+set:
+  sensors.gyro_noise: 0.5
+  fake.sleep_s: 0.25
+parameters:
+  - path: sensors.gyro_noise
+    values: [0.125]
+)");
+  ASSERT_EQ(spec.overrides.size(), 2u);
+  EXPECT_NO_THROW(CheckParameterPaths(spec));
+  const auto out = dir_.path() / "set.yaml";
+  WriteRunScenario(spec, ExpandRuns(spec).at(0), out);
+  const YAML::Node n = YAML::LoadFile(out.string());
+  EXPECT_DOUBLE_EQ(n["sensors"]["gyro_noise"].as<double>(), 0.125);
+  EXPECT_DOUBLE_EQ(n["fake"]["sleep_s"].as<double>(), 0.25);
+  const auto bad = Parse("base: base.yaml\nset:\n  nothere.x: 1\nparameters: [{path: terrain.friction, values: [1]}]\n");
+  EXPECT_THAT([&] { CheckParameterPaths(bad); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("camp.yaml:3: set: nothere.x")));
+}
+
 TEST_F(CampaignSpecTest, SetAtPathWritesMapsAndSequences) {
   YAML::Node root = YAML::Load(kBaseScenario);
   SetAtPath(root, "faults[0].probability", 0.25, "here");
