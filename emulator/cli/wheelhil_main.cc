@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "emulator/bullet_precision.h"
+#include "emulator/cli/bench_command.h"
 #include "emulator/cli/bus_commands.h"
 #include "emulator/cli/campaign_command.h"
 #include "emulator/cli/run_command.h"
@@ -28,6 +29,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   auto* version = app.add_subcommand("version", "Print the version and build facts");
   wheelhil::emulator::BusCommands bus_commands(app);
+  wheelhil::emulator::BenchCommand bench_command(app);
   wheelhil::emulator::CampaignCommand campaign_command(app);
   wheelhil::emulator::RunCommand run_command(app);
 
@@ -39,6 +41,7 @@ int main(int argc, char** argv) {
   }
   if (version->parsed()) return RunVersion();
   if (auto code = bus_commands.Run()) return *code;
+  if (auto code = bench_command.Run()) return *code;
   if (auto code = campaign_command.Run()) return *code;
   if (auto code = run_command.Run()) return *code;
   return 2;

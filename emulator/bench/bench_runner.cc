@@ -1,0 +1,336 @@
+#include "emulator/bench/bench_runner.h"
+
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "bus/ucan_runtime_dir.h"
+#include "emulator/bench/bench_report.h"
+#include "emulator/bench/bench_workloads.h"
+
+extern char** environ;
+
+namespace wheelhil::emulator::bench {
+namespace {
+
+std::string WorkerStatus(int status) {
+  if (WIFEXITED(status)) return fmt::format("exit code {}", WEXITSTATUS(status));
+  if (WIFSIGNALED(status)) return fmt::format("killed by signal {}", WTERMSIG(status));
+  return "stopped";
+}
+
+std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::string& self_exe,
+                                          const std::string& name) {
+  std::vector<std::string> argv = {self_exe, "bench", "--worker", name, "--source-dir",
+                                   o.source_dir};
+  if (o.quick) argv.push_back("--quick");
+  if (!o.sched_fifo) argv.push_back("--no-rt");
+  argv.push_back("--fifo-priority");
+  argv.push_back(std::to_string(o.fifo_priority));
+  argv.push_back("--cpu");
+  argv.push_back(std::to_string(o.cpu));
+  argv.push_back("--load-threads");
+  argv.push_back(std::to_string(o.load_threads));
+  return argv;
+}
+
+/// scenarios/<name>*.yaml, the first in name order; empty when there is none.
+std::string FindScenarioFile(const std::string& source_dir, const std::string& name) {
+  std::vector<std::string> found;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(source_dir + "/scenarios", ec)) {
+    const std::string file = e.path().filename().string();
+    if (e.is_regular_file() && file.rfind(name, 0) == 0 && e.path().extension() == ".yaml") {
+      found.push_back(e.path().string());
+    }
+  }
+  std::sort(found.begin(), found.end());
+  return found.empty() ? std::string() : found.front();
+}
+
+void RunLockstep(const BenchOptions& o, const std::string& self_exe,
+                 const std::string& unavailable, nlohmann::json& report, double& peak_mib) {
+  double lockstep_mib = 0.0;
+  const std::string vcan_reason =
+      std::filesystem::exists("/sys/class/net/vcan0")
+          ? "lockstep over a kernel vcan is not driven by the bench yet"
+          : "no kernel vcan0 on this machine (the lockstep runs over the userspace bus)";
+  for (const auto& s : BenchScenarios()) {
+    const std::string key = fmt::format("lockstep.{}.rtf", s);
+    SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s),
+            Unavailable(unavailable.empty() ? vcan_reason : unavailable));
+    if (!unavailable.empty()) {
+      SetPath(report, key, Unavailable(unavailable));
+      continue;
+    }
+    const std::string file = FindScenarioFile(o.source_dir, s);
+    if (file.empty()) {
+      SetPath(report, key, Unavailable(fmt::format("no scenario file scenarios/{}*.yaml yet", s)));
+      continue;
+    }
+    std::string out_dir;
+    try {
+      out_dir = bus::CreateTempUcanRuntimeDir("wheelhil-bench-run-");
+    } catch (const std::exception& e) {
+      SetPath(report, key, Unavailable(e.what()));
+      continue;
+    }
+    const WorkerOutcome w =
+        RunWorkerProcess({self_exe, "run", file, "--out", out_dir, "--quiet"}, {},
+                         /*expect_json=*/false);
+    nlohmann::json run_report;
+    std::ifstream in(out_dir + "/report.json");
+    try {
+      if (in) run_report = nlohmann::json::parse(in);
+    } catch (const std::exception&) {
+      run_report = nlohmann::json();
+    }
+    const nlohmann::json* rtf = GetPath(run_report, "wall.real_time_factor");
+    if (rtf && rtf->is_number() && rtf->get<double>() > 0) {
+      SetPath(report, key, rtf->get<double>());
+      SetPath(report, fmt::format("lockstep.{}.scenario", s),
+              std::filesystem::path(file).filename().string());
+      const nlohmann::json* sim = GetPath(run_report, "sim_time_s");
+      if (sim && sim->is_number()) SetPath(report, fmt::format("lockstep.{}.sim_s", s), *sim);
+      lockstep_mib = std::max(lockstep_mib, w.max_rss_mib);
+    } else {
+      SetPath(report, key,
+              Unavailable(fmt::format("`wheelhil run {}` gave no real_time_factor ({})", file,
+                                      w.problem.empty() ? "no report.json" : w.problem)));
+    }
+    std::error_code ec;
+    std::filesystem::remove_all(out_dir, ec);
+  }
+  if (lockstep_mib > 0) {
+    SetPath(report, "rss.lockstep_mib", lockstep_mib);
+    peak_mib = std::max(peak_mib, lockstep_mib);
+  } else {
+    SetPath(report, "rss.lockstep_mib",
+            Unavailable(unavailable.empty() ? "no lockstep run completed" : unavailable));
+  }
+}
+
+}  // namespace
+
+WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
+                               const std::vector<std::pair<std::string, std::string>>& extra_env,
+                               bool expect_json) {
+  WorkerOutcome out;
+  // Everything the child needs is built before fork (no allocation between fork and exec).
+  std::vector<std::string> env_strings;
+  for (char** e = environ; *e; ++e) {
+    const std::string s = *e;
+    const std::string key = s.substr(0, s.find('='));
+    const bool replaced = std::any_of(extra_env.begin(), extra_env.end(),
+                                      [&](const auto& kv) { return kv.first == key; });
+    if (!replaced) env_strings.push_back(s);
+  }
+  for (const auto& [k, v] : extra_env) env_strings.push_back(k + "=" + v);
+  std::vector<char*> envp, args;
+  for (auto& s : env_strings) envp.push_back(s.data());
+  envp.push_back(nullptr);
+  std::vector<std::string> argv_copy = argv;
+  for (auto& s : argv_copy) args.push_back(s.data());
+  args.push_back(nullptr);
+
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) {
+    out.problem = fmt::format("pipe: {}", std::strerror(errno));
+    return out;
+  }
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    out.problem = fmt::format("fork: {}", std::strerror(errno));
+    ::close(fds[0]);
+    ::close(fds[1]);
+    return out;
+  }
+  if (pid == 0) {
+    ::dup2(fds[1], STDOUT_FILENO);
+    ::execve(args[0], args.data(), envp.data());
+    ::_exit(127);
+  }
+  ::close(fds[1]);
+  std::string text;
+  char buf[4096];
+  while (true) {
+    const ssize_t n = ::read(fds[0], buf, sizeof(buf));
+    if (n > 0) {
+      text.append(buf, static_cast<std::size_t>(n));
+    } else if (n == 0 || errno != EINTR) {
+      break;
+    }
+  }
+  ::close(fds[0]);
+  int status = 0;
+  rusage usage{};
+  while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
+  }
+  out.max_rss_mib = static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB
+  // The JSON is the last line that starts with '{' (a UML guest prints boot lines first).
+  std::size_t end = text.size();
+  while (end > 0) {
+    std::size_t begin = text.rfind('\n', end - 1);
+    begin = begin == std::string::npos ? 0 : begin + 1;
+    if (text.compare(begin, 1, "{") == 0) {
+      try {
+        out.report = nlohmann::json::parse(text.substr(begin, end - begin));
+      } catch (const std::exception& e) {
+        out.problem = fmt::format("worker output is not JSON: {}", e.what());
+      }
+      break;
+    }
+    if (begin == 0) break;
+    end = begin - 1;
+  }
+  const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (!ok && out.problem.empty()) {
+    out.problem = fmt::format("worker {} failed ({})", argv.size() > 3 ? argv[3] : argv[0],
+                              WorkerStatus(status));
+  } else if (ok && expect_json && out.report.empty() && out.problem.empty()) {
+    out.problem = "worker printed no JSON";
+  }
+  return out;
+}
+
+nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
+  const double case_s = o.quick ? 0.15 : 1.5;
+  if (name == "physics") return RunPhysicsWorkload(o.source_dir, case_s);
+  if (name == "bus-ucan") return RunBusWorkload("ucan", o.quick ? 0.3 : 2.0);
+  if (name == "bus-vcan") return RunBusWorkload("vcan", o.quick ? 0.3 : 2.0);
+  if (name == "realtime" || name == "realtime-loaded") {
+    RealtimeWorkloadOptions r;
+    r.source_dir = o.source_dir;
+    r.duration_s = o.quick ? 1.0 : 10.0;
+    r.sched_fifo = o.sched_fifo;
+    r.fifo_priority = o.fifo_priority;
+    r.cpu = o.cpu;
+    if (name == "realtime-loaded") {
+      r.prefix = "realtime.loaded_";
+      r.load_threads = o.load_threads >= 0
+                           ? o.load_threads
+                           : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    }
+    return RunRealtimeWorkload(r);
+  }
+  throw std::invalid_argument(fmt::format("unknown bench worker '{}'", name));
+}
+
+nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
+                        const UcanEnvironmentFn& ucan_env,
+                        const std::string& lockstep_unavailable) {
+  nlohmann::json report = nlohmann::json::object();
+  const MachineFacts m = ReadMachineFacts();
+  SetPath(report, "machine.cpu_model", m.cpu_model);
+  SetPath(report, "machine.cores", m.cores);
+  SetPath(report, "machine.build_type", m.build_type);
+  SetPath(report, "machine.kernel", m.kernel);
+  SetPath(report, "machine.date_utc", m.date_utc);
+  SetPath(report, "machine.quick", o.quick);
+
+  double peak_mib = 0.0;
+  auto run = [&](const std::string& name, bool on_ucan,
+                 const std::vector<std::string>& failure_keys) -> double {
+    std::vector<std::pair<std::string, std::string>> env;
+    std::string dir;
+    if (on_ucan) {
+      try {
+        dir = bus::CreateTempUcanRuntimeDir("wheelhil-bench-");
+        env = ucan_env(dir);
+      } catch (const std::exception& e) {
+        for (const auto& k : failure_keys) SetPath(report, k, Unavailable(e.what()));
+        return std::nan("");
+      }
+    }
+    WorkerOutcome w = RunWorkerProcess(CommonWorkerArgs(o, self_exe, name), env);
+    if (!dir.empty()) {
+      std::error_code ec;
+      std::filesystem::remove_all(dir, ec);  // the broker removes it; this covers a crash
+    }
+    if (!w.problem.empty()) {
+      for (const auto& k : failure_keys) {
+        if (!GetPath(w.report, k)) SetPath(report, k, Unavailable(w.problem));
+      }
+    }
+    report.merge_patch(w.report);
+    peak_mib = std::max(peak_mib, w.max_rss_mib);
+    return w.max_rss_mib;
+  };
+
+  std::vector<std::string> physics_keys;
+  for (const auto& k : DocumentedMetricKeys()) {
+    if (k.rfind("physics.", 0) == 0) physics_keys.push_back(k);
+  }
+  SetPath(report, "rss.physics_mib", run("physics", false, physics_keys));
+  SetPath(report, "rss.bus_mib",
+          run("bus-ucan", true, {"bus.ucan_frames_per_s", "bus.ucan_fanout4_frames_per_s"}));
+
+  const std::vector<std::string> vcan_keys = {"bus.vcan_frames_per_s",
+                                              "bus.vcan_fanout4_frames_per_s"};
+  if (std::filesystem::exists("/sys/class/net/vcan0")) {
+    run("bus-vcan", false, vcan_keys);
+    SetPath(report, "bus.vcan_environment", "host kernel vcan0");
+  } else if (o.uml) {
+    const std::string script = o.source_dir + "/tests/vcan/uml_run.sh";
+    std::vector<std::string> argv = {script, "--timeout", "300", "--"};
+    const auto worker = CommonWorkerArgs(o, self_exe, "bus-vcan");
+    argv.insert(argv.end(), worker.begin(), worker.end());
+    WorkerOutcome w = RunWorkerProcess(argv, {});
+    if (!w.problem.empty()) {
+      for (const auto& k : vcan_keys) {
+        if (!GetPath(w.report, k)) SetPath(report, k, Unavailable("user-mode-linux: " + w.problem));
+      }
+    }
+    report.merge_patch(w.report);
+    SetPath(report, "bus.vcan_environment",
+            "vcan0 inside the user-mode-linux test kernel (tests/vcan/uml_run.sh): UML traps "
+            "every system call, so these are UML's numbers, not a native kernel's");
+  } else {
+    for (const auto& k : vcan_keys) {
+      SetPath(report, k,
+              Unavailable("no kernel vcan0 on this machine; `wheelhil bench --uml` measures it "
+                          "inside the user-mode-linux test kernel"));
+    }
+    SetPath(report, "bus.vcan_environment", "none");
+  }
+  const nlohmann::json* u = GetPath(report, "bus.ucan_frames_per_s");
+  const nlohmann::json* v = GetPath(report, "bus.vcan_frames_per_s");
+  if (u && v && u->is_number() && v->is_number() && v->get<double>() > 0) {
+    SetPath(report, "bus.ucan_vs_vcan_ratio", u->get<double>() / v->get<double>());
+  } else {
+    SetPath(report, "bus.ucan_vs_vcan_ratio", Unavailable("needs both bus rates"));
+  }
+
+  const std::vector<std::string> rt_keys = {"realtime.p50_us", "realtime.p99_us",
+                                            "realtime.max_us", "realtime.missed_deadlines",
+                                            "realtime.frames", "realtime.duration_s",
+                                            "realtime.arrival_p99_us", "realtime.scheduling"};
+  SetPath(report, "rss.realtime_mib", run("realtime", true, rt_keys));
+  run("realtime-loaded", true,
+      {"realtime.loaded_p50_us", "realtime.loaded_p99_us", "realtime.loaded_max_us",
+       "realtime.loaded_missed_deadlines"});
+
+  RunLockstep(o, self_exe, lockstep_unavailable, report, peak_mib);
+  for (const char* k : {"rss.physics_mib", "rss.bus_mib", "rss.realtime_mib"}) {
+    const nlohmann::json* r = GetPath(report, k);
+    if (r && r->is_number() && !std::isfinite(r->get<double>())) {
+      SetPath(report, k, Unavailable("the worker did not run"));
+    }
+  }
+  SetPath(report, "rss.peak_mib", peak_mib);
+  return report;
+}
+
+}  // namespace wheelhil::emulator::bench

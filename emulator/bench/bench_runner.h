@@ -1,0 +1,58 @@
+#pragma once
+/// Runs `wheelhil bench`: every workload (emulator/bench/bench_workloads.h) in its own child
+/// process (`<self> bench --worker NAME ...`, result as one JSON line on its stdout), its peak
+/// RSS from wait4's ru_maxrss, merged into one report with the machine facts. Figures that
+/// could not be measured carry "unavailable: <reason>". Thread-compatible; spawns processes.
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace wheelhil::emulator::bench {
+
+struct BenchOptions {
+  bool quick = false;        ///< Every measurement shortened (about 1 s each).
+  std::string source_dir;    ///< Repository root (platforms, meshes, DBC files).
+  bool sched_fifo = true;    ///< Real-time row: ask for SCHED_FIFO + mlockall.
+  int fifo_priority = 80;
+  int cpu = -1;              ///< Real-time row: pin the pacer; -1 = no pinning.
+  int load_threads = -1;     ///< Busy threads of the loaded real-time run; -1 = one per core.
+  bool uml = false;          ///< Measure the kernel vcan inside the user-mode-linux test kernel.
+};
+
+/// Environment entries a child needs to reach the userspace buses of `runtime_dir` (LD_PRELOAD
+/// of libwheelhil_ucan.so, WHEELHIL_UCAN_DIR); see emulator/cli/bus_commands.h.
+using UcanEnvironmentFn =
+    std::function<std::vector<std::pair<std::string, std::string>>(const std::string&)>;
+
+/// What a child process produced.
+struct WorkerOutcome {
+  nlohmann::json report = nlohmann::json::object();  ///< Its JSON line ({} on failure).
+  double max_rss_mib = 0.0;                           ///< ru_maxrss of the child.
+  std::string problem;                                ///< Empty on success.
+};
+
+/// Runs argv (argv[0] = program path) with `extra_env` added to this environment, reads the
+/// last line of its stdout that starts with '{' as JSON, and waits for it with wait4.
+/// expect_json = false: a program that prints no JSON (e.g. `wheelhil run`) is fine.
+WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
+                               const std::vector<std::pair<std::string, std::string>>& extra_env,
+                               bool expect_json = true);
+
+/// The full bench. self_exe: path of the wheelhil executable. The lockstep rows run
+/// `<self_exe> run scenarios/<paperNNN>*.yaml` (the first such file) in a child process and read
+/// wall.real_time_factor from its report.json; lockstep_unavailable non-empty: why they cannot
+/// run at all (e.g. no `run` command in this build).
+nlohmann::json RunBench(const BenchOptions& options, const std::string& self_exe,
+                        const UcanEnvironmentFn& ucan_env,
+                        const std::string& lockstep_unavailable);
+
+/// The worker side: runs workload `name` (physics, bus-ucan, bus-vcan, realtime,
+/// realtime-loaded) and returns its partial report.
+nlohmann::json RunWorker(const std::string& name, const BenchOptions& options);
+
+}  // namespace wheelhil::emulator::bench

@@ -1,0 +1,461 @@
+#include "emulator/bench/bench_workloads.h"
+
+#include <linux/can.h>
+#include <net/if.h>
+#include <poll.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "bus/socketcan_transport.h"
+#include "bus/ucan_broker.h"
+#include "emulator/bench/bench_report.h"
+#include "emulator/physics/physics_world.h"
+#include "emulator/platforms/platform.h"
+#include "emulator/realtime/paper002_device_set.h"
+#include "emulator/realtime/realtime_pacer.h"
+
+namespace wheelhil::emulator::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// ---------------------------------------------------------------- physics
+
+double MeasureWorld(const std::string& source_dir, const std::string& platform, bool mesh,
+                    int count, double wall_s) {
+  const platforms::Platform p =
+      platforms::LoadPlatformFile(source_dir + "/scenarios/platforms/" + platform + ".yaml");
+  physics::PhysicsWorld world;
+  if (mesh) {
+    world.terrain().AddMesh(source_dir + "/meshes/uneven_tiles.obj", MeshOptions{});
+  } else {
+    world.terrain().AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.7});
+  }
+  for (int i = 0; i < count; ++i) {
+    auto& v = world.AddVehicle(p.vehicle, -1.5 + 0.75 * (i % 4), -1.5 + 0.75 * (i / 4), 0.0);
+    platforms::CommandTwist(v, p, platforms::BodyTwist{0.05, 0.0, 0.05});
+  }
+  world.StepFor(0.2);  // settle
+  constexpr int kChunkSteps = 100;
+  std::vector<double> rtf;
+  const Clock::time_point t0 = Clock::now();
+  while (SecondsSince(t0) < wall_s || rtf.size() < 3) {
+    const Clock::time_point c0 = Clock::now();
+    for (int i = 0; i < kChunkSteps; ++i) world.Step();
+    rtf.push_back(kChunkSteps * world.step_s() / SecondsSince(c0));
+  }
+  return Median(rtf);
+}
+
+// ---------------------------------------------------------------- bus
+
+int OpenCan(const char* name) {
+  const int fd = ::socket(PF_CAN, SOCK_RAW, CAN_RAW);
+  if (fd < 0) return -1;
+  sockaddr_can addr{};
+  addr.can_family = AF_CAN;
+  addr.can_ifindex = static_cast<int>(::if_nametoindex(name));
+  if (addr.can_ifindex == 0 ||
+      ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+struct FanOutResult {
+  double frames_per_s = 0;
+  std::uint64_t lost = 0;
+  std::string problem;
+};
+
+/// One writer, `readers` readers, flow-controlled by `window` frames in flight.
+FanOutResult MeasureFanOut(const char* iface, int readers, double wall_s, std::uint64_t window) {
+  FanOutResult result;
+  const int tx = OpenCan(iface);
+  std::vector<int> rx;
+  for (int i = 0; i < readers; ++i) rx.push_back(OpenCan(iface));
+  if (tx < 0 || std::count(rx.begin(), rx.end(), -1) > 0) {
+    result.problem = fmt::format("cannot open {}: {}", iface, std::strerror(errno));
+    if (tx >= 0) ::close(tx);
+    for (int fd : rx) {
+      if (fd >= 0) ::close(fd);
+    }
+    return result;
+  }
+  std::vector<std::atomic<std::uint64_t>> received(static_cast<std::size_t>(readers));
+  std::atomic<bool> writer_done{false};
+  std::vector<std::thread> threads;
+  for (int i = 0; i < readers; ++i) {
+    threads.emplace_back([&, i] {
+      can_frame f{};
+      pollfd p{rx[i], POLLIN, 0};
+      while (true) {
+        const int n = ::poll(&p, 1, 200);
+        if (n > 0) {
+          if (::read(rx[i], &f, sizeof(f)) != sizeof(f)) return;
+          received[i].fetch_add(1, std::memory_order_release);
+        } else if (n == 0 && writer_done.load(std::memory_order_acquire)) {
+          return;  // nothing for 200 ms after the last frame: the rest was dropped
+        } else if (n < 0 && errno != EINTR) {
+          return;
+        }
+      }
+    });
+  }
+  auto slowest = [&] {
+    std::uint64_t m = UINT64_MAX;
+    for (auto& r : received) m = std::min(m, r.load(std::memory_order_acquire));
+    return m;
+  };
+  can_frame f{};
+  f.can_id = 0x123;
+  f.can_dlc = 8;
+  std::uint64_t sent = 0;
+  const Clock::time_point t0 = Clock::now();
+  while (SecondsSince(t0) < wall_s) {
+    for (int burst = 0; burst < 256; ++burst) {
+      int spins = 0;
+      while (sent - slowest() >= window) {
+        if (++spins > 1000 && SecondsSince(t0) > wall_s + 2.0) break;  // a reader stalled
+        std::this_thread::sleep_for(std::chrono::microseconds(20));
+      }
+      std::memcpy(f.data, &sent, sizeof(sent));
+      if (::write(tx, &f, sizeof(f)) != sizeof(f)) {
+        if (errno == ENOBUFS || errno == EAGAIN) {
+          std::this_thread::sleep_for(std::chrono::microseconds(20));
+          continue;
+        }
+        result.problem = fmt::format("write on {}: {}", iface, std::strerror(errno));
+        break;
+      }
+      ++sent;
+    }
+    if (!result.problem.empty()) break;
+  }
+  // Wait for the readers to catch up (bounded: frames the bus dropped never arrive).
+  const Clock::time_point drain0 = Clock::now();
+  while (slowest() < sent && SecondsSince(drain0) < 2.0) {
+    std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+  const double elapsed = SecondsSince(t0);
+  writer_done = true;
+  for (auto& t : threads) t.join();
+  ::close(tx);
+  for (int fd : rx) ::close(fd);
+  const std::uint64_t delivered = slowest();
+  result.lost = sent - delivered;
+  result.frames_per_s = static_cast<double>(delivered) / elapsed;
+  return result;
+}
+
+// ---------------------------------------------------------------- real time
+
+class TransportSink final : public realtime::FrameSink {
+ public:
+  explicit TransportSink(bus::SocketCanTransport& t) : t_(t) {}
+  std::error_code Send(const bus::CanFrame& frame) noexcept override { return t_.Send(frame); }
+
+ private:
+  bus::SocketCanTransport& t_;
+};
+
+std::string JoinNotes(const std::vector<std::string>& notes) {
+  std::string s;
+  for (const auto& n : notes) s += (s.empty() ? "" : "; ") + n;
+  return s;
+}
+
+}  // namespace
+
+nlohmann::json RunPhysicsWorkload(const std::string& source_dir, double wall_s_per_case) {
+  nlohmann::json report = nlohmann::json::object();
+  for (const auto& platform : BenchPlatforms()) {
+    for (const bool mesh : {false, true}) {
+      const std::string key =
+          fmt::format("physics.{}.{}_rtf", platform, mesh ? "mesh" : "flat");
+      try {
+        SetPath(report, key, MeasureWorld(source_dir, platform, mesh, 1, wall_s_per_case));
+      } catch (const std::exception& e) {
+        SetPath(report, key, Unavailable(e.what()));
+      }
+    }
+  }
+  for (int n : {1, 4, 16}) {
+    const std::string key = fmt::format("physics.platforms_{}.rtf", n);
+    try {
+      SetPath(report, key, MeasureWorld(source_dir, "mecanum4_omni3", false, n, wall_s_per_case));
+    } catch (const std::exception& e) {
+      SetPath(report, key, Unavailable(e.what()));
+    }
+  }
+  return report;
+}
+
+nlohmann::json RunBusWorkload(const std::string& kind, double wall_s_per_case) {
+  nlohmann::json report = nlohmann::json::object();
+  const std::string k1 = fmt::format("bus.{}_frames_per_s", kind);
+  const std::string k4 = fmt::format("bus.{}_fanout4_frames_per_s", kind);
+  std::unique_ptr<bus::UcanBroker> broker;
+  std::string iface;
+  try {
+    if (kind == "ucan") {
+      const char* dir = std::getenv("WHEELHIL_UCAN_DIR");
+      if (!dir || !std::getenv("LD_PRELOAD")) {
+        throw std::runtime_error("libwheelhil_ucan.so is not preloaded (run through wheelhil bench)");
+      }
+      bus::UcanBrokerOptions o;
+      o.runtime_dir = dir;
+      o.remove_runtime_dir = true;
+      broker = std::make_unique<bus::UcanBroker>(o);
+      broker->AddBus("ucan0");
+      iface = "ucan0";
+    } else {
+      if (!std::filesystem::exists("/sys/class/net/vcan0")) {
+        throw std::runtime_error(
+            "no kernel vcan0 on this machine (measure it inside the test kernel: wheelhil bench "
+            "--uml, or `modprobe vcan; ip link add vcan0 type vcan; ip link set vcan0 up`)");
+      }
+      iface = "vcan0";
+    }
+  } catch (const std::exception& e) {
+    SetPath(report, k1, Unavailable(e.what()));
+    SetPath(report, k4, Unavailable(e.what()));
+    return report;
+  }
+  // vcan drops what does not fit a reader's socket buffer (about 300 frames by default); the
+  // ucan broker queues up to 8192 per reader.
+  const std::uint64_t window = kind == "ucan" ? 2048 : 128;
+  for (const auto& [readers, key] : {std::pair{1, k1}, std::pair{4, k4}}) {
+    const FanOutResult r = MeasureFanOut(iface.c_str(), readers, wall_s_per_case, window);
+    if (!r.problem.empty()) {
+      SetPath(report, key, Unavailable(r.problem));
+    } else {
+      SetPath(report, key, r.frames_per_s);
+      if (r.lost) SetPath(report, key + "_lost_frames", r.lost);
+    }
+  }
+  return report;
+}
+
+nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
+  using namespace realtime;
+  nlohmann::json report = nlohmann::json::object();
+  const std::string& px = options.prefix;
+  const bool main_run = px == "realtime.";
+  auto fail = [&](const std::string& reason) {
+    for (const char* k : {"p50_us", "p99_us", "max_us", "missed_deadlines"}) {
+      SetPath(report, px + k, Unavailable(reason));
+    }
+    if (main_run) {
+      for (const char* k : {"frames", "duration_s", "arrival_p99_us"}) {
+        SetPath(report, px + k, Unavailable(reason));
+      }
+      SetPath(report, "realtime.scheduling", Unavailable(reason));
+    }
+    return report;
+  };
+  const char* dir = std::getenv("WHEELHIL_UCAN_DIR");
+  if (!dir || !std::getenv("LD_PRELOAD")) {
+    return fail("libwheelhil_ucan.so is not preloaded (run through wheelhil bench)");
+  }
+  try {
+    Paper002DeviceSetOptions dso;
+    dso.source_dir = options.source_dir;
+    Paper002DeviceSet devices(dso);
+    const std::int64_t cycles =
+        static_cast<std::int64_t>(options.duration_s * 1e9 / static_cast<double>(devices.cycle_ns()));
+
+    // The broker's, producer's and reader's threads inherit the policy of the thread that
+    // creates them: under SCHED_FIFO the whole pipeline runs one step below the pacer, so a
+    // busy machine cannot stall the bus behind the pacer's frames.
+    RealtimeStatus pipeline;
+    if (options.sched_fifo) {
+      RealtimeOptions po;
+      po.lock_memory = false;
+      po.fifo_priority = std::max(1, options.fifo_priority - 1);
+      pipeline = ApplyRealtimeSettings(po);
+    }
+    bus::UcanBrokerOptions bo;
+    bo.runtime_dir = dir;
+    bo.remove_runtime_dir = true;
+    bus::UcanBroker broker(bo);
+    broker.AddBus("ucan0");
+    bus::CanTransportOptions to;
+    to.send_retry_limit = 0;
+    bus::SocketCanTransport tx = bus::SocketCanTransport::Open("ucan0", to);
+    bus::SocketCanTransport rx = bus::SocketCanTransport::Open("ucan0");
+
+    // Everything the threads record is allocated here, before the stream starts.
+    const std::size_t expected = static_cast<std::size_t>(cycles) * 8 + 64;
+    SpscRing<PacedFrame> input(4096);
+    SpscRing<SendRecord> records(8192);
+    std::vector<SendRecord> log;
+    log.reserve(expected);
+    std::vector<std::int64_t> arrivals_ns;
+    arrivals_ns.reserve(expected);
+    std::atomic<bool> producer_done{false}, pacer_done{false}, stop{false}, reader_stop{false};
+    std::atomic<bool> load_stop{false};
+
+    // Producer: device models in virtual time, ahead of the pacer by at most the ring.
+    std::vector<PacedFrame> batch;
+    batch.reserve(64);
+    std::thread producer([&] {
+      for (std::int64_t c = 0; c < cycles && !stop.load(); ++c) {
+        batch.clear();
+        devices.NextCycle(batch);
+        for (const PacedFrame& f : batch) {
+          while (!input.TryPush(f)) {
+            if (stop.load()) return;
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          }
+        }
+      }
+      producer_done.store(true, std::memory_order_release);
+    });
+    // Prefill before the clock starts.
+    while (input.SizeApprox() < input.capacity() / 2 && !producer_done.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    // Writer: the only place send records are stored (no I/O on the pacer's thread).
+    std::thread writer([&] {
+      SendRecord r;
+      while (true) {
+        if (records.TryPop(r)) {
+          if (log.size() < log.capacity()) log.push_back(r);
+        } else if (pacer_done.load(std::memory_order_acquire)) {
+          if (!records.TryPop(r)) break;
+          if (log.size() < log.capacity()) log.push_back(r);
+        } else {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      }
+    });
+    // Reader: a node on the bus noting when each frame arrives.
+    std::thread reader([&] {
+      bus::ReceivedFrame f;
+      while (!reader_stop.load()) {
+        const std::error_code ec = rx.Receive(f, 100);
+        if (!ec) {
+          if (arrivals_ns.size() < arrivals_ns.capacity()) arrivals_ns.push_back(MonotonicNowNs());
+        } else if (ec != std::errc::timed_out && ec != std::errc::bad_message) {
+          break;
+        }
+      }
+    });
+    std::vector<std::thread> load;
+    for (int i = 0; i < options.load_threads; ++i) {
+      load.emplace_back([&] {
+        sched_param normal{};
+        ::pthread_setschedparam(::pthread_self(), SCHED_OTHER, &normal);  // never starve others
+        volatile std::uint64_t x = 0;
+        while (!load_stop.load(std::memory_order_relaxed)) x = x + 1;
+      });
+    }
+
+    TransportSink sink(tx);
+    const std::int64_t start_ns = MonotonicNowNs() + 50'000'000;
+    RealtimeStatus rt;
+    PacerStats stats;
+    std::thread pacer([&] {
+      RealtimeOptions ro;
+      ro.sched_fifo = options.sched_fifo;
+      ro.lock_memory = options.sched_fifo;
+      ro.fifo_priority = options.fifo_priority;
+      ro.cpu = options.cpu;
+      rt = ApplyRealtimeSettings(ro);
+      FramePacer p(input, records, sink);
+      stats = p.Run(start_ns, producer_done, stop);
+      pacer_done.store(true, std::memory_order_release);
+    });
+    pacer.join();
+    producer.join();
+    writer.join();
+    load_stop = true;
+    for (auto& t : load) t.join();
+    // Let the reader collect the tail.
+    const std::int64_t drain_until = MonotonicNowNs() + 500'000'000;
+    while (arrivals_ns.size() < log.size() && MonotonicNowNs() < drain_until) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    reader_stop = true;
+    reader.join();
+
+    std::vector<double> error_us, wake_us;
+    error_us.reserve(log.size());
+    wake_us.reserve(log.size());
+    std::uint64_t missed = 0;
+    int first_error = 0;
+    for (const SendRecord& r : log) {
+      if (r.error != 0 && first_error == 0) first_error = r.error;
+      const double e = static_cast<double>(r.sent_ns - r.nominal_ns) * 1e-3;
+      error_us.push_back(e);
+      wake_us.push_back(static_cast<double>(r.woke_ns - r.nominal_ns) * 1e-3);
+      if (e > options.miss_threshold_us || r.error != 0) ++missed;
+    }
+    if (error_us.empty()) return fail("no frame was sent");
+    SetPath(report, px + "p50_us", Percentile(error_us, 50));
+    SetPath(report, px + "p99_us", Percentile(error_us, 99));
+    SetPath(report, px + "max_us", Percentile(error_us, 100));
+    SetPath(report, px + "missed_deadlines", missed);
+    SetPath(report, px + "wake_p99_us", Percentile(wake_us, 99));
+    if (main_run) {
+      std::vector<double> arrival_us;
+      const std::size_t n = std::min(arrivals_ns.size(), log.size());
+      for (std::size_t i = 0; i < n; ++i) {
+        arrival_us.push_back(static_cast<double>(arrivals_ns[i] - start_ns - log[i].nominal_ns) *
+                             1e-3);
+      }
+      SetPath(report, "realtime.frames", log.size());
+      SetPath(report, "realtime.duration_s", static_cast<double>(cycles) * devices.cycle_ns() * 1e-9);
+      SetPath(report, "realtime.arrival_p99_us",
+              arrival_us.empty() ? nlohmann::json(Unavailable("the reader received nothing"))
+                                 : nlohmann::json(Percentile(arrival_us, 99)));
+      SetPath(report, "realtime.frames_received", arrivals_ns.size());
+      SetPath(report, "realtime.send_errors", stats.send_errors);
+      if (first_error) SetPath(report, "realtime.first_send_error", std::strerror(first_error));
+      SetPath(report, "realtime.underruns", stats.underruns);
+      SetPath(report, "realtime.records_dropped", stats.records_dropped);
+      SetPath(report, "realtime.device_problems", devices.problems());
+      SetPath(report, "realtime.miss_threshold_us", options.miss_threshold_us);
+      std::string sched = fmt::format(
+          "{}, {}{}", rt.sched_fifo ? fmt::format("SCHED_FIFO {}", options.fifo_priority)
+                                    : std::string("SCHED_OTHER"),
+          rt.memory_locked ? "memory locked" : "memory not locked",
+          rt.pinned_cpu >= 0 ? fmt::format(", pinned to CPU {}", rt.pinned_cpu) : "");
+      if (pipeline.sched_fifo) {
+        sched += fmt::format("; bus broker, producer and reader SCHED_FIFO {}",
+                             std::max(1, options.fifo_priority - 1));
+      }
+      if (!rt.notes.empty()) sched += " (" + JoinNotes(rt.notes) + ")";
+      if (!options.sched_fifo) sched += " (--no-rt)";
+      SetPath(report, "realtime.scheduling", sched);
+    } else {
+      SetPath(report, px + "threads", options.load_threads);
+    }
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
+  return report;
+}
+
+}  // namespace wheelhil::emulator::bench

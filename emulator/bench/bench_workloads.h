@@ -1,0 +1,44 @@
+#pragma once
+/// The measured workloads of `wheelhil bench`. Each returns a partial report (nested JSON
+/// objects, keys of emulator/bench/bench_report.h) and is meant to run in its own child process
+/// (`wheelhil bench --worker NAME`), so that its peak RSS is its own. A figure that cannot be
+/// measured is set to "unavailable: <reason>", never to a made-up number. Not thread-safe: each
+/// workload owns the process while it runs.
+
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+namespace wheelhil::emulator::bench {
+
+/// Physics alone at 1 kHz: each platform on the flat floor and on meshes/uneven_tiles.obj, and
+/// 1, 4, 16 mecanum4_omni3 platforms in one world on the flat floor. Sets physics.*: median of
+/// per-chunk simulated seconds per wall second. wall_s_per_case: measuring time per case.
+nlohmann::json RunPhysicsWorkload(const std::string& source_dir, double wall_s_per_case);
+
+/// Frames per second 1 writer -> 1 reader and 1 -> 4 readers of 8-byte classic frames through
+/// the plain SocketCAN API on `iface` (flow-controlled: at most a window of frames in flight to
+/// the slowest reader; frames the bus dropped are reported, not counted as delivered).
+/// kind "ucan": starts a private broker on $WHEELHIL_UCAN_DIR (this process must have
+/// libwheelhil_ucan.so preloaded) and uses ucan0; "vcan": the kernel's vcan0.
+/// Sets bus.<kind>_frames_per_s and bus.<kind>_fanout4_frames_per_s.
+nlohmann::json RunBusWorkload(const std::string& kind, double wall_s_per_case);
+
+struct RealtimeWorkloadOptions {
+  std::string source_dir;
+  double duration_s = 10.0;       ///< Paced stream length.
+  bool sched_fifo = true;         ///< Ask for SCHED_FIFO (and mlockall).
+  int fifo_priority = 80;
+  int cpu = -1;                   ///< Pin the pacer; -1 = no pinning.
+  int load_threads = 0;           ///< Busy threads competing for the CPUs during the run.
+  double miss_threshold_us = 1000.0;  ///< A frame later than this missed its deadline.
+  std::string prefix = "realtime.";   ///< Key prefix: "realtime." or "realtime.loaded_".
+};
+/// The paper-002 device set (emulator/realtime/paper002_device_set.h) paced in real time onto
+/// a private ucan bus (broker on $WHEELHIL_UCAN_DIR, libwheelhil_ucan.so preloaded), a reader
+/// on the bus recording each frame's arrival. Sets <prefix>p50_us, p99_us, max_us (send time
+/// minus nominal instant, after the send returned), missed_deadlines, and for the unloaded run
+/// frames, duration_s, arrival_p99_us, scheduling.
+nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options);
+
+}  // namespace wheelhil::emulator::bench
