@@ -362,5 +362,37 @@ TEST_F(CampaignTest, SmokeWritesOneCasePerScenarioWithTheFailedExpectation) {
               ::testing::ThrowsMessage<std::invalid_argument>(HasSubstr("bad.list:2:")));
 }
 
+// The real `wheelhil run` (not the fake): the shipped smoke suite passes and a two-run campaign
+// over the paper-000 scenario, cut to 1 m, reads the real report's metrics.
+TEST_F(CampaignTest, RealRunnerSmokeSuiteAndShortCampaign) {
+  SmokeOptions so;
+  so.scenarios = FindSmokeScenarios(fs::path(WHEELHIL_SOURCE_DIR) / "scenarios/smoke");
+  so.out_dir = dir_.path() / "real_smoke";
+  so.runner_exe = WHEELHIL_EXE;
+  so.junit = dir_.path() / "real_smoke.xml";
+  so.progress = false;
+  const auto smoke = RunSmoke(so);
+  ASSERT_FALSE(smoke.runs.empty());
+  for (const auto& r : smoke.runs) EXPECT_TRUE(r.passed) << r.key << ": " << r.failure;
+  EXPECT_TRUE(smoke.passed);
+
+  const auto spec = ParseCampaign(
+      "base: " + std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml\n"
+      "set:\n  motion[1].distance: 1.0\n"
+      "parameters: [{path: terrain.random_patches.count, values: [0, 4]}]\n"
+      "pass:\n  verdict: false\n  run: [{metric: pose.final_position_error_m, max: 0.25}]\n",
+      (dir_.path() / "real.yaml").string());
+  auto o = Options("real");
+  o.runner_exe = WHEELHIL_EXE;
+  const auto out = RunCampaign(spec, o);
+  ASSERT_EQ(out.runs.size(), 2u);
+  for (const auto& r : out.runs) {
+    EXPECT_NE(r.verdict, "error") << r.failure;
+    ASSERT_EQ(r.metrics.count("pose.final_position_error_m"), 1u) << r.key;
+    EXPECT_NEAR(r.metrics.at("pose.distance_m"), 1.0, 0.1);
+    EXPECT_TRUE(r.passed) << r.failure;
+  }
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator::campaign
