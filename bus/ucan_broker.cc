@@ -38,12 +38,15 @@ using ucan::Reply;
 using ucan::Request;
 using ucan::RxTrailer;
 using ucan::TxAddress;
+using ucan::TxStamp;
 
 constexpr std::uint64_t kListenTag = 0;
 constexpr std::uint64_t kWakeTag = 1;
 constexpr std::uint32_t kFirstClientId = 2;  // ids 0 and 1 are the tags above
 constexpr int kBatch = 64;
-constexpr int kReadBatchesPerWakeup = 4;  // fairness between flooding clients
+// Per pass and connection. Honest clients never reach it (a pass reads each connection only up
+// to its first frame stamped after the pass began); it bounds a client that forges old stamps.
+constexpr int kReadBatchesPerPass = 64;
 constexpr std::size_t kMaxRequest = sizeof(Request) + ucan::kMaxFilters * sizeof(can_filter);
 constexpr std::size_t kClientMsgBuf = 128;  // > 80, so a larger message shows as MSG_TRUNC
 
@@ -194,6 +197,26 @@ struct Bus {
   std::int64_t last_ts_ns = 0;
 };
 
+std::int64_t MonotonicNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
+/// A frame read from a client, waiting for its turn (dispatch is in TxStamp order). The
+/// sender's options are captured at read time: a later setsockopt does not apply to it.
+struct Pending {
+  std::int64_t stamp_ns = 0;
+  Bus* bus = nullptr;
+  std::uint32_t sender_id = 0;
+  pid_t sender_pid = 0;
+  bool loopback = true;
+  bool recv_own = false;
+  std::uint32_t can_id = 0;
+  std::uint8_t frame_len = 0;
+  std::array<std::uint8_t, ucan::kCanFdMtu> frame{};
+};
+
 std::int64_t RealtimeNs() {
   timespec ts{};
   ::clock_gettime(CLOCK_REALTIME, &ts);
@@ -241,6 +264,14 @@ struct UcanBroker::Impl {
   int next_named_index = ucan::kFirstNamedIfindex;
   std::vector<Client*> any_clients;
   std::vector<Client*> dirty;
+  std::vector<Pending> pending;  // read, not yet routed (see Dispatch)
+  struct DeferredOptions {
+    std::uint32_t request_id = 0;  // the kSetOptions connection, answered after the pass
+    Request req;
+    std::vector<std::uint8_t> extra;
+  };
+  std::vector<DeferredOptions> deferred_options;
+  std::int64_t pass_start_ns = 0;  // T0 of the current pass
   std::uint32_t next_id = kFirstClientId;
   std::uint64_t orphan_bad_messages = 0;
 
@@ -346,6 +377,10 @@ struct UcanBroker::Impl {
       Kill(c);
     }
     it->second->members.clear();
+    Bus* gone = it->second.get();
+    pending.erase(std::remove_if(pending.begin(), pending.end(),
+                                 [gone](const Pending& f) { return f.bus == gone; }),
+                  pending.end());
     buses.erase(it);
     ReapDead();
     return true;
@@ -503,10 +538,10 @@ struct UcanBroker::Impl {
           reply.error = ENOTCONN;
           break;
         }
-        ReadData(target, /*max_batches=*/1024);  // frames sent before the change go first
-        FlushDirty();
-        if (!SetOptions(target, req, extra, extra_len)) reply.error = EINVAL;
-        break;
+        // Applied after this pass's dispatch, once the target's earlier frames are read
+        // (ApplyDeferredOptions); the reply waits until then.
+        deferred_options.push_back({c->id, req, std::vector<std::uint8_t>(extra, extra + extra_len)});
+        return;
       }
       case Op::kResolveName: {
         auto it = buses.find(name);
@@ -568,7 +603,9 @@ struct UcanBroker::Impl {
     Kill(c);
   }
 
-  void ReadData(Client* c, int max_batches) {
+  /// Reads `c`'s frames into `pending`, up to and including the first batch holding a frame
+  /// stamped at or after `stop_ns` (later frames wait in the socket for the next pass).
+  void ReadData(Client* c, int max_batches, std::int64_t stop_ns) {
     std::array<std::array<std::uint8_t, kClientMsgBuf>, kBatch> bufs;
     std::array<iovec, kBatch> iovs;
     std::array<mmsghdr, kBatch> msgs;
@@ -588,15 +625,21 @@ struct UcanBroker::Impl {
         Kill(c);
         return;
       }
+      // Every message of this batch was sent before now: an honest stamp is not larger.
+      const std::int64_t read_ns = MonotonicNs();
+      bool reached_stop = false;
       for (int i = 0; i < n; ++i) {
         const std::size_t len = msgs[i].msg_len;
         if (len == 0) {  // end of stream
           Kill(c);
           return;
         }
-        HandleFrame(c, bufs[i].data(), len, (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0);
+        const std::int64_t stamp = HandleFrame(c, bufs[i].data(), len,
+                                               (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0,
+                                               read_ns);
+        reached_stop = reached_stop || stamp >= stop_ns;
       }
-      if (n < kBatch) return;
+      if (n < kBatch || reached_stop) return;
     }
   }
 
@@ -608,34 +651,73 @@ struct UcanBroker::Impl {
     }
   }
 
-  void HandleFrame(Client* c, const std::uint8_t* p, std::size_t len, bool truncated) {
+  /// Validates one client message and appends its frame to `pending`. Returns the frame's
+  /// stamp (clamped to `read_ns`), or INT64_MIN for a rejected message.
+  std::int64_t HandleFrame(Client* c, const std::uint8_t* p, std::size_t len, bool truncated,
+                           std::int64_t read_ns) {
+    constexpr std::int64_t kRejected = INT64_MIN;
     Bus* bus = c->bus;
-    std::size_t frame_len = len;
-    if (!truncated && (len == ucan::kCanMtu + sizeof(TxAddress) ||
-                       len == ucan::kCanFdMtu + sizeof(TxAddress))) {
+    std::size_t frame_len = 0;
+    bool addressed = false;
+    if (!truncated) {
+      if (len == ucan::kCanMtu + sizeof(TxStamp) || len == ucan::kCanFdMtu + sizeof(TxStamp)) {
+        frame_len = len - sizeof(TxStamp);
+      } else if (len == ucan::kCanMtu + sizeof(TxStamp) + sizeof(TxAddress) ||
+                 len == ucan::kCanFdMtu + sizeof(TxStamp) + sizeof(TxAddress)) {
+        frame_len = len - sizeof(TxStamp) - sizeof(TxAddress);
+        addressed = true;
+      }
+    }
+    if (addressed) {
       TxAddress to;
-      frame_len = len - sizeof(TxAddress);
-      std::memcpy(&to, p + frame_len, sizeof(to));
+      std::memcpy(&to, p + frame_len + sizeof(TxStamp), sizeof(to));
       bus = to.magic == ucan::kMagic ? BusByIndex(to.ifindex) : nullptr;
     }
-    if (truncated || bus == nullptr ||
-        (frame_len != ucan::kCanMtu && frame_len != ucan::kCanFdMtu) ||
+    if (frame_len == 0 || bus == nullptr ||
         (frame_len == ucan::kCanFdMtu && !c->options.fd_frames)) {
       CountBad(c);
-      return;
+      return kRejected;
     }
     const std::uint8_t payload_len = p[4];
     if (payload_len > (frame_len == ucan::kCanMtu ? CAN_MAX_DLEN : CANFD_MAX_DLEN)) {
       ++bus->bad_messages;
-      return;
+      return kRejected;
     }
-    std::uint32_t can_id = 0;
-    std::memcpy(&can_id, p, sizeof(can_id));
-    Route(c, bus, can_id, p, frame_len);
+    TxStamp stamp;
+    std::memcpy(&stamp, p + frame_len, sizeof(stamp));
+    Pending& f = pending.emplace_back();
+    f.stamp_ns = std::min(stamp.monotonic_ns, read_ns);  // a future stamp would stall it
+    f.bus = bus;
+    f.sender_id = c->id;
+    f.sender_pid = c->pid;
+    f.loopback = c->options.loopback != 0;
+    f.recv_own = c->options.recv_own != 0;
+    std::memcpy(&f.can_id, p, sizeof(f.can_id));
+    f.frame_len = static_cast<std::uint8_t>(frame_len);
+    std::memcpy(f.frame.data(), p, frame_len);
+    return f.stamp_ns;
   }
 
-  void Route(Client* sender, Bus* bus, std::uint32_t can_id, const std::uint8_t* frame,
-             std::size_t frame_len) {
+  /// Routes, in stamp order (ties: read order), every pending frame stamped before `before_ns`;
+  /// later ones stay pending for the next pass, which starts without blocking.
+  void Dispatch(std::int64_t before_ns) {
+    auto by_stamp = [](const Pending& a, const Pending& b) { return a.stamp_ns < b.stamp_ns; };
+    if (!std::is_sorted(pending.begin(), pending.end(), by_stamp)) {
+      std::stable_sort(pending.begin(), pending.end(), by_stamp);
+    }
+    auto end = pending.begin();
+    while (end != pending.end() && end->stamp_ns < before_ns) {
+      Route(*end);
+      ++end;
+    }
+    pending.erase(pending.begin(), end);
+  }
+
+  void Route(const Pending& f) {
+    Bus* bus = f.bus;
+    const std::uint32_t can_id = f.can_id;
+    const std::uint8_t* frame = f.frame.data();
+    const std::size_t frame_len = f.frame_len;
     const std::int64_t ts = std::max(RealtimeNs(), bus->last_ts_ns);
     bus->last_ts_ns = ts;
     ++bus->frames;
@@ -643,10 +725,10 @@ struct UcanBroker::Impl {
     auto deliver = [&](Client* r) {
       if (r->dead) return;
       std::uint32_t flags = 0;
-      if (r == sender) {
-        if (!sender->options.recv_own || !sender->options.loopback) return;
+      if (r->id == f.sender_id) {
+        if (!f.recv_own || !f.loopback) return;
         flags = ucan::kRxOwn;
-      } else if (!sender->options.loopback && r->pid == sender->pid) {
+      } else if (!f.loopback && r->pid == f.sender_pid) {
         return;
       }
       if (is_fd && !r->options.fd_frames) return;
@@ -715,13 +797,49 @@ struct UcanBroker::Impl {
     dirty.clear();
   }
 
+  /// Answers the kSetOptions requests of this pass: the target's frames sent before the
+  /// request are read first (and routed with the options they were sent under).
+  void ApplyDeferredOptions() {
+    std::vector<DeferredOptions> todo;
+    todo.swap(deferred_options);
+    for (DeferredOptions& d : todo) {
+      Client* c = Find(d.request_id);
+      if (c == nullptr || c->dead) continue;
+      Reply reply;
+      Client* target = Find(d.req.client_id);
+      if (target == nullptr || !target->data) {
+        reply.error = ENOTCONN;
+      } else {
+        ReadData(target, kReadBatchesPerPass, INT64_MAX);
+        if (!SetOptions(target, d.req, d.extra.data(), d.extra.size())) reply.error = EINVAL;
+      }
+      SendReply(c, reply);
+      Kill(c);
+    }
+  }
+
+  /// One pass: T0 = now; take the whole ready set (epoll after T0, room for every fd); read each
+  /// ready connection up to its first frame stamped >= T0; route the frames stamped < T0 in
+  /// stamp order. A write that returned before T0 is then either routed already or read in this
+  /// pass, so a frame is never routed before one whose write() returned before it was sent.
   void Loop() {
-    std::array<epoll_event, kBatch> events;
+    std::vector<epoll_event> events(kBatch);
     for (;;) {
-      const int n = ::epoll_wait(epoll_fd.get(), events.data(), kBatch, -1);
+      bool more_pending = false;
+      {
+        std::lock_guard lk(mu);
+        more_pending = !pending.empty();
+      }
+      int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()),
+                           more_pending ? 0 : -1);
       if (n < 0 && errno != EINTR) break;
       std::lock_guard lk(mu);
       if (stop_requested) break;
+      pass_start_ns = MonotonicNs();
+      // The wait above may predate T0; the level-triggered set is taken again after it.
+      events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
+      n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
+      if (n < 0) n = 0;
       for (int i = 0; i < n; ++i) {
         const std::uint64_t tag = events[i].data.u64;
         if (tag == kListenTag) {
@@ -738,12 +856,14 @@ struct UcanBroker::Impl {
         if (events[i].events & EPOLLOUT) Flush(c);
         if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
           if (c->data) {
-            ReadData(c, kReadBatchesPerWakeup);
+            ReadData(c, kReadBatchesPerPass, pass_start_ns);
           } else {
             HandleRequest(c);
           }
         }
       }
+      Dispatch(pass_start_ns);
+      ApplyDeferredOptions();
       FlushDirty();
       ReapDead();
       if (stop_requested) break;

@@ -458,7 +458,7 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   for (std::size_t i = 0; i < iovcnt; ++i) total += iov[i].iov_len;
   if (total != ucan::kCanMtu && total != ucan::kCanFdMtu) return Fail(EINVAL);
   if (total == ucan::kCanFdMtu && !v.fd_frames) return Fail(EINVAL);
-  std::uint8_t buf[ucan::kCanFdMtu + sizeof(ucan::TxAddress)];
+  std::uint8_t buf[ucan::kCanFdMtu + sizeof(ucan::TxStamp) + sizeof(ucan::TxAddress)];
   std::size_t off = 0;
   for (std::size_t i = 0; i < iovcnt; ++i) {
     if (iov[i].iov_len == 0) continue;
@@ -478,13 +478,20 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
     ifindex = sa.can_ifindex;
   }
   if (ifindex == 0 || !v.bound) return Fail(ENXIO);
-  std::size_t len = total;
+  std::size_t len = total + sizeof(ucan::TxStamp);
   if (ifindex != v.ifindex) {
     ucan::TxAddress to;
     to.ifindex = ifindex;
-    std::memcpy(buf + total, &to, sizeof(to));
+    std::memcpy(buf + len, &to, sizeof(to));
     len += sizeof(to);
   }
+  // Stamped last, right before the send: a write that returned before this one began has a
+  // smaller stamp (see ucan::TxStamp).
+  timespec now{};
+  ::clock_gettime(CLOCK_MONOTONIC, &now);
+  ucan::TxStamp stamp;
+  stamp.monotonic_ns = static_cast<std::int64_t>(now.tv_sec) * 1000000000 + now.tv_nsec;
+  std::memcpy(buf + total, &stamp, sizeof(stamp));
   const ssize_t n = real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
   if (n < 0) {
     if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN) return Fail(ENETDOWN);

@@ -6,10 +6,10 @@
 /// boundaries are kept by the kernel, so one message is one frame or one request.
 ///
 /// Every connection starts with one Request. kOpen turns the connection into a data connection:
-///   client -> broker: `struct can_frame` (16 bytes) or `struct canfd_frame` (72 bytes) for the
-///                     bound bus, or the same followed by a TxAddress (24 / 80 bytes) to send on
-///                     another bus (sockets bound to "any"). Any other size is counted as a bad
-///                     message and ignored.
+///   client -> broker: `struct can_frame` (16 bytes) or `struct canfd_frame` (72 bytes), then a
+///                     TxStamp (24 / 80 bytes) for the bound bus, or frame + TxStamp + TxAddress
+///                     (32 / 88 bytes) to send on another bus (sockets bound to "any"). Any other
+///                     size is counted as a bad message and ignored.
 ///   broker -> client: the frame (16 / 72 bytes) followed by an RxTrailer (24 bytes).
 /// All other ops are one request, one Reply, then the broker closes the connection.
 ///
@@ -23,7 +23,7 @@ namespace wheelhil::bus::ucan {
 
 inline constexpr char kSocketName[] = "ucan.sock";
 inline constexpr char kLockName[] = "ucan.lock";
-inline constexpr std::uint32_t kMagic = 0x4E414355u;  // "UCAN"
+inline constexpr std::uint32_t kMagic = 0x32414355u;  // "UCA2" (v2: frames carry a TxStamp)
 inline constexpr std::size_t kNameSize = 16;           // IFNAMSIZ, including the NUL
 inline constexpr std::size_t kCanMtu = 16;             // sizeof(struct can_frame)
 inline constexpr std::size_t kCanFdMtu = 72;           // sizeof(struct canfd_frame)
@@ -95,6 +95,13 @@ struct RxTrailer {
   std::uint32_t magic = kMagic;
 };
 
+/// Follows every frame a client sends: CLOCK_MONOTONIC ns taken right before the send() (vDSO).
+/// The broker dispatches in stamp order, so a write that returned before another began is
+/// delivered first even when the two went through different connections (docs/ucan.md).
+struct TxStamp {
+  std::int64_t monotonic_ns = 0;
+};
+
 struct TxAddress {
   std::int32_t ifindex = 0;
   std::uint32_t magic = kMagic;
@@ -102,6 +109,7 @@ struct TxAddress {
 
 static_assert(sizeof(RxTrailer) == 24);
 static_assert(sizeof(TxAddress) == 8);
+static_assert(sizeof(TxStamp) == 8);
 inline constexpr std::size_t kMaxRxMessage = kCanFdMtu + sizeof(RxTrailer);
 
 }  // namespace wheelhil::bus::ucan

@@ -380,6 +380,45 @@ TEST_F(UcanBusTest, ManyReadersSeeOneGlobalOrder) {
   ::close(w2);
 }
 
+// vcan: a write() that returned happens-before the next write(), so frames written back to back
+// from one thread through two sockets reach every reader in that order. Each ucan socket is
+// its own connection to the broker, whose epoll loop may service B's before A's.
+TEST_F(UcanBusTest, BackToBackWritesThroughTwoSocketsKeepTheirOrder) {
+  const int a = OpenCan("ucan0"), b = OpenCan("ucan0"), c = OpenCan("ucan0");
+  ASSERT_GE(a, 0);
+  ASSERT_GE(b, 0);
+  ASSERT_GE(c, 0);
+  constexpr int kIterations = 20000;
+  constexpr int kChunk = 200;  // pairs in flight before C reads (well under C's queue)
+  int reversed = 0;
+  int lost = 0;
+  for (int base = 0; base < kIterations; base += kChunk) {
+    for (int i = base; i < base + kChunk; ++i) {
+      const auto lo = static_cast<std::uint8_t>(i), hi = static_cast<std::uint8_t>(i >> 8);
+      ASSERT_TRUE(Send(a, Frame(0x100, {lo, hi})));
+      ASSERT_TRUE(Send(b, Frame(0x200, {lo, hi})));
+    }
+    // Expected: A(base) B(base) A(base+1) ...; count the places where the sequence goes back.
+    int last_key = -1;
+    for (int k = 0; k < 2 * kChunk; ++k) {
+      const can_frame f = Receive(c);
+      if (f.can_id == kNothing) {
+        ++lost;
+        break;
+      }
+      const int key = 2 * (f.data[0] | (f.data[1] << 8)) + (f.can_id == 0x200 ? 1 : 0);
+      if (key < last_key) ++reversed;
+      last_key = key;
+    }
+    if (lost > 0) break;
+  }
+  EXPECT_EQ(lost, 0);
+  EXPECT_EQ(reversed, 0) << "of " << kIterations << " A-then-B pairs";
+  ::close(a);
+  ::close(b);
+  ::close(c);
+}
+
 TEST(UcanBroker, SlowReaderDropsAreCountedAndNeverStallOthers) {
   testing::TempRuntimeDir dir;
   UcanBrokerOptions options;
