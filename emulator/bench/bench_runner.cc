@@ -46,8 +46,16 @@ std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::stri
   return argv;
 }
 
-/// scenarios/<name>*.yaml, the first in name order; empty when there is none.
+/// The paper's reference scenario (paper000_slip.yaml, paper001_forward_T10.yaml) when it
+/// exists, else scenarios/<name>*.yaml, the first in name order; empty when there is none.
 std::string FindScenarioFile(const std::string& source_dir, const std::string& name) {
+  const std::vector<std::pair<std::string, std::string>> preferred = {
+      {"paper000", "paper000_slip.yaml"}, {"paper001", "paper001_forward_T10.yaml"},
+      {"paper002", "paper002_straight.yaml"}};
+  for (const auto& [paper, file] : preferred) {
+    const std::string path = source_dir + "/scenarios/" + file;
+    if (paper == name && std::filesystem::is_regular_file(path)) return path;
+  }
   std::vector<std::string> found;
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(source_dir + "/scenarios", ec)) {
