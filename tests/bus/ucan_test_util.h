@@ -45,7 +45,7 @@ inline can_frame Frame(canid_t id, std::vector<std::uint8_t> data = {}) {
   can_frame f{};
   f.can_id = id;
   f.can_dlc = static_cast<std::uint8_t>(data.size());
-  std::memcpy(f.data, data.data(), data.size());
+  if (!data.empty()) std::memcpy(f.data, data.data(), data.size());  // nullptr when empty
   return f;
 }
 
