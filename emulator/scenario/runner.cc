@@ -30,6 +30,7 @@
 #include "bus/ucan_broker.h"
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/devices/can_bus_model.h"
+#include "emulator/devices/accel4_node.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
 #include "emulator/devices/mm5_imu_node.h"
@@ -194,6 +195,8 @@ class Run {
   };
   std::vector<Encoder> encoders_;
   std::unique_ptr<Mm5ImuNode> imu_;
+  std::unique_ptr<Accel4Node> accel4_;
+  int bus_accel4_ = -1;
   std::uint64_t enqueued_ = 0, completed_ = 0, silenced_ = 0, enqueue_failures_ = 0;
   std::vector<std::size_t> drive_wheels_;
 
@@ -311,6 +314,24 @@ void Run::BuildDevices() {
     gp.seed = seed_ * 7919ull + 17;
     imu_ = std::make_unique<Mm5ImuNode>(mm5_, gp, std::llround(1e9 / gp.rate_hz));
     bus_imu_ = bus_->AddNode("imu");
+  }
+  if (s_.sensors.accel4) {
+    auto params = Paper002AccelParams(s_.sensors.accel4_radius_m, s_.sensors.accel4_rate_hz,
+                                      seed_ * 104729ull + 31);
+    for (std::size_t i = 0; i < 4; ++i) {
+      params[i].noise_density_m_s2_sqrt_hz = s_.sensors.accel4_noise_density_m_s2_sqrt_hz;
+      if (!s_.sensors.accel4_bias_m_s2.empty()) {
+        params[i].bias_m_s2 = {s_.sensors.accel4_bias_m_s2[i]};
+      }
+      if (!s_.sensors.accel4_scale_error.empty()) {
+        params[i].scale_error = {s_.sensors.accel4_scale_error[i]};
+      }
+    }
+    auto db = std::make_shared<const bus::DbcDatabase>(
+        bus::DbcDatabase::LoadFile(dir + "/wheelhil_accel4.dbc"));
+    accel4_ = std::make_unique<Accel4Node>(db, params,
+                                           std::llround(1e9 / s_.sensors.accel4_rate_hz));
+    bus_accel4_ = bus_->AddNode("accel4");
   }
 }
 
@@ -507,6 +528,25 @@ void Run::Step(bool motion) {
       bus::CanFrame f;
       (void)imu_->Sample(w_B, a_B.y(), f);
       if (bus_->Enqueue(bus_imu_, f, std::max(ts, bus_->now_ns()))) {
+        ++enqueued_;
+      } else {
+        ++enqueue_failures_;
+      }
+    }
+  }
+  if (accel4_) {
+    // The four accelerometers at each sample instant, from the body kinematics of this step.
+    while (accel4_->next_sample_ns() <= t_ns_) {
+      const std::int64_t ts = accel4_->next_sample_ns();
+      const auto& b = vehicle_->body_truth();
+      BodyKinematics k;
+      k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
+      k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
+      k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
+      k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
+      bus::CanFrame f;
+      (void)accel4_->Sample(k, f);
+      if (bus_->Enqueue(bus_accel4_, f, std::max(ts, bus_->now_ns()))) {
         ++enqueued_;
       } else {
         ++enqueue_failures_;

@@ -228,7 +228,7 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
                         const platforms::Platform& platform) {
   SensorsSpec s;
   if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
-  r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus"});
+  r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4"});
   const auto e = n["encoders"];
   if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
   r.CheckKeys(e, "sensors.encoders",
@@ -272,6 +272,49 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
     s.gyro_bias_rad_s = r.Number(g, "bias_rad_s", f, -10, 10, 0.0);
     s.gyro_bias_random_walk_rad_s_sqrt_s =
         r.Number(g, "bias_random_walk_rad_s_sqrt_s", f, 0, 1, 0.0);
+  }
+  if (const auto a = n["accel4"]) {
+    const std::string f = "sensors.accel4";
+    r.CheckKeys(a, f, {"rate_hz", "radius_m", "noise_density_m_s2_sqrt_hz", "bias_m_s2",
+                       "scale_error"});
+    s.accel4 = true;
+    s.accel4_rate_hz = r.Number(a, "rate_hz", f, 1, 1e5, 1000.0);
+    std::optional<double> radius_default;
+    for (const auto& [k, v] : platform.parameters) {
+      if (k == "accelerometer_radius_m") radius_default = v;
+    }
+    if (!a["radius_m"] && !radius_default) {
+      r.Fail(a, f + ".radius_m",
+             fmt::format("is required (platform {} has no kinematics.accelerometer_radius_m)",
+                         platform.name));
+    }
+    s.accel4_radius_m = r.Number(a, "radius_m", f, 1e-3, 10, radius_default);
+    s.accel4_noise_density_m_s2_sqrt_hz =
+        r.Number(a, "noise_density_m_s2_sqrt_hz", f, 0, 10, 0.0);
+    auto four = [&](const char* key, double lim) {
+      std::vector<double> out;
+      const auto v = a[key];
+      if (!v) return out;
+      if (!v.IsSequence() || v.size() != 4) {
+        r.Fail(v, f + "." + key, "must list 4 values (accelerometers 1..4 of paper 002 eq 3)");
+      }
+      for (std::size_t i = 0; i < 4; ++i) {
+        double x = 0;
+        try {
+          x = v[i].as<double>();
+        } catch (const std::exception&) {
+          r.Fail(v[i], fmt::format("{}.{}[{}]", f, key, i), "is not a number");
+        }
+        if (!std::isfinite(x) || std::abs(x) > lim) {
+          r.Fail(v[i], fmt::format("{}.{}[{}]", f, key, i),
+                 fmt::format("({}) must be within +-{}", x, lim));
+        }
+        out.push_back(x);
+      }
+      return out;
+    };
+    s.accel4_bias_m_s2 = four("bias_m_s2", 10.0);
+    s.accel4_scale_error = four("scale_error", 0.5);
   }
   if (const auto b = n["bus"]) {
     r.CheckKeys(b, "sensors.bus", {"bitrate_bps", "heartbeat_ms"});

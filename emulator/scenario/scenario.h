@@ -84,6 +84,13 @@ struct SensorsSpec {
   double gyro_bias_random_walk_rad_s_sqrt_s = 0;
   std::uint32_t bitrate_bps = 1'000'000;
   int heartbeat_ms = 100;
+  /// Paper 002's four single-axis accelerometers (one node, ACC4_Data 0x170) present.
+  bool accel4 = false;
+  double accel4_rate_hz = 1000;
+  double accel4_radius_m = 0.15;  ///< R of paper 002 eq 3 (platform accelerometer_radius_m).
+  double accel4_noise_density_m_s2_sqrt_hz = 0;
+  std::vector<double> accel4_bias_m_s2;  ///< 4 values (calibration error), empty: none.
+  std::vector<double> accel4_scale_error;  ///< 4 values, empty: none.
 };
 
 /// A fault injected at a time: a node's device fault (EMCY) or a node falling silent.
