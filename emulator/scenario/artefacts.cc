@@ -177,7 +177,10 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
                      ok ? "pass" : "fail", ok ? "pass" : "FAIL");
   }
   h += "</table>\n<h2>Metrics</h2>\n<table><tr><th>stream</th><th>metric</th><th>value</th></tr>\n";
-  for (const auto& [stream, m] : report.value("metrics", nlohmann::json::object()).items()) {
+  // Named: items() only refers to the object it is called on, so iterating the items() of the
+  // temporary that value() returns would read a destroyed map (crashed `wheelhil run`).
+  const nlohmann::json metrics = report.value("metrics", nlohmann::json::object());
+  for (const auto& [stream, m] : metrics.items()) {
     if (!m.is_object()) continue;
     for (const auto& [k, v] : m.items()) {
       h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td></tr>\n", Escape(stream), Escape(k),
