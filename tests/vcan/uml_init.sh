@@ -46,7 +46,12 @@ skip() { echo "$*" > "$W/skip"; echo "uml_init: SKIP: $*"; exit 0; }
 # Writable host directories: the command's cwd and anything asked for with --rw.
 read -r cwd < "$W/cwd"
 mapfile -t rw < "$W/rw"
-for dir in "$cwd" "${rw[@]}"; do
+# Parents before children, so a directory mounted inside another stays visible.
+# (no process substitution: the guest has no /dev/fd)
+sorted="$(printf '%s\n' "$cwd" "${rw[@]}" | awk 'NF { print length($0) "\t" $0 }' | sort -n -u \
+  | cut -f2-)"
+mapfile -t dirs <<< "$sorted"
+for dir in "${dirs[@]}"; do
   [ -n "$dir" ] || continue
   [ -d "$dir" ] || mkdir -p "$dir"
   mount -t hostfs hostfs "$dir" -o "$dir" || fail "cannot mount $dir writable"

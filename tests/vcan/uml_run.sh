@@ -114,6 +114,10 @@ for m in can can-raw can-dev vcan; do add_module "$m"; done
 # memory (EAGAIN).
 for m in can-bcm sch_netem sch_tbf; do add_module "$m" optional; done
 
+# The guest mounts a fresh tmpfs over /tmp, so a checkout or build tree under /tmp (as in CI
+# clones) would vanish there: mount the source tree and the command's directory from the host.
+rw+=("$(cd "$(dirname "$0")/../.." && pwd -P)")
+if [ "${1#/}" != "$1" ] && [ -d "$(dirname "$1")" ]; then rw+=("$(cd "$(dirname "$1")" && pwd -P)"); fi
 pwd -P > "$work/cwd"
 printf '%s\n' "${rw[@]+"${rw[@]}"}" > "$work/rw"
 env -0 | grep -zvE '^(PWD|OLDPWD|SHLVL|_)=' > "$work/env" || true
