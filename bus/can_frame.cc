@@ -7,7 +7,7 @@
 
 namespace wheelhil::bus {
 namespace {
-constexpr std::array<std::uint8_t, 16> kDlcToLen = {0,  1,  2,  3,  4,  5,  6,  7,
+constexpr std::array<std::uint8_t, 16> kDlcToLen = {0, 1,  2,  3,  4,  5,  6,  7,
                                                     8, 12, 16, 20, 24, 32, 48, 64};
 constexpr char kHex[] = "0123456789ABCDEF";
 constexpr std::uint32_t kMaxExtendedIdMask = CanFrame::kMaxExtendedId;
@@ -15,9 +15,8 @@ constexpr std::uint32_t kMaxExtendedIdMask = CanFrame::kMaxExtendedId;
 
 CanFrame CanFrame::Classic(std::uint32_t id, std::span<const std::uint8_t> bytes, bool extended) {
   if (bytes.size() > kMaxClassicLen) {
-    throw std::invalid_argument(
-        fmt::format("CAN frame 0x{:X}: {} data bytes (classic CAN carries at most 8)", id,
-                    bytes.size()));
+    throw std::invalid_argument(fmt::format(
+        "CAN frame 0x{:X}: {} data bytes (classic CAN carries at most 8)", id, bytes.size()));
   }
   if (id > (extended ? kMaxExtendedId : kMaxStandardId)) {
     throw std::invalid_argument(fmt::format("CAN id 0x{:X} does not fit a {} identifier", id,
@@ -39,8 +38,8 @@ bool CanFrame::IsValid() const noexcept {
 }
 
 bool CanFrame::operator==(const CanFrame& o) const noexcept {
-  return id == o.id && extended == o.extended && rtr == o.rtr && error == o.error &&
-         fd == o.fd && (!fd || fd_flags == o.fd_flags) && len == o.len &&
+  return id == o.id && extended == o.extended && rtr == o.rtr && error == o.error && fd == o.fd &&
+         (!fd || fd_flags == o.fd_flags) && len == o.len &&
          (rtr || std::equal(data.begin(), data.begin() + len, o.data.begin()));
 }
 

@@ -16,11 +16,11 @@ struct CanFrame {
   static constexpr std::size_t kMaxClassicLen = 8;
   static constexpr std::size_t kMaxFdLen = 64;
 
-  std::uint32_t id = 0;   ///< 11-bit or 29-bit identifier (no flag bits), or error class bits.
-  bool extended = false;  ///< 29-bit identifier.
-  bool rtr = false;       ///< Remote transmission request (classic frames only).
-  bool error = false;     ///< Error frame (id holds the CAN_ERR_* class mask).
-  bool fd = false;        ///< CAN FD frame.
+  std::uint32_t id = 0;       ///< 11-bit or 29-bit identifier (no flag bits), or error class bits.
+  bool extended = false;      ///< 29-bit identifier.
+  bool rtr = false;           ///< Remote transmission request (classic frames only).
+  bool error = false;         ///< Error frame (id holds the CAN_ERR_* class mask).
+  bool fd = false;            ///< CAN FD frame.
   std::uint8_t fd_flags = 0;  ///< CANFD_BRS (0x01) / CANFD_ESI (0x02) for FD frames.
   std::uint8_t len = 0;       ///< Payload length in bytes (for RTR: the requested DLC).
   std::array<std::uint8_t, kMaxFdLen> data{};

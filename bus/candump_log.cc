@@ -147,7 +147,8 @@ CandumpLineStatus ParseCandumpLine(std::string_view line, std::size_t line_numbe
   }
   if (digits == 0) return fail("timestamp must be '(<seconds>.<fraction>)'");
   if (seconds > kMaxSeconds) return fail("timestamp seconds out of range (int64 nanoseconds)");
-  if (i >= line.size() || line[i] != '.') return fail("timestamp lacks the '.' before the fraction");
+  if (i >= line.size() || line[i] != '.')
+    return fail("timestamp lacks the '.' before the fraction");
   ++i;
   std::int64_t fraction_ns = 0;
   digits = 0;
@@ -173,8 +174,8 @@ CandumpLineStatus ParseCandumpLine(std::string_view line, std::size_t line_numbe
   if (!next_field(iface)) return fail("missing interface name after the timestamp");
   if (!next_field(frame_text)) return fail("missing frame after the interface name");
   if (next_field(flag)) {
-    if (flag.size() != 1 || (flag[0] != 'R' && flag[0] != 'T' && flag[0] != 'r' &&
-                             flag[0] != 't')) {
+    if (flag.size() != 1 ||
+        (flag[0] != 'R' && flag[0] != 'T' && flag[0] != 'r' && flag[0] != 't')) {
       return fail(fmt::format("unexpected trailing field '{}' (only R or T allowed)", flag));
     }
     if (i != line.size()) return fail("unexpected text after the direction flag");
@@ -255,8 +256,7 @@ std::string FormatCandumpLine(std::int64_t timestamp_ns, std::string_view interf
   return line;
 }
 
-CandumpWriter::CandumpWriter(std::ostream& out, FlushPolicy policy)
-    : out_(&out), policy_(policy) {}
+CandumpWriter::CandumpWriter(std::ostream& out, FlushPolicy policy) : out_(&out), policy_(policy) {}
 
 CandumpWriter::CandumpWriter(const std::string& path, FlushPolicy policy)
     : file_(path, std::ios::out | std::ios::trunc), out_(&file_), policy_(policy) {

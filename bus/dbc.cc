@@ -19,16 +19,16 @@ constexpr std::uint32_t kIndependentSignalsId = 0xC0000000u;  // VECTOR__INDEPEN
 // Keywords whose statements we do not need; they are skipped up to their terminating ';'.
 const std::set<std::string_view>& IgnoredKeywords() {
   static const std::set<std::string_view> k = {
-      "BO_TX_BU_", "EV_",        "ENVVAR_DATA_", "SGTYPE_",    "SGTYPE_VAL_",  "SIG_GROUP_",
-      "SIG_TYPE_REF_", "BA_DEF_REL_", "BA_DEF_DEF_REL_", "BA_REL_", "BA_SGTYPE_",
-      "BA_DEF_SGTYPE_", "BU_SG_REL_", "BU_EV_REL_", "BU_BO_REL_", "SG_MUL_VAL_", "CAT_DEF_",
-      "CAT_",      "FILTER",     "NS_DESC_",     "SIGTYPE_VALTYPE_", "EV_DATA_", "VAL_TABLE_REF_"};
+      "BO_TX_BU_",        "EV_",        "ENVVAR_DATA_",  "SGTYPE_",
+      "SGTYPE_VAL_",      "SIG_GROUP_", "SIG_TYPE_REF_", "BA_DEF_REL_",
+      "BA_DEF_DEF_REL_",  "BA_REL_",    "BA_SGTYPE_",    "BA_DEF_SGTYPE_",
+      "BU_SG_REL_",       "BU_EV_REL_", "BU_BO_REL_",    "SG_MUL_VAL_",
+      "CAT_DEF_",         "CAT_",       "FILTER",        "NS_DESC_",
+      "SIGTYPE_VALTYPE_", "EV_DATA_",   "VAL_TABLE_REF_"};
   return k;
 }
 
-bool IsIdentStart(char c) {
-  return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || c == '_';
-}
+bool IsIdentStart(char c) { return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || c == '_'; }
 bool IsIdentChar(char c) { return IsIdentStart(c) || (c >= '0' && c <= '9'); }
 
 /// Motorola MSB position in "linear" numbering (byte 0 bit 7 = 0, byte 0 bit 0 = 7, byte 1
@@ -186,8 +186,8 @@ class DbcParser {
     const std::size_t begin = pos_;
     while (!AtEnd()) {
       const char c = s_[pos_];
-      const bool exp_sign = (c == '+' || c == '-') && pos_ > begin &&
-                            (s_[pos_ - 1] == 'e' || s_[pos_ - 1] == 'E');
+      const bool exp_sign =
+          (c == '+' || c == '-') && pos_ > begin && (s_[pos_ - 1] == 'e' || s_[pos_ - 1] == 'E');
       if ((c >= '0' && c <= '9') || c == '.' || c == 'e' || c == 'E' || exp_sign ||
           ((c == '-' || c == '+') && pos_ == begin)) {
         Advance();
@@ -360,7 +360,8 @@ class DbcParser {
     Expect('@');
     SkipSpace();
     const char order = Peek();
-    if (order != '0' && order != '1') Fail(fmt::format("signal {}: byte order must be @0 or @1", sig.name));
+    if (order != '0' && order != '1')
+      Fail(fmt::format("signal {}: byte order must be @0 or @1", sig.name));
     Advance();
     const char sign = Peek();
     if (sign != '+' && sign != '-') {
@@ -383,8 +384,10 @@ class DbcParser {
     if (skipping_message_) return;
     sig.little_endian = order == '1';
     sig.is_signed = sign == '-';
-    if (length < 1 || length > 64) Fail(fmt::format("signal {}: length {} must be 1..64", sig.name, length));
-    if (start < 0 || start >= 512) Fail(fmt::format("signal {}: start bit {} out of range", sig.name, start));
+    if (length < 1 || length > 64)
+      Fail(fmt::format("signal {}: length {} must be 1..64", sig.name, length));
+    if (start < 0 || start >= 512)
+      Fail(fmt::format("signal {}: start bit {} out of range", sig.name, start));
     sig.start_bit = static_cast<int>(start);
     sig.length = static_cast<int>(length);
     if (sig.factor == 0.0) Fail(fmt::format("signal {}: factor must not be 0", sig.name));
@@ -408,8 +411,8 @@ class DbcParser {
         Fail(fmt::format("signal {} defined twice in message {}", sig.name, m.name));
       }
       if (sig.is_multiplexer && other.is_multiplexer) {
-        Fail(fmt::format("message {}: second multiplexer switch {} (only one is supported)",
-                         m.name, sig.name));
+        Fail(fmt::format("message {}: second multiplexer switch {} (only one is supported)", m.name,
+                         sig.name));
       }
     }
     m.signals.push_back(std::move(sig));
@@ -518,7 +521,8 @@ class DbcParser {
     const std::string value = AttributeValueText();
     Expect(';');
     auto it = attribute_defs_.find(name);
-    if (it == attribute_defs_.end()) Fail(fmt::format("BA_DEF_DEF_ of undefined attribute {}", name));
+    if (it == attribute_defs_.end())
+      Fail(fmt::format("BA_DEF_DEF_ of undefined attribute {}", name));
     it->second.default_value = value;
   }
 
@@ -581,8 +585,8 @@ class DbcParser {
     } else if (type == 1 || type == 2) {
       const int want = type == 1 ? 32 : 64;
       if (sig.length != want) {
-        Fail(fmt::format("signal {}: SIG_VALTYPE_ {} needs a {}-bit signal, it has {}", name,
-                         type, want, sig.length));
+        Fail(fmt::format("signal {}: SIG_VALTYPE_ {} needs a {}-bit signal, it has {}", name, type,
+                         want, sig.length));
       }
       sig.value_type = type == 1 ? DbcValueType::kFloat32 : DbcValueType::kFloat64;
     } else {
@@ -593,10 +597,9 @@ class DbcParser {
   void Finish() {
     // GenMsgCycleTime default applies to messages without their own value.
     auto it = attribute_defs_.find("GenMsgCycleTime");
-    const int default_cycle =
-        it != attribute_defs_.end() && !it->second.default_value.empty()
-            ? CycleTime(it->second.default_value)
-            : 0;
+    const int default_cycle = it != attribute_defs_.end() && !it->second.default_value.empty()
+                                  ? CycleTime(it->second.default_value)
+                                  : 0;
     for (std::size_t i = 0; i < db_.messages_.size(); ++i) {
       DbcMessage& m = db_.messages_[i];
       if (!m.cycle_time_ms && default_cycle > 0) m.cycle_time_ms = default_cycle;

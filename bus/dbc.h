@@ -47,8 +47,8 @@ struct DbcSignal {
   double maximum = 0.0;
   std::string unit;
   std::vector<std::string> receivers;
-  bool is_multiplexer = false;           ///< The message's multiplexer switch (`M`).
-  std::optional<int> multiplex_value;    ///< Set for `m<n>` signals.
+  bool is_multiplexer = false;                      ///< The message's multiplexer switch (`M`).
+  std::optional<int> multiplex_value;               ///< Set for `m<n>` signals.
   std::map<std::int64_t, std::string> value_names;  ///< VAL_: raw value -> name.
   std::string comment;
 };

@@ -81,8 +81,7 @@ bool ExtractRaw(const DbcSignal& sig, std::span<const std::uint8_t> payload,
   for (int k = 0; k < sig.length; ++k) {
     const int p = sig.little_endian ? sig.start_bit + k : lsb - k;
     const int shift = sig.little_endian ? (p & 7) : 7 - (p & 7);
-    v |= static_cast<std::uint64_t>((payload[static_cast<std::size_t>(p >> 3)] >> shift) & 1u)
-         << k;
+    v |= static_cast<std::uint64_t>((payload[static_cast<std::size_t>(p >> 3)] >> shift) & 1u) << k;
   }
   raw = v;
   return true;
@@ -192,8 +191,8 @@ double SignalPhysicalMin(const DbcSignal& sig) noexcept {
   if (sig.value_type == DbcValueType::kFloat32) return std::numeric_limits<float>::lowest();
   if (sig.value_type == DbcValueType::kFloat64) return std::numeric_limits<double>::lowest();
   const double lo = sig.is_signed ? -std::ldexp(1.0, sig.length - 1) : 0.0;
-  const double hi = sig.is_signed ? std::ldexp(1.0, sig.length - 1) - 1.0
-                                  : std::ldexp(1.0, sig.length) - 1.0;
+  const double hi =
+      sig.is_signed ? std::ldexp(1.0, sig.length - 1) - 1.0 : std::ldexp(1.0, sig.length) - 1.0;
   return std::min(lo * sig.factor, hi * sig.factor) + sig.offset;
 }
 
@@ -201,8 +200,8 @@ double SignalPhysicalMax(const DbcSignal& sig) noexcept {
   if (sig.value_type == DbcValueType::kFloat32) return std::numeric_limits<float>::max();
   if (sig.value_type == DbcValueType::kFloat64) return std::numeric_limits<double>::max();
   const double lo = sig.is_signed ? -std::ldexp(1.0, sig.length - 1) : 0.0;
-  const double hi = sig.is_signed ? std::ldexp(1.0, sig.length - 1) - 1.0
-                                  : std::ldexp(1.0, sig.length) - 1.0;
+  const double hi =
+      sig.is_signed ? std::ldexp(1.0, sig.length - 1) - 1.0 : std::ldexp(1.0, sig.length) - 1.0;
   return std::max(lo * sig.factor, hi * sig.factor) + sig.offset;
 }
 
@@ -241,8 +240,8 @@ bool EncodeMessage(const DbcMessage& msg, const SignalValues& values, CanFrame& 
       continue;
     }
     if (!EncodeSignal(*sig, value, payload)) {
-      report(fmt::format("{}.{}: value {} saturated to the {}-bit raw range", msg.name, name,
-                         value, sig->length));
+      report(fmt::format("{}.{}: value {} saturated to the {}-bit raw range", msg.name, name, value,
+                         sig->length));
     }
   }
   return ok;

@@ -174,10 +174,17 @@ struct Client {
     } else {
       for (const Filter& f : filters) {
         switch (f.kind) {
-          case Filter::kAll: ++matches; break;
-          case Filter::kMatch: matches += (can_id & f.mask) == f.id; break;
-          case Filter::kInverse: matches += (can_id & f.mask) != f.id; break;
-          case Filter::kError: break;
+          case Filter::kAll:
+            ++matches;
+            break;
+          case Filter::kMatch:
+            matches += (can_id & f.mask) == f.id;
+            break;
+          case Filter::kInverse:
+            matches += (can_id & f.mask) != f.id;
+            break;
+          case Filter::kError:
+            break;
         }
       }
     }
@@ -540,7 +547,8 @@ struct UcanBroker::Impl {
         }
         // Applied after this pass's dispatch, once the target's earlier frames are read
         // (ApplyDeferredOptions); the reply waits until then.
-        deferred_options.push_back({c->id, req, std::vector<std::uint8_t>(extra, extra + extra_len)});
+        deferred_options.push_back(
+            {c->id, req, std::vector<std::uint8_t>(extra, extra + extra_len)});
         return;
       }
       case Op::kResolveName: {
@@ -634,9 +642,8 @@ struct UcanBroker::Impl {
           Kill(c);
           return;
         }
-        const std::int64_t stamp = HandleFrame(c, bufs[i].data(), len,
-                                               (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0,
-                                               read_ns);
+        const std::int64_t stamp = HandleFrame(
+            c, bufs[i].data(), len, (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0, read_ns);
         reached_stop = reached_stop || stamp >= stop_ns;
       }
       if (n < kBatch || reached_stop) return;
@@ -882,8 +889,8 @@ struct UcanBroker::Impl {
       UcanBusStats s;
       s.name = name;
       s.ifindex = bus->ifindex;
-      s.clients = static_cast<std::size_t>(std::count_if(
-          bus->members.begin(), bus->members.end(), [](const Client* c) { return !c->dead; }));
+      s.clients = static_cast<std::size_t>(std::count_if(bus->members.begin(), bus->members.end(),
+                                                         [](const Client* c) { return !c->dead; }));
       s.frames = bus->frames;
       s.drops = bus->drops;
       s.bad_messages = bus->bad_messages;
@@ -968,7 +975,8 @@ std::error_code Request(const std::string& dir, Op op, const std::string& name, 
       const std::size_t count =
           std::min<std::size_t>(reply->count, (n - sizeof(Reply)) / sizeof(BusInfo));
       infos->resize(count);
-      if (count > 0) std::memcpy(infos->data(), buf.data() + sizeof(Reply), count * sizeof(BusInfo));
+      if (count > 0)
+        std::memcpy(infos->data(), buf.data() + sizeof(Reply), count * sizeof(BusInfo));
     }
     return {};
   } catch (const std::bad_alloc&) {

@@ -17,12 +17,12 @@
 #include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
+#include <linux/close_range.h>
 #include <net/if.h>
 #include <poll.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdarg.h>
-#include <linux/close_range.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/uio.h>
@@ -69,9 +69,9 @@ F Resolve(F& slot, const char* name) {
   return f;
 }
 
-#define REAL_FN(name, ret, params)                   \
-  using name##_fn = ret(*) params;                   \
-  name##_fn g_real_##name = nullptr;                 \
+#define REAL_FN(name, ret, params)   \
+  using name##_fn = ret(*) params;   \
+  name##_fn g_real_##name = nullptr; \
   inline name##_fn real_##name() { return Resolve(g_real_##name, #name); }
 
 REAL_FN(socket, int, (int, int, int))
@@ -240,8 +240,9 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
              void* extra = nullptr, std::size_t extra_cap = 0) {
   const int s = ConnectBroker();
   if (s < 0) return -1;
-  iovec iov[2] = {{const_cast<ucan::Request*>(&req), sizeof(req)},
-                  {const_cast<can_filter*>(filters), req.options.filter_count * sizeof(can_filter)}};
+  iovec iov[2] = {
+      {const_cast<ucan::Request*>(&req), sizeof(req)},
+      {const_cast<can_filter*>(filters), req.options.filter_count * sizeof(can_filter)}};
   msghdr msg{};
   msg.msg_iov = iov;
   msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
@@ -773,8 +774,7 @@ UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
       return -1;
     }
     const bool nano = request == kSiocgstampNsOld || request == kSiocgstampNsNew;
-    const std::int64_t v[2] = {ns / 1000000000,
-                               nano ? ns % 1000000000 : (ns % 1000000000) / 1000};
+    const std::int64_t v[2] = {ns / 1000000000, nano ? ns % 1000000000 : (ns % 1000000000) / 1000};
     std::memcpy(arg, v, sizeof(v));
     return 0;
   }
@@ -860,11 +860,21 @@ UCAN_EXPORT int setsockopt(int fd, int level, int opt, const void* val, socklen_
       LockTable();
       if (UcanSocket* s = g_sockets[fd]) {
         switch (opt) {
-          case CAN_RAW_ERR_FILTER: s->options.err_mask = v & CAN_ERR_MASK; break;
-          case CAN_RAW_LOOPBACK: s->options.loopback = v != 0; break;
-          case CAN_RAW_RECV_OWN_MSGS: s->options.recv_own = v != 0; break;
-          case CAN_RAW_FD_FRAMES: s->options.fd_frames = v != 0; break;
-          default: s->options.join_filters = v != 0; break;
+          case CAN_RAW_ERR_FILTER:
+            s->options.err_mask = v & CAN_ERR_MASK;
+            break;
+          case CAN_RAW_LOOPBACK:
+            s->options.loopback = v != 0;
+            break;
+          case CAN_RAW_RECV_OWN_MSGS:
+            s->options.recv_own = v != 0;
+            break;
+          case CAN_RAW_FD_FRAMES:
+            s->options.fd_frames = v != 0;
+            break;
+          default:
+            s->options.join_filters = v != 0;
+            break;
         }
       }
       UnlockTable();
@@ -888,15 +898,29 @@ UCAN_EXPORT int getsockopt(int fd, int level, int opt, void* val, socklen_t* len
     const UcanSocket* s = g_sockets[fd];
     bool handled = true;
     switch (opt) {
-      case SO_DOMAIN: ival = AF_CAN; break;
-      case SO_TYPE: ival = SOCK_RAW; break;
-      case SO_PROTOCOL: ival = CAN_RAW; break;
-      case kSoRxqOvfl: ival = s && s->rxq_ovfl; break;
+      case SO_DOMAIN:
+        ival = AF_CAN;
+        break;
+      case SO_TYPE:
+        ival = SOCK_RAW;
+        break;
+      case SO_PROTOCOL:
+        ival = CAN_RAW;
+        break;
+      case kSoRxqOvfl:
+        ival = s && s->rxq_ovfl;
+        break;
       case kSoTimestampOld:
-      case kSoTimestampNew: ival = s && s->timestamp_mode == 1; break;
+      case kSoTimestampNew:
+        ival = s && s->timestamp_mode == 1;
+        break;
       case kSoTimestampNsOld:
-      case kSoTimestampNsNew: ival = s && s->timestamp_mode == 2; break;
-      default: handled = false; break;
+      case kSoTimestampNsNew:
+        ival = s && s->timestamp_mode == 2;
+        break;
+      default:
+        handled = false;
+        break;
     }
     UnlockTable();
     if (!handled) return real_getsockopt()(fd, level, opt, val, len);
@@ -920,11 +944,21 @@ UCAN_EXPORT int getsockopt(int fd, int level, int opt, void* val, socklen_t* len
       return 0;
     }
     switch (opt) {
-      case CAN_RAW_ERR_FILTER: ival = static_cast<int>(s->options.err_mask); break;
-      case CAN_RAW_LOOPBACK: ival = s->options.loopback; break;
-      case CAN_RAW_RECV_OWN_MSGS: ival = s->options.recv_own; break;
-      case CAN_RAW_FD_FRAMES: ival = s->options.fd_frames; break;
-      case CAN_RAW_JOIN_FILTERS: ival = s->options.join_filters; break;
+      case CAN_RAW_ERR_FILTER:
+        ival = static_cast<int>(s->options.err_mask);
+        break;
+      case CAN_RAW_LOOPBACK:
+        ival = s->options.loopback;
+        break;
+      case CAN_RAW_RECV_OWN_MSGS:
+        ival = s->options.recv_own;
+        break;
+      case CAN_RAW_FD_FRAMES:
+        ival = s->options.fd_frames;
+        break;
+      case CAN_RAW_JOIN_FILTERS:
+        ival = s->options.join_filters;
+        break;
       default:
         UnlockTable();
         return static_cast<int>(Fail(ENOPROTOOPT));
@@ -975,8 +1009,7 @@ UCAN_EXPORT ssize_t sendmsg(int fd, const msghdr* msg, int flags) {
   View v;
   if (!GetView(fd, &v)) return real_sendmsg()(fd, msg, flags);
   if (msg == nullptr) return Fail(EFAULT);
-  return SendFrame(fd, v, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name,
-                   msg->msg_namelen);
+  return SendFrame(fd, v, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name, msg->msg_namelen);
 }
 
 UCAN_EXPORT ssize_t read(int fd, void* buf, size_t n) {

@@ -24,10 +24,10 @@ namespace wheelhil::bus::ucan {
 inline constexpr char kSocketName[] = "ucan.sock";
 inline constexpr char kLockName[] = "ucan.lock";
 inline constexpr std::uint32_t kMagic = 0x32414355u;  // "UCA2" (v2: frames carry a TxStamp)
-inline constexpr std::size_t kNameSize = 16;           // IFNAMSIZ, including the NUL
-inline constexpr std::size_t kCanMtu = 16;             // sizeof(struct can_frame)
-inline constexpr std::size_t kCanFdMtu = 72;           // sizeof(struct canfd_frame)
-inline constexpr std::uint32_t kMaxFilters = 512;      // CAN_RAW_FILTER_MAX
+inline constexpr std::size_t kNameSize = 16;          // IFNAMSIZ, including the NUL
+inline constexpr std::size_t kCanMtu = 16;            // sizeof(struct can_frame)
+inline constexpr std::size_t kCanFdMtu = 72;          // sizeof(struct canfd_frame)
+inline constexpr std::uint32_t kMaxFilters = 512;     // CAN_RAW_FILTER_MAX
 /// Interface indexes: "ucanN" (N < 1000) gets 1000 + N; any other name 2000 + creation order.
 inline constexpr int kFirstIfindex = 1000;
 inline constexpr int kFirstNamedIfindex = 2000;

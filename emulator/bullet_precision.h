@@ -1,7 +1,7 @@
 #pragma once
 /// Guards against the classic Debian Bullet trap: the float (`bullet`) and double
-/// (`bullet-float64`) builds share headers, link either way and then read garbage. wheelhil uses the
-/// single-precision build; this reports what the linked library was built with.
+/// (`bullet-float64`) builds share headers, link either way and then read garbage. wheelhil uses
+/// the single-precision build; this reports what the linked library was built with.
 
 namespace wheelhil::emulator {
 

@@ -5,13 +5,13 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include <assimp/Importer.hpp>
+#include <BulletCollision/NarrowPhaseCollision/btRaycastCallback.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
-#include <Eigen/Geometry>
-#include <BulletCollision/NarrowPhaseCollision/btRaycastCallback.h>
 #include <btBulletCollisionCommon.h>
 #include <fmt/format.h>
+#include <Eigen/Geometry>
+#include <assimp/Importer.hpp>
 
 namespace wheelhil::emulator {
 
@@ -61,9 +61,8 @@ void ValidateFriction(const Friction& f, const std::string& where) {
         fmt::format("{}: mu_peak ({}) must be finite and in [0, 10]", where, f.mu_peak));
   }
   if (!(std::isfinite(f.mu_slide) && f.mu_slide >= 0 && f.mu_slide <= f.mu_peak)) {
-    throw std::invalid_argument(
-        fmt::format("{}: mu_slide ({}) must be finite and in [0, mu_peak={}]", where, f.mu_slide,
-                    f.mu_peak));
+    throw std::invalid_argument(fmt::format(
+        "{}: mu_slide ({}) must be finite and in [0, mu_peak={}]", where, f.mu_slide, f.mu_peak));
   }
 }
 
@@ -98,8 +97,8 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
     config_ = std::make_unique<btDefaultCollisionConfiguration>();
     dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
     broadphase_ = std::make_unique<btDbvtBroadphase>();
-    world_ = std::make_unique<btCollisionWorld>(dispatcher_.get(), broadphase_.get(),
-                                                config_.get());
+    world_ =
+        std::make_unique<btCollisionWorld>(dispatcher_.get(), broadphase_.get(), config_.get());
   }
   Mesh mesh;
   mesh.friction = friction;
@@ -161,7 +160,8 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
   mesh.cell_tris.resize(count[ncell]);
   std::vector<std::uint32_t> fill(count.begin(), count.end() - 1);
   for (std::size_t k = 0; k < mesh.tris.size(); ++k) {
-    for_cells(mesh.tris[k], [&](std::size_t c) { mesh.cell_tris[fill[c]++] = static_cast<std::uint32_t>(k); });
+    for_cells(mesh.tris[k],
+              [&](std::size_t c) { mesh.cell_tris[fill[c]++] = static_cast<std::uint32_t>(k); });
   }
   mesh.object = std::make_unique<btCollisionObject>();
   mesh.object->setCollisionShape(mesh.shape.get());
@@ -185,8 +185,9 @@ void Terrain::AddMesh(const std::string& path, const MeshOptions& options) {
         fmt::format("{}: up_axis ('{}') must be 'y' or 'z'", path, options.up_axis));
   }
   Assimp::Importer importer;
-  const aiScene* scene = importer.ReadFile(
-      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices);
+  const aiScene* scene =
+      importer.ReadFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                                  aiProcess_PreTransformVertices);
   if (scene == nullptr || scene->mRootNode == nullptr) {
     throw std::invalid_argument(
         fmt::format("{}: mesh: cannot be read: {}", path, importer.GetErrorString()));
@@ -219,9 +220,8 @@ void Terrain::AddMesh(const std::string& path, const MeshOptions& options) {
   AddTriangles(vertices, triangles, options.friction, path);
 }
 
-bool Terrain::GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from,
-                          const Eigen::Vector3d& dir, double max_distance, double* t_out,
-                          Eigen::Vector3d* normal) noexcept {
+bool Terrain::GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from, const Eigen::Vector3d& dir,
+                          double max_distance, double* t_out, Eigen::Vector3d* normal) noexcept {
   const Eigen::Vector3d to = from + dir * max_distance;
   const double inv = 1.0 / mesh.cell_m;
   const int i0 = static_cast<int>(std::floor((std::min(from.x(), to.x()) - mesh.grid_x0) * inv));
@@ -265,8 +265,8 @@ bool Terrain::GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from,
 void Terrain::AddPatch(const FrictionPatch& patch) {
   const std::string where = fmt::format("patch '{}'", patch.name);
   if (patch.polygon_W.size() < 3) {
-    throw std::invalid_argument(fmt::format("{}: polygon: needs at least 3 vertices, has {}",
-                                            where, patch.polygon_W.size()));
+    throw std::invalid_argument(fmt::format("{}: polygon: needs at least 3 vertices, has {}", where,
+                                            patch.polygon_W.size()));
   }
   for (const auto& v : patch.polygon_W) {
     if (!v.allFinite()) throw std::invalid_argument(where + ": polygon: vertex is not finite");

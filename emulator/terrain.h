@@ -42,8 +42,8 @@ struct SurfaceHit {
 
 /// Options for a mesh floor.
 struct MeshOptions {
-  double scale = 1.0;                  ///< applied to the file's coordinates
-  char up_axis = 'z';                  ///< the file's up axis: 'y' (glTF/OBJ habit) or 'z'
+  double scale = 1.0;  ///< applied to the file's coordinates
+  char up_axis = 'z';  ///< the file's up axis: 'y' (glTF/OBJ habit) or 'z'
   Eigen::Vector3d offset_W = Eigen::Vector3d::Zero();  ///< added after scale and axis change
   Friction friction;
 };
@@ -105,9 +105,8 @@ class Terrain {
     std::vector<std::uint32_t> cell_start;  // nx*ny + 1
     std::vector<std::uint32_t> cell_tris;
   };
-  static bool GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from,
-                          const Eigen::Vector3d& dir, double max_distance, double* t,
-                          Eigen::Vector3d* normal) noexcept;
+  static bool GridRaycast(const Mesh& mesh, const Eigen::Vector3d& from, const Eigen::Vector3d& dir,
+                          double max_distance, double* t, Eigen::Vector3d* normal) noexcept;
   std::vector<Plane> planes_;
   std::vector<Mesh> meshes_;
   std::vector<FrictionPatch> patches_;

@@ -30,7 +30,7 @@ namespace wheelhil::fw {
 
 struct CycleAssemblerConfig {
   std::vector<std::uint8_t> tpdo_nodes;  ///< Encoder node ids, at most kMaxNodes, distinct.
-  std::int64_t deadline_ns = 0;  ///< > 0: close a cycle this long after its SYNC; 0: never.
+  std::int64_t deadline_ns = 0;          ///< > 0: close a cycle this long after its SYNC; 0: never.
 };
 
 struct EncoderReading {

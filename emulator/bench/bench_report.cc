@@ -36,7 +36,8 @@ std::string CpuModelFromCpuinfo(std::string_view cpuinfo) {
       while (!value.empty() && (value.front() == ' ' || value.front() == '\t')) {
         value.remove_prefix(1);
       }
-      while (!value.empty() && (value.back() == ' ' || value.back() == '\r')) value.remove_suffix(1);
+      while (!value.empty() && (value.back() == ' ' || value.back() == '\r'))
+        value.remove_suffix(1);
       if (!value.empty()) return std::string(value);
     }
   }
@@ -78,9 +79,7 @@ double Percentile(std::vector<double> values, double p) {
 
 double Median(std::vector<double> values) { return Percentile(std::move(values), 50.0); }
 
-std::string Unavailable(std::string_view reason) {
-  return fmt::format("unavailable: {}", reason);
-}
+std::string Unavailable(std::string_view reason) { return fmt::format("unavailable: {}", reason); }
 
 bool IsUnavailable(const nlohmann::json& value) {
   if (!value.is_string()) return false;
@@ -141,22 +140,36 @@ std::vector<std::string> DocumentedMetricKeys() {
     keys.push_back(fmt::format("lockstep.{}.rtf", s));
     keys.push_back(fmt::format("lockstep.{}.vcan_rtf", s));
   }
-  for (const char* k :
-       {"bus.ucan_frames_per_s", "bus.ucan_fanout4_frames_per_s", "bus.vcan_frames_per_s",
-        "bus.vcan_fanout4_frames_per_s", "bus.ucan_vs_vcan_ratio", "realtime.p50_us",
-        "realtime.p99_us", "realtime.max_us", "realtime.missed_deadlines", "realtime.frames",
-        "realtime.duration_s", "realtime.arrival_p99_us", "realtime.loaded_p50_us",
-        "realtime.loaded_p99_us", "realtime.loaded_max_us", "realtime.loaded_missed_deadlines",
-        "rss.physics_mib", "rss.bus_mib", "rss.realtime_mib", "rss.lockstep_mib",
-        "rss.peak_mib", "machine.cores"}) {
+  for (const char* k : {"bus.ucan_frames_per_s",
+                        "bus.ucan_fanout4_frames_per_s",
+                        "bus.vcan_frames_per_s",
+                        "bus.vcan_fanout4_frames_per_s",
+                        "bus.ucan_vs_vcan_ratio",
+                        "realtime.p50_us",
+                        "realtime.p99_us",
+                        "realtime.max_us",
+                        "realtime.missed_deadlines",
+                        "realtime.frames",
+                        "realtime.duration_s",
+                        "realtime.arrival_p99_us",
+                        "realtime.loaded_p50_us",
+                        "realtime.loaded_p99_us",
+                        "realtime.loaded_max_us",
+                        "realtime.loaded_missed_deadlines",
+                        "rss.physics_mib",
+                        "rss.bus_mib",
+                        "rss.realtime_mib",
+                        "rss.lockstep_mib",
+                        "rss.peak_mib",
+                        "machine.cores"}) {
     keys.emplace_back(k);
   }
   return keys;
 }
 
 std::vector<std::string> DocumentedTextKeys() {
-  return {"machine.cpu_model", "machine.build_type", "machine.kernel", "machine.date_utc",
-          "realtime.scheduling", "bus.vcan_environment"};
+  return {"machine.cpu_model", "machine.build_type",  "machine.kernel",
+          "machine.date_utc",  "realtime.scheduling", "bus.vcan_environment"};
 }
 
 std::vector<std::string> CheckReport(const nlohmann::json& report) {

@@ -33,8 +33,8 @@ std::string WorkerStatus(int status) {
 
 std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::string& self_exe,
                                           const std::string& name) {
-  std::vector<std::string> argv = {self_exe, "bench", "--worker", name, "--source-dir",
-                                   o.source_dir};
+  std::vector<std::string> argv = {self_exe, "bench",        "--worker",
+                                   name,     "--source-dir", o.source_dir};
   if (o.quick) argv.push_back("--quick");
   if (!o.sched_fifo) argv.push_back("--no-rt");
   argv.push_back("--fifo-priority");
@@ -50,7 +50,8 @@ std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::stri
 /// exists, else scenarios/<name>*.yaml, the first in name order; empty when there is none.
 std::string FindScenarioFile(const std::string& source_dir, const std::string& name) {
   const std::vector<std::pair<std::string, std::string>> preferred = {
-      {"paper000", "paper000_slip.yaml"}, {"paper001", "paper001_forward_T10.yaml"},
+      {"paper000", "paper000_slip.yaml"},
+      {"paper001", "paper001_forward_T10.yaml"},
       {"paper002", "paper002_straight.yaml"}};
   for (const auto& [paper, file] : preferred) {
     const std::string path = source_dir + "/scenarios/" + file;
@@ -68,8 +69,8 @@ std::string FindScenarioFile(const std::string& source_dir, const std::string& n
   return found.empty() ? std::string() : found.front();
 }
 
-void RunLockstep(const BenchOptions& o, const std::string& self_exe,
-                 const std::string& unavailable, nlohmann::json& report, double& peak_mib) {
+void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::string& unavailable,
+                 nlohmann::json& report, double& peak_mib) {
   double lockstep_mib = 0.0;
   const std::string vcan_reason =
       std::filesystem::exists("/sys/class/net/vcan0")
@@ -321,9 +322,9 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
     SetPath(report, "bus.ucan_vs_vcan_ratio", Unavailable("needs both bus rates"));
   }
 
-  const std::vector<std::string> rt_keys = {"realtime.p50_us", "realtime.p99_us",
-                                            "realtime.max_us", "realtime.missed_deadlines",
-                                            "realtime.frames", "realtime.duration_s",
+  const std::vector<std::string> rt_keys = {"realtime.p50_us",         "realtime.p99_us",
+                                            "realtime.max_us",         "realtime.missed_deadlines",
+                                            "realtime.frames",         "realtime.duration_s",
                                             "realtime.arrival_p99_us", "realtime.scheduling"};
   SetPath(report, "rss.realtime_mib", run("realtime", true, rt_keys));
   run("realtime-loaded", true,

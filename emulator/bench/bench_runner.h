@@ -15,13 +15,13 @@
 namespace wheelhil::emulator::bench {
 
 struct BenchOptions {
-  bool quick = false;        ///< Every measurement shortened (about 1 s each).
-  std::string source_dir;    ///< Repository root (platforms, meshes, DBC files).
-  bool sched_fifo = true;    ///< Real-time row: ask for SCHED_FIFO + mlockall.
+  bool quick = false;      ///< Every measurement shortened (about 1 s each).
+  std::string source_dir;  ///< Repository root (platforms, meshes, DBC files).
+  bool sched_fifo = true;  ///< Real-time row: ask for SCHED_FIFO + mlockall.
   int fifo_priority = 80;
-  int cpu = -1;              ///< Real-time row: pin the pacer; -1 = no pinning.
-  int load_threads = -1;     ///< Busy threads of the loaded real-time run; -1 = one per core.
-  bool uml = false;          ///< Measure the kernel vcan inside the user-mode-linux test kernel.
+  int cpu = -1;           ///< Real-time row: pin the pacer; -1 = no pinning.
+  int load_threads = -1;  ///< Busy threads of the loaded real-time run; -1 = one per core.
+  bool uml = false;       ///< Measure the kernel vcan inside the user-mode-linux test kernel.
 };
 
 /// Environment entries a child needs to reach the userspace buses of `runtime_dir` (LD_PRELOAD
@@ -32,8 +32,8 @@ using UcanEnvironmentFn =
 /// What a child process produced.
 struct WorkerOutcome {
   nlohmann::json report = nlohmann::json::object();  ///< Its JSON line ({} on failure).
-  double max_rss_mib = 0.0;                           ///< ru_maxrss of the child.
-  std::string problem;                                ///< Empty on success.
+  double max_rss_mib = 0.0;                          ///< ru_maxrss of the child.
+  std::string problem;                               ///< Empty on success.
 };
 
 /// Runs argv (argv[0] = program path) with `extra_env` added to this environment, reads the
@@ -48,8 +48,7 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
 /// wall.real_time_factor from its report.json; lockstep_unavailable non-empty: why they cannot
 /// run at all (e.g. no `run` command in this build).
 nlohmann::json RunBench(const BenchOptions& options, const std::string& self_exe,
-                        const UcanEnvironmentFn& ucan_env,
-                        const std::string& lockstep_unavailable);
+                        const UcanEnvironmentFn& ucan_env, const std::string& lockstep_unavailable);
 
 /// The worker side: runs workload `name` (physics, bus-ucan, bus-vcan, realtime,
 /// realtime-loaded) and returns its partial report.

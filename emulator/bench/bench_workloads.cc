@@ -74,8 +74,7 @@ int OpenCan(const char* name) {
   sockaddr_can addr{};
   addr.can_family = AF_CAN;
   addr.can_ifindex = static_cast<int>(::if_nametoindex(name));
-  if (addr.can_ifindex == 0 ||
-      ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+  if (addr.can_ifindex == 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
     ::close(fd);
     return -1;
   }
@@ -191,8 +190,7 @@ nlohmann::json RunPhysicsWorkload(const std::string& source_dir, double wall_s_p
   nlohmann::json report = nlohmann::json::object();
   for (const auto& platform : BenchPlatforms()) {
     for (const bool mesh : {false, true}) {
-      const std::string key =
-          fmt::format("physics.{}.{}_rtf", platform, mesh ? "mesh" : "flat");
+      const std::string key = fmt::format("physics.{}.{}_rtf", platform, mesh ? "mesh" : "flat");
       try {
         SetPath(report, key, MeasureWorld(source_dir, platform, mesh, 1, wall_s_per_case));
       } catch (const std::exception& e) {
@@ -221,7 +219,8 @@ nlohmann::json RunBusWorkload(const std::string& kind, double wall_s_per_case) {
     if (kind == "ucan") {
       const char* dir = std::getenv("WHEELHIL_UCAN_DIR");
       if (!dir || !std::getenv("LD_PRELOAD")) {
-        throw std::runtime_error("libwheelhil_ucan.so is not preloaded (run through wheelhil bench)");
+        throw std::runtime_error(
+            "libwheelhil_ucan.so is not preloaded (run through wheelhil bench)");
       }
       bus::UcanBrokerOptions o;
       o.runtime_dir = dir;
@@ -290,8 +289,8 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     Paper002DeviceSetOptions dso;
     dso.source_dir = options.source_dir;
     Paper002DeviceSet devices(dso);
-    const std::int64_t cycles =
-        static_cast<std::int64_t>(options.duration_s * 1e9 / static_cast<double>(devices.cycle_ns()));
+    const std::int64_t cycles = static_cast<std::int64_t>(options.duration_s * 1e9 /
+                                                          static_cast<double>(devices.cycle_ns()));
 
     // The broker's, producer's and reader's threads inherit the policy of the thread that
     // creates them: under SCHED_FIFO the whole pipeline runs one step below the pacer, so a
@@ -434,7 +433,8 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
                              1e-3);
       }
       SetPath(report, "realtime.frames", log.size());
-      SetPath(report, "realtime.duration_s", static_cast<double>(cycles) * devices.cycle_ns() * 1e-9);
+      SetPath(report, "realtime.duration_s",
+              static_cast<double>(cycles) * devices.cycle_ns() * 1e-9);
       SetPath(report, "realtime.arrival_p99_us",
               arrival_us.empty() ? nlohmann::json(Unavailable("the reader received nothing"))
                                  : nlohmann::json(Percentile(arrival_us, 99)));
@@ -445,11 +445,12 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       SetPath(report, "realtime.records_dropped", stats.records_dropped);
       SetPath(report, "realtime.device_problems", devices.problems());
       SetPath(report, "realtime.miss_threshold_us", options.miss_threshold_us);
-      std::string sched = fmt::format(
-          "{}, {}{}", rt.sched_fifo ? fmt::format("SCHED_FIFO {}", options.fifo_priority)
+      std::string sched =
+          fmt::format("{}, {}{}",
+                      rt.sched_fifo ? fmt::format("SCHED_FIFO {}", options.fifo_priority)
                                     : std::string("SCHED_OTHER"),
-          rt.memory_locked ? "memory locked" : "memory not locked",
-          rt.pinned_cpu >= 0 ? fmt::format(", pinned to CPU {}", rt.pinned_cpu) : "");
+                      rt.memory_locked ? "memory locked" : "memory not locked",
+                      rt.pinned_cpu >= 0 ? fmt::format(", pinned to CPU {}", rt.pinned_cpu) : "");
       if (pipeline.sched_fifo) {
         sched += fmt::format("; bus broker, producer and reader SCHED_FIFO {}",
                              std::max(1, options.fifo_priority - 1));

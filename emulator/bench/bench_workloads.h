@@ -26,11 +26,11 @@ nlohmann::json RunBusWorkload(const std::string& kind, double wall_s_per_case);
 
 struct RealtimeWorkloadOptions {
   std::string source_dir;
-  double duration_s = 10.0;       ///< Paced stream length.
-  bool sched_fifo = true;         ///< Ask for SCHED_FIFO (and mlockall).
+  double duration_s = 10.0;  ///< Paced stream length.
+  bool sched_fifo = true;    ///< Ask for SCHED_FIFO (and mlockall).
   int fifo_priority = 80;
-  int cpu = -1;                   ///< Pin the pacer; -1 = no pinning.
-  int load_threads = 0;           ///< Busy threads competing for the CPUs during the run.
+  int cpu = -1;                       ///< Pin the pacer; -1 = no pinning.
+  int load_threads = 0;               ///< Busy threads competing for the CPUs during the run.
   double miss_threshold_us = 1000.0;  ///< A frame later than this missed its deadline.
   std::string prefix = "realtime.";   ///< Key prefix: "realtime." or "realtime.loaded_".
 };

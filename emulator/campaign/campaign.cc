@@ -42,10 +42,10 @@ void EvaluateRun(const CampaignSpec& spec, RunRecord& r, const RunReport* report
     const auto v = report->Metric(c.metric);
     if (!c.Holds(v)) {
       passed = false;
-      AppendFailure(failure, v ? fmt::format("criterion {} failed: {} = {:.6g}", c.Describe(),
-                                             c.metric, *v)
-                               : fmt::format("criterion {} failed: metric {} missing from report",
-                                             c.Describe(), c.metric));
+      AppendFailure(failure,
+                    v ? fmt::format("criterion {} failed: {} = {:.6g}", c.Describe(), c.metric, *v)
+                      : fmt::format("criterion {} failed: metric {} missing from report",
+                                    c.Describe(), c.metric));
     }
   }
   r.passed = passed;
@@ -153,8 +153,9 @@ std::vector<fs::path> FindSmokeScenarios(const fs::path& dir_or_list) {
     }
   }
   if (out.empty()) {
-    throw std::invalid_argument(fmt::format(
-        "{}:0: smoke: no scenarios (need a folder of *.yaml or a list file)", dir_or_list.string()));
+    throw std::invalid_argument(
+        fmt::format("{}:0: smoke: no scenarios (need a folder of *.yaml or a list file)",
+                    dir_or_list.string()));
   }
   return out;
 }
@@ -199,7 +200,8 @@ SmokeOutcome RunSmoke(const SmokeOptions& options) {
       YAML::Emitter em;
       em << root;
       std::ofstream(file) << "# " << scenario.string() << " with firmware.command from "
-                          << "`wheelhil smoke --firmware`\n" << em.c_str() << "\n";
+                          << "`wheelhil smoke --firmware`\n"
+                          << em.c_str() << "\n";
       return file;
     };
     jobs.push_back(std::move(job));

@@ -47,7 +47,7 @@ struct SmokeOptions {
   std::vector<std::filesystem::path> scenarios;
   std::filesystem::path out_dir = "smoke";
   int jobs = 2;
-  std::string runner_exe;  ///< default: this executable
+  std::string runner_exe;        ///< default: this executable
   std::string firmware_command;  ///< non-empty: written into each scenario's firmware.command
   std::filesystem::path junit;
   std::uint64_t seed = 1;

@@ -243,12 +243,12 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     L.FailAt(e.mark.line + 1, "yaml", e.msg);
   }
   L.OnlyKeys(root, "",
-             {"campaign", "description", "base", "sampling", "runs", "seed", "repeats",
-              "set", "parameters", "pass", "rank_by", "timeout_s"});
+             {"campaign", "description", "base", "sampling", "runs", "seed", "repeats", "set",
+              "parameters", "pass", "rank_by", "timeout_s"});
   CampaignSpec spec;
   spec.file = file;
-  spec.name = root["campaign"] ? L.String(root["campaign"], "campaign")
-                               : fs::path(file).stem().string();
+  spec.name =
+      root["campaign"] ? L.String(root["campaign"], "campaign") : fs::path(file).stem().string();
   for (char c : spec.name) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) {
       L.Fail(root["campaign"], "campaign", "use only letters, digits, '_', '-', '.'");
@@ -259,7 +259,8 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   spec.base_scenario = fs::path(base).is_absolute() ? fs::path(base) : dir / base;
   spec.base_scenario = spec.base_scenario.lexically_normal();
   if (!fs::is_regular_file(spec.base_scenario)) {
-    L.Fail(root["base"], "base", fmt::format("scenario '{}' not found", spec.base_scenario.string()));
+    L.Fail(root["base"], "base",
+           fmt::format("scenario '{}' not found", spec.base_scenario.string()));
   }
 
   const std::string sampling = root["sampling"] ? L.String(root["sampling"], "sampling") : "grid";
@@ -278,7 +279,8 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   }
   if (root["seed"]) {
     const double s = L.Number(root["seed"], "seed");
-    if (s < 0 || s != std::floor(s) || s > 9.0e15) L.Fail(root["seed"], "seed", "must be an integer >= 0");
+    if (s < 0 || s != std::floor(s) || s > 9.0e15)
+      L.Fail(root["seed"], "seed", "must be an integer >= 0");
     spec.seed = static_cast<std::uint64_t>(s);
   }
   if (root["repeats"]) spec.repeats = L.Integer(root["repeats"], "repeats", 1);
@@ -340,7 +342,8 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
       L.OnlyKeys(u, field + ".loguniform", {"min", "max"});
       ps.from = L.Number(u["min"], field + ".loguniform.min");
       ps.to = L.Number(u["max"], field + ".loguniform.max");
-      if (!(ps.from > 0 && ps.to > ps.from)) L.Fail(u, field + ".loguniform", "needs 0 < min < max");
+      if (!(ps.from > 0 && ps.to > ps.from))
+        L.Fail(u, field + ".loguniform", "needs 0 < min < max");
     }
     if (const auto n = p["normal"]) {
       ++kinds;
@@ -414,8 +417,10 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   std::ifstream base_in(spec.base_scenario, std::ios::binary);
   std::stringstream base_text;
   base_text << base_in.rdbuf();
-  json fp = {{"sampling", sampling},      {"runs", spec.runs},
-             {"seed", spec.seed},         {"repeats", spec.repeats},
+  json fp = {{"sampling", sampling},
+             {"runs", spec.runs},
+             {"seed", spec.seed},
+             {"repeats", spec.repeats},
              {"base", Hex64(Fnv1a64(base_text.str()))}};
   for (const auto& o : spec.overrides) fp["set"].push_back({o.path, o.value});
   for (const auto& p : spec.parameters) {
@@ -461,8 +466,8 @@ std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec) {
         grids.push_back(p.GridValues());
         total *= grids.back().size();
         if (total > 10'000'000) {
-          throw std::invalid_argument(fmt::format("{}:{}: parameters: grid of more than 1e7 points",
-                                                  spec.file, p.line));
+          throw std::invalid_argument(
+              fmt::format("{}:{}: parameters: grid of more than 1e7 points", spec.file, p.line));
         }
       }
       // First parameter varies slowest (row-major, like nested loops in file order).

@@ -71,12 +71,12 @@ struct CampaignSpec {
   std::string file;                     ///< campaign file path as given
   std::string name;                     ///< `campaign:` (default: file stem)
   std::filesystem::path base_scenario;  ///< absolute
-  std::vector<Override> overrides;  ///< `set:`, applied first
+  std::vector<Override> overrides;      ///< `set:`, applied first
   std::vector<ParameterSpec> parameters;
   Sampling sampling = Sampling::kGrid;
-  int runs = 0;             ///< random/LHS: number of points (grid: product of the grids)
-  std::uint64_t seed = 1;   ///< sampling seed and root of the run seeds
-  int repeats = 1;          ///< runs per point, each with its own seed
+  int runs = 0;                      ///< random/LHS: number of points (grid: product of the grids)
+  std::uint64_t seed = 1;            ///< sampling seed and root of the run seeds
+  int repeats = 1;                   ///< runs per point, each with its own seed
   bool require_verdict_pass = true;  ///< a run passes only if report.json's verdict is pass
   std::vector<MetricBound> run_criteria;
   std::vector<CampaignCriterion> campaign_criteria;

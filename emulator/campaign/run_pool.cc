@@ -79,7 +79,10 @@ std::string LastLine(const fs::path& file) {
 class Progress {
  public:
   Progress(const PoolOptions& o, std::size_t total)
-      : enabled_(o.progress), tty_(::isatty(STDERR_FILENO) == 1), label_(o.label), total_(total),
+      : enabled_(o.progress),
+        tty_(::isatty(STDERR_FILENO) == 1),
+        label_(o.label),
+        total_(total),
         start_(Clock::now()) {}
   void Finished(const RunRecord& r) {
     ++done_;
@@ -96,10 +99,9 @@ class Progress {
                    bar.c_str(), done_, total_, failed_, FormatDuration(eta).c_str());
       if (done_ == total_) std::fputc('\n', stderr);
     } else {
-      std::fprintf(stderr, "%s: %zu/%zu %s %s (%.1f s)%s%s, %zu failed, ETA %s\n",
-                   label_.c_str(), done_, total_, r.key.c_str(),
-                   r.passed ? "pass" : "FAIL", r.wall_s, r.passed ? "" : ": ",
-                   r.passed ? "" : r.failure.substr(0, 200).c_str(), failed_,
+      std::fprintf(stderr, "%s: %zu/%zu %s %s (%.1f s)%s%s, %zu failed, ETA %s\n", label_.c_str(),
+                   done_, total_, r.key.c_str(), r.passed ? "pass" : "FAIL", r.wall_s,
+                   r.passed ? "" : ": ", r.passed ? "" : r.failure.substr(0, 200).c_str(), failed_,
                    FormatDuration(eta).c_str());
     }
     std::fflush(stderr);
@@ -195,8 +197,8 @@ std::vector<RunRecord> RunPool(
         argv.insert(argv.end(), options.extra_args.begin(), options.extra_args.end());
         r.pid = Spawn(argv, run_dir / "runner.log");
         if (r.pid < 0) {
-          throw std::runtime_error(fmt::format("cannot start {}: {}", options.runner_exe,
-                                               std::strerror(errno)));
+          throw std::runtime_error(
+              fmt::format("cannot start {}: {}", options.runner_exe, std::strerror(errno)));
         }
       } catch (const std::exception& e) {
         r.error = e.what();

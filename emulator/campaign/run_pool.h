@@ -8,8 +8,8 @@
 /// group killed. stdout/stderr of a run go to RUN_DIR/runner.log. After a child exits, its
 /// RUN_DIR/report.json is parsed into a RunRecord. Single-threaded; not reentrant.
 
-#include <functional>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 

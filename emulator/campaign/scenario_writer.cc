@@ -72,9 +72,9 @@ void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
     const std::string here = prefix.empty() ? *key : prefix + "." + *key;
     const bool create = create_leaf && last && node.IsMap();
     if (!create && (!node.IsMap() || !node[*key])) {
-      throw std::invalid_argument(fmt::format(
-          "{}: {}: '{}' does not exist in the base scenario{}", where, path, here,
-          node.IsMap() ? "" : fmt::format(" ('{}' is not a mapping)", prefix)));
+      throw std::invalid_argument(
+          fmt::format("{}: {}: '{}' does not exist in the base scenario{}", where, path, here,
+                      node.IsMap() ? "" : fmt::format(" ('{}' is not a mapping)", prefix)));
     }
     prefix = here;
     if (last) {
@@ -90,10 +90,10 @@ void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
     const std::size_t idx = std::get<std::size_t>(seg);
     const std::string here = fmt::format("{}[{}]", prefix, idx);
     if (!node.IsSequence() || idx >= node.size()) {
-      throw std::invalid_argument(fmt::format(
-          "{}: {}: '{}' does not exist in the base scenario ({})", where, path, here,
-          node.IsSequence() ? fmt::format("'{}' has {} entries", prefix, node.size())
-                            : fmt::format("'{}' is not a list", prefix)));
+      throw std::invalid_argument(
+          fmt::format("{}: {}: '{}' does not exist in the base scenario ({})", where, path, here,
+                      node.IsSequence() ? fmt::format("'{}' has {} entries", prefix, node.size())
+                                        : fmt::format("'{}' is not a list", prefix)));
     }
     prefix = here;
     if (last) {
@@ -125,8 +125,8 @@ YAML::Node LoadBase(const CampaignSpec& spec) {
   try {
     return YAML::LoadFile(spec.base_scenario.string());
   } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(fmt::format("{}:{}: {}", spec.base_scenario.string(),
-                                            e.mark.line + 1, e.msg));
+    throw std::invalid_argument(
+        fmt::format("{}:{}: {}", spec.base_scenario.string(), e.mark.line + 1, e.msg));
   }
 }
 
@@ -152,8 +152,8 @@ void CheckParameterPaths(const CampaignSpec& spec) {
   YAML::Node base = LoadBase(spec);
   ApplyOverrides(spec, base);
   for (const auto& p : spec.parameters) {
-    SetAtPath(base, p.path, p.kind == ParameterSpec::Kind::kList ? p.values.front()
-                                                                 : nlohmann::json(p.from),
+    SetAtPath(base, p.path,
+              p.kind == ParameterSpec::Kind::kList ? p.values.front() : nlohmann::json(p.from),
               fmt::format("{}:{}: path", spec.file, p.line));
   }
 }

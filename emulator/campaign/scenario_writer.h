@@ -4,8 +4,8 @@
 /// existing file or folder relative to the base's directory) become absolute, so the generated
 /// file works from the run directory. Thread-compatible.
 
-#include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
+#include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <string>
@@ -23,8 +23,8 @@ struct RunSpec;
 void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& value,
                const std::string& where, bool create_leaf = false);
 
-/// Throws like SetAtPath when any `set:` or parameter path of `spec` is missing from the base scenario;
-/// call once before running so that errors come before any run starts.
+/// Throws like SetAtPath when any `set:` or parameter path of `spec` is missing from the base
+/// scenario; call once before running so that errors come before any run starts.
 void CheckParameterPaths(const CampaignSpec& spec);
 
 /// Writes `out_file` (YAML) for `run`. Throws std::invalid_argument / std::runtime_error.

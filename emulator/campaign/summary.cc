@@ -118,11 +118,20 @@ std::string Html(const std::string& s) {
   std::string out;
   for (char c : s) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -234,7 +243,8 @@ CampaignSummary Summarize(const CampaignSpec& spec, const std::vector<RunRecord>
     cr.description = c.Describe();
     cr.required = c.fraction;
     std::size_t ok = 0;
-    for (const auto& r : runs) ok += (c.bound ? c.bound->Holds(MetricOf(r, c.bound->metric)) : r.passed);
+    for (const auto& r : runs)
+      ok += (c.bound ? c.bound->Holds(MetricOf(r, c.bound->metric)) : r.passed);
     cr.achieved = runs.empty() ? 0 : static_cast<double>(ok) / runs.size();
     cr.holds = !runs.empty() && cr.achieved + 1e-12 >= cr.required;
     all_hold = all_hold && cr.holds;
@@ -295,13 +305,12 @@ std::string FormatSummary(const CampaignSpec& spec, const CampaignSummary& s,
                        spec.rank_metric.empty() ? "" : " (by " + spec.rank_metric + ")");
     for (const auto i : s.worst) {
       const auto& r = runs[i];
-      out += fmt::format("  {} seed {} {} {}{}{}\n", r.key, r.seed, r.passed ? "pass" : "FAIL",
-                         ParamsText(r),
-                         spec.rank_metric.empty()
-                             ? ""
-                             : " " + spec.rank_metric + "=" +
-                                   Num(MetricOf(r, spec.rank_metric).value_or(NAN)),
-                         r.passed ? "" : "  [" + r.failure.substr(0, 160) + "]");
+      out += fmt::format(
+          "  {} seed {} {} {}{}{}\n", r.key, r.seed, r.passed ? "pass" : "FAIL", ParamsText(r),
+          spec.rank_metric.empty()
+              ? ""
+              : " " + spec.rank_metric + "=" + Num(MetricOf(r, spec.rank_metric).value_or(NAN)),
+          r.passed ? "" : "  [" + r.failure.substr(0, 160) + "]");
     }
   }
   for (const auto& p : spec.parameters) {
@@ -341,9 +350,10 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
     h += "<h2>Campaign criteria</h2><table><tr><th class=\"l\">criterion</th><th>achieved</th>"
          "<th>result</th></tr>\n";
     for (const auto& c : s.criteria) {
-      h += fmt::format("<tr><td class=\"l\">{}</td><td>{:.1f} %</td><td class=\"{}\">{}</td></tr>\n",
-                       Html(c.description), c.achieved * 100, c.holds ? "pass" : "fail",
-                       c.holds ? "holds" : "fails");
+      h +=
+          fmt::format("<tr><td class=\"l\">{}</td><td>{:.1f} %</td><td class=\"{}\">{}</td></tr>\n",
+                      Html(c.description), c.achieved * 100, c.holds ? "pass" : "fail",
+                      c.holds ? "holds" : "fails");
     }
     h += "</table>\n";
   }
@@ -353,18 +363,21 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
   h += "<th class=\"l\">failure</th></tr>\n";
   for (const auto i : s.worst) {
     const auto& r = runs[i];
-    h += fmt::format("<tr><td class=\"l\"><a href=\"{}\">{}</a></td><td>{}</td>"
-                     "<td class=\"{}\">{}</td><td class=\"l\">{}</td>",
-                     Html(r.run_dir), Html(r.key), r.seed, r.passed ? "pass" : "fail",
-                     r.passed ? "pass" : "FAIL", Html(ParamsText(r)));
-    for (const auto& m : s.key_metrics) h += fmt::format("<td>{}</td>", Num(MetricOf(r, m).value_or(NAN)));
+    h += fmt::format(
+        "<tr><td class=\"l\"><a href=\"{}\">{}</a></td><td>{}</td>"
+        "<td class=\"{}\">{}</td><td class=\"l\">{}</td>",
+        Html(r.run_dir), Html(r.key), r.seed, r.passed ? "pass" : "fail",
+        r.passed ? "pass" : "FAIL", Html(ParamsText(r)));
+    for (const auto& m : s.key_metrics)
+      h += fmt::format("<td>{}</td>", Num(MetricOf(r, m).value_or(NAN)));
     h += fmt::format("<td class=\"l\">{}</td></tr>\n", Html(r.failure));
   }
   h += "</table>\n";
   for (const auto& p : spec.parameters) {
-    h += fmt::format("<h2>{}</h2>\n<table><tr><th class=\"l\">value</th><th>runs</th>"
-                     "<th>pass %</th>",
-                     Html(p.path));
+    h += fmt::format(
+        "<h2>{}</h2>\n<table><tr><th class=\"l\">value</th><th>runs</th>"
+        "<th>pass %</th>",
+        Html(p.path));
     for (const auto& m : s.key_metrics) {
       h += fmt::format("<th>{} mean</th><th>{} max</th>", Html(m), Html(m));
     }

@@ -28,9 +28,9 @@ struct CampaignSummary {
   std::size_t passed = 0;
   double pass_rate = 0;  ///< passed / stored
   std::vector<CriterionResult> criteria;
-  bool complete = false;         ///< stored == expected
-  bool campaign_passed = false;  ///< complete and every criterion holds
-  std::vector<std::size_t> worst;  ///< indices into the runs, worst first (at most 10)
+  bool complete = false;                 ///< stored == expected
+  bool campaign_passed = false;          ///< complete and every criterion holds
+  std::vector<std::size_t> worst;        ///< indices into the runs, worst first (at most 10)
   std::vector<std::string> key_metrics;  ///< metrics shown in tables and plots
 };
 

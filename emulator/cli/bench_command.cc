@@ -69,8 +69,7 @@ BenchCommand::BenchCommand(CLI::App& app) : app_(&app) {
                      "Repository root (platforms, meshes, DBC files)");
   bench_->add_option("--check", check_path_,
                      "Only check that a JSON report has every documented key");
-  bench_->add_option("--worker", worker_, "Internal: run one workload, print its JSON")
-      ->group("");
+  bench_->add_option("--worker", worker_, "Internal: run one workload, print its JSON")->group("");
 }
 
 std::optional<int> BenchCommand::Run() {

@@ -94,9 +94,9 @@ int RunDown(const std::string& name) {
   const auto ec = bus::UcanRemoveBus(dir, name);
   if (ec) {
     fmt::print(stderr, "wheelhil bus down {}: {}\n", name,
-               NoBroker(ec) ? fmt::format("no ucan broker in {}", dir)
-                            : ec == std::errc::no_such_device ? std::string("no such bus")
-                                                              : ec.message());
+               NoBroker(ec)                      ? fmt::format("no ucan broker in {}", dir)
+               : ec == std::errc::no_such_device ? std::string("no such bus")
+                                                 : ec.message());
     return 1;
   }
   fmt::print("{} down\n", name);
@@ -111,8 +111,8 @@ int RunList() {
     fmt::print(stderr, "wheelhil bus list: {}\n", ec.message());
     return 1;
   }
-  fmt::print("{:<16}{:>8}{:>9}{:>14}{:>10}{:>8}\n", "NAME", "IFINDEX", "CLIENTS", "FRAMES",
-             "DROPS", "BAD");
+  fmt::print("{:<16}{:>8}{:>9}{:>14}{:>10}{:>8}\n", "NAME", "IFINDEX", "CLIENTS", "FRAMES", "DROPS",
+             "BAD");
   for (const auto& s : stats) {
     fmt::print("{:<16}{:>8}{:>9}{:>14}{:>10}{:>8}\n", s.name, s.ifindex, s.clients, s.frames,
                s.drops, s.bad_messages);
@@ -154,8 +154,8 @@ int RunExec(const std::vector<std::string>& buses, const std::vector<std::string
 
 int EnsureUcanBus(const std::string& runtime_dir, const std::string& name) {
   if (!bus::IsValidUcanBusName(name)) {
-    throw std::runtime_error(fmt::format(
-        "bad bus name '{}': 1..15 characters, no '/', ':' or spaces", name));
+    throw std::runtime_error(
+        fmt::format("bad bus name '{}': 1..15 characters, no '/', ':' or spaces", name));
   }
   EnsureDaemon(runtime_dir);
   int index = 0;

@@ -32,8 +32,8 @@ std::string DefaultSmokeDir() {
 }  // namespace
 
 CampaignCommand::CampaignCommand(CLI::App& app) {
-  campaign_ = app.add_subcommand(
-      "campaign", "Run or resume a fault-injection campaign (docs/campaigns.md)");
+  campaign_ = app.add_subcommand("campaign",
+                                 "Run or resume a fault-injection campaign (docs/campaigns.md)");
   campaign_->add_option("FILE", file_, "Campaign file (YAML)");
   campaign_->add_option("-j,--jobs", jobs_, "Parallel runs (child processes)")
       ->check(CLI::Range(1, 1024));
@@ -51,7 +51,8 @@ CampaignCommand::CampaignCommand(CLI::App& app) {
   merge_->add_option("INPUTS", merge_inputs_, "Shard databases")->required();
 
   smoke_ = app.add_subcommand(
-      "smoke", "Short CI suite: every platform and paper scenario, a few seconds each (docs/ci.md)");
+      "smoke",
+      "Short CI suite: every platform and paper scenario, a few seconds each (docs/ci.md)");
   smoke_->add_option("--junit", smoke_junit_, "Write JUnit XML (one case per scenario)");
   smoke_->add_option("--firmware", smoke_firmware_,
                      "Firmware command under test (replaces each scenario's firmware.command)");
@@ -103,7 +104,8 @@ int CampaignCommand::RunMerge() {
   try {
     std::vector<fs::path> inputs(merge_inputs_.begin(), merge_inputs_.end());
     const auto n = cmp::MergeStores(merge_out_, inputs);
-    std::cout << fmt::format("merged {} databases into {}: {} runs\n", inputs.size(), merge_out_, n);
+    std::cout << fmt::format("merged {} databases into {}: {} runs\n", inputs.size(), merge_out_,
+                             n);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "wheelhil campaign merge: " << e.what() << "\n";
@@ -114,8 +116,8 @@ int CampaignCommand::RunMerge() {
 int CampaignCommand::RunSmoke() {
   try {
     cmp::SmokeOptions o;
-    o.scenarios = cmp::FindSmokeScenarios(smoke_scenarios_.empty() ? DefaultSmokeDir()
-                                                                   : smoke_scenarios_);
+    o.scenarios =
+        cmp::FindSmokeScenarios(smoke_scenarios_.empty() ? DefaultSmokeDir() : smoke_scenarios_);
     o.out_dir = smoke_out_;
     o.jobs = smoke_jobs_;
     o.runner_exe = smoke_runner_.empty() ? "" : fs::absolute(smoke_runner_).string();

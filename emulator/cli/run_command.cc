@@ -30,8 +30,8 @@ std::string FindDbcDir() {
   if (const char* env = std::getenv("WHEELHIL_DBC_DIR"); env != nullptr && env[0] != '\0') {
     return env;
   }
-  for (const fs::path& p : {fs::path(ExeDir()) / "../../bus/dbc",
-                           fs::path(ExeDir()) / "../share/wheelhil/dbc"}) {
+  for (const fs::path& p :
+       {fs::path(ExeDir()) / "../../bus/dbc", fs::path(ExeDir()) / "../share/wheelhil/dbc"}) {
     if (fs::exists(p / "wheelhil_fw.dbc")) return fs::canonical(p).string();
   }
   return {};
@@ -44,8 +44,8 @@ void PrintSummary(const nlohmann::json& r) {
              r["wall"].value("real_time_factor", 0.0));
   const auto& m = r["metrics"];
   const char* streams[] = {"pose", "pose_raw"};
-  fmt::print("{:<10} {:>14} {:>14} {:>12} {:>12} {:>12}\n", "stream", "final_err_m",
-             "heading_err", "ape_rmse_m", "distance_m", "rotation");
+  fmt::print("{:<10} {:>14} {:>14} {:>12} {:>12} {:>12}\n", "stream", "final_err_m", "heading_err",
+             "ape_rmse_m", "distance_m", "rotation");
   for (const char* s : streams) {
     if (!m.contains(s)) continue;
     const auto& p = m[s];

@@ -2,8 +2,8 @@
 // that owns it; this file only wires them together. Exit codes: 0 success, 1 failure, 2 usage or
 // input error.
 
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
+#include <CLI/CLI.hpp>
 
 #include "emulator/bullet_precision.h"
 #include "emulator/cli/bench_command.h"

@@ -61,7 +61,8 @@ Accel4Node::Accel4Node(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
     if (sensors[i].rate_hz != sensors[0].rate_hz) {
       throw std::invalid_argument(fmt::format(
           "accel4_node.sensors[{}].rate_hz ({}) differs from sensor 0 ({}): one frame carries "
-          "all four", i, sensors[i].rate_hz, sensors[0].rate_hz));
+          "all four",
+          i, sensors[i].rate_hz, sensors[0].rate_hz));
     }
     sensors_.emplace_back(sensors[i]);
   }
@@ -86,7 +87,8 @@ bool Accel4Node::EncodeSample(const std::array<double, 4>& a_m_s2, bus::CanFrame
   out.len = static_cast<std::uint8_t>(msg_->length);
   const std::span<std::uint8_t> payload(out.data.data(), out.len);
   bool ok = true;
-  for (std::size_t i = 0; i < 4; ++i) ok = bus::EncodeSignal(*channels_[i], a_m_s2[i], payload) && ok;
+  for (std::size_t i = 0; i < 4; ++i)
+    ok = bus::EncodeSignal(*channels_[i], a_m_s2[i], payload) && ok;
   const std::uint64_t counter_mask = (1ULL << counter_->length) - 1;
   bus::InsertRaw(*counter_, counter_value_ & counter_mask, payload);
   counter_value_ = (counter_value_ + 1) & counter_mask;

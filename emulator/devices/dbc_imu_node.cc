@@ -78,9 +78,9 @@ DbcImuNode::DbcImuNode(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImu
           fmt::format("{}: message '{}' has no GenMsgCycleTime > 0", field, name));
     }
     if (msg->length > 8) {
-      throw std::invalid_argument(fmt::format(
-          "{}: message '{}' is {} bytes: only classic CAN frames (<= 8) are modelled", field, name,
-          msg->length));
+      throw std::invalid_argument(
+          fmt::format("{}: message '{}' is {} bytes: only classic CAN frames (<= 8) are modelled",
+                      field, name, msg->length));
     }
     Message m;
     m.msg = msg;
@@ -100,10 +100,10 @@ DbcImuNode::DbcImuNode(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImu
     }
     const std::optional<double> k = SiToUnit(c.quantity, sig->unit);
     if (!k) {
-      throw std::invalid_argument(fmt::format(
-          "{}.signal: unit '{}' of '{}' does not fit a {} (expected {})", field, sig->unit,
-          c.signal, IsRate(c.quantity) ? "rate" : "acceleration",
-          IsRate(c.quantity) ? "deg/s or rad/s" : "g or m/s^2"));
+      throw std::invalid_argument(
+          fmt::format("{}.signal: unit '{}' of '{}' does not fit a {} (expected {})", field,
+                      sig->unit, c.signal, IsRate(c.quantity) ? "rate" : "acceleration",
+                      IsRate(c.quantity) ? "deg/s or rad/s" : "g or m/s^2"));
     }
     m.bindings.push_back({c.quantity, sig, *k});
   }
@@ -113,15 +113,15 @@ DbcImuNode::DbcImuNode(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImu
     auto it = std::find_if(messages_.begin(), messages_.end(),
                            [&](const Message& m) { return m.msg->name == o.message; });
     if (it == messages_.end()) {
-      throw std::invalid_argument(fmt::format(
-          "{}.message: '{}' carries no configured channel", field, o.message));
+      throw std::invalid_argument(
+          fmt::format("{}.message: '{}' carries no configured channel", field, o.message));
     }
     if (!o.counter_signal.empty()) {
       it->counter = it->msg->FindSignal(o.counter_signal);
       if (!it->counter || it->counter->value_type != bus::DbcValueType::kInteger) {
-        throw std::invalid_argument(fmt::format(
-            "{}.counter_signal: '{}' is not an integer signal of '{}'", field, o.counter_signal,
-            o.message));
+        throw std::invalid_argument(
+            fmt::format("{}.counter_signal: '{}' is not an integer signal of '{}'", field,
+                        o.counter_signal, o.message));
       }
     }
     if (!o.checksum_signal.empty()) {
@@ -129,8 +129,8 @@ DbcImuNode::DbcImuNode(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImu
       it->checksum_kind = o.checksum;
       if (!it->checksum || !ChecksumFits(o.checksum, *it->checksum)) {
         throw std::invalid_argument(fmt::format(
-            "{}.checksum_signal: '{}' is not a signal of '{}' that can carry a {} checksum",
-            field, o.checksum_signal, o.message, ChecksumKindName(o.checksum)));
+            "{}.checksum_signal: '{}' is not a signal of '{}' that can carry a {} checksum", field,
+            o.checksum_signal, o.message, ChecksumKindName(o.checksum)));
       }
     }
   }

@@ -48,7 +48,7 @@ struct DbcImuMessageOptions {
 };
 
 struct DbcImuConfig {
-  std::vector<DbcImuChannel> channels;             ///< At least one.
+  std::vector<DbcImuChannel> channels;                ///< At least one.
   std::vector<DbcImuMessageOptions> message_options;  ///< Only for messages with counter/checksum.
 };
 

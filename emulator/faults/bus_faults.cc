@@ -70,8 +70,8 @@ FaultyCanBus::FaultyCanBus(CanBusModel& bus, std::vector<BusFault> faults, Stuff
         if (f.flood_id > bus::CanFrame::kMaxStandardId) fail("flood_id: must be a standard id");
         if (f.flood_len > 8) fail("flood_len: must be 0..8");
         const unsigned bits = CanFrameBits(FloodFrame(f), stuffing);
-        s.period_ns = static_cast<std::int64_t>(
-            std::ceil(static_cast<double>(bits) * static_cast<double>(bus_.bit_time_ns()) / f.load));
+        s.period_ns = static_cast<std::int64_t>(std::ceil(
+            static_cast<double>(bits) * static_cast<double>(bus_.bit_time_ns()) / f.load));
         if (flood_node_ < 0) {
           flood_node_ = bus_.AddNode("fault:flood", CanBusModel::QueueOrder::kFifo, 4096);
         }

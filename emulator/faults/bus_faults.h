@@ -37,10 +37,10 @@ std::string_view BusFaultKindName(BusFaultKind kind) noexcept;
 struct BusFault {
   BusFaultKind kind = BusFaultKind::kErrorBurst;
   FaultWindow window;
-  int error_frames = 1;          ///< kErrorBurst: 1..1000.
-  int node = -1;                 ///< kBusOff: bus node index (CanBusModel::AddNode).
-  std::string node_name;         ///< kBusOff: for the log.
-  double load = 0.5;             ///< kFlood: (0, 1].
+  int error_frames = 1;            ///< kErrorBurst: 1..1000.
+  int node = -1;                   ///< kBusOff: bus node index (CanBusModel::AddNode).
+  std::string node_name;           ///< kBusOff: for the log.
+  double load = 0.5;               ///< kFlood: (0, 1].
   std::uint32_t flood_id = 0x001;  ///< kFlood: standard id.
   std::uint8_t flood_len = 8;      ///< kFlood: 0..8.
 };
@@ -74,8 +74,8 @@ class FaultyCanBus {
   struct State {
     BusFault fault;
     faults_internal::WindowPhase phase;
-    std::int64_t period_ns = 0;     ///< kFlood.
-    std::int64_t next_ns = 0;       ///< kFlood: next frame; kErrorBurst: INT64_MAX once queued.
+    std::int64_t period_ns = 0;  ///< kFlood.
+    std::int64_t next_ns = 0;    ///< kFlood: next frame; kErrorBurst: INT64_MAX once queued.
     std::string target;
   };
   void Generate(std::int64_t t_ns);

@@ -46,8 +46,7 @@ DeviceFaultInjector::DeviceFaultInjector(std::string node_name, std::uint8_t nod
     }
     if (f.kind == DeviceFaultKind::kReboot && f.window.t1_ns == FaultWindow::kForever) {
       throw std::invalid_argument(fmt::format(
-          "{}: device_faults[{}].window: a reboot needs an end (power-on instant)", node_name_,
-          i));
+          "{}: device_faults[{}].window: a reboot needs an end (power-on instant)", node_name_, i));
     }
     faults_.push_back({f, {}, false, false});
   }
@@ -58,8 +57,8 @@ void DeviceFaultInjector::Track(std::int64_t t_ns) {
     if (!s.phase.Pending(t_ns, s.fault.window)) continue;
     std::string detail;
     if (s.fault.kind == DeviceFaultKind::kEmcy) {
-      detail = fmt::format("code=0x{:04X} register=0x{:02X}", s.fault.emcy_code,
-                           s.fault.error_register);
+      detail =
+          fmt::format("code=0x{:04X} register=0x{:02X}", s.fault.emcy_code, s.fault.error_register);
     }
     s.phase.Advance(t_ns, s.fault.window, log_, "device", DeviceFaultKindName(s.fault.kind),
                     fmt::format("{} (node {})", node_name_, node_id_), detail);

@@ -33,8 +33,8 @@ std::string_view DeviceFaultKindName(DeviceFaultKind kind) noexcept;
 struct DeviceFault {
   DeviceFaultKind kind = DeviceFaultKind::kSilent;
   FaultWindow window;
-  std::uint16_t emcy_code = 0x7305;       ///< kEmcy: CiA 406 incremental sensor 1 fault.
-  std::uint8_t error_register = 0x01;     ///< kEmcy: 0x1001 generic error.
+  std::uint16_t emcy_code = 0x7305;    ///< kEmcy: CiA 406 incremental sensor 1 fault.
+  std::uint8_t error_register = 0x01;  ///< kEmcy: 0x1001 generic error.
 };
 
 class DeviceFaultInjector {

@@ -44,8 +44,8 @@ std::string FaultEventJson(const FaultEvent& e) {
 namespace faults_internal {
 
 void WindowPhase::Advance(std::int64_t t_ns, const FaultWindow& w, FaultEventLog* log,
-                          std::string_view category, std::string_view kind,
-                          std::string_view target, std::string_view detail) {
+                          std::string_view category, std::string_view kind, std::string_view target,
+                          std::string_view detail) {
   if (!started_ && t_ns >= w.t0_ns) {
     started_ = true;
     if (log) {

@@ -41,8 +41,8 @@ std::string_view FrameFaultKindName(FrameFaultKind kind) noexcept {
 }
 
 FrameFaultFilter::FrameFaultFilter(std::vector<FrameFault> faults,
-                                   std::shared_ptr<const bus::DbcDatabase> dbc,
-                                   std::uint64_t seed, FaultEventLog* log)
+                                   std::shared_ptr<const bus::DbcDatabase> dbc, std::uint64_t seed,
+                                   FaultEventLog* log)
     : dbc_(std::move(dbc)), rng_(seed), log_(log) {
   for (std::size_t i = 0; i < faults.size(); ++i) {
     const FrameFault& f = faults[i];
@@ -68,11 +68,11 @@ FrameFaultFilter::FrameFaultFilter(std::vector<FrameFault> faults,
         !dbc_) {
       fail("kind: counter/checksum faults need the DBC database");
     }
-    const std::uint32_t max_id = f.extended ? bus::CanFrame::kMaxExtendedId
-                                            : bus::CanFrame::kMaxStandardId;
+    const std::uint32_t max_id =
+        f.extended ? bus::CanFrame::kMaxExtendedId : bus::CanFrame::kMaxStandardId;
     if (f.id > max_id || f.mask > max_id) fail("id/mask: beyond the identifier range");
-    State s{f, {}, fmt::format("id 0x{:X} mask 0x{:X}{}", f.id, f.mask, f.extended ? " ext" : ""),
-            0};
+    State s{
+        f, {}, fmt::format("id 0x{:X} mask 0x{:X}{}", f.id, f.mask, f.extended ? " ext" : ""), 0};
     states_.push_back(std::move(s));
   }
 }
@@ -139,9 +139,9 @@ void FrameFaultFilter::Filter(NodeFrame f, std::vector<NodeFrame>& out) {
         const bool counter = x.kind == FrameFaultKind::kWrongCounter;
         const bus::DbcSignal* sig =
             msg ? msg->FindSignal(counter ? x.counter_signal : x.checksum_signal) : nullptr;
-        const bus::DbcSignal* checksum =
-            counter && msg && !x.checksum_signal.empty() ? msg->FindSignal(x.checksum_signal)
-                                                         : nullptr;
+        const bus::DbcSignal* checksum = counter && msg && !x.checksum_signal.empty()
+                                             ? msg->FindSignal(x.checksum_signal)
+                                             : nullptr;
         std::uint64_t raw = 0;
         if (!sig || !bus::ExtractRaw(*sig, payload, raw) ||
             (counter && !x.checksum_signal.empty() && !checksum)) {
@@ -172,13 +172,13 @@ std::vector<NodeFrame> FrameFaultFilter::Process(const std::vector<NodeFrame>& i
   for (const NodeFrame& f : in) Filter(f, held_);
   // Windows that started/ended with no frame in them are still recorded.
   for (State& s : states_) {
-    s.phase.Advance(t_ns, s.fault.window, log_, "frame", FrameFaultKindName(s.fault.kind),
-                    s.target, "");
+    s.phase.Advance(t_ns, s.fault.window, log_, "frame", FrameFaultKindName(s.fault.kind), s.target,
+                    "");
   }
   std::stable_sort(held_.begin(), held_.end(),
                    [](const NodeFrame& a, const NodeFrame& b) { return a.due_ns < b.due_ns; });
-  const auto split = std::find_if(held_.begin(), held_.end(),
-                                  [&](const NodeFrame& f) { return f.due_ns > t_ns; });
+  const auto split =
+      std::find_if(held_.begin(), held_.end(), [&](const NodeFrame& f) { return f.due_ns > t_ns; });
   std::vector<NodeFrame> out(held_.begin(), split);
   held_.erase(held_.begin(), split);
   return out;

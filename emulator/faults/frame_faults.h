@@ -53,11 +53,11 @@ struct FrameFault {
   std::uint32_t id = 0;
   std::uint32_t mask = 0x7FF;  ///< 0x7FF: exactly `id` (standard); 0: every frame.
   bool extended = false;
-  double probability = 1.0;    ///< kDrop / kDuplicate / kCorrupt: chance per selected frame.
-  std::int64_t delay_ns = 0;   ///< kDelay: added latency; kDuplicate: gap to the copy (>= 0).
-  int bit_flips = 1;           ///< kCorrupt: bits flipped per frame (1..8*len).
-  std::uint8_t dlc = 0;        ///< kWrongDlc: the length sent (0..8).
-  std::string counter_signal;  ///< kWrongCounter.
+  double probability = 1.0;          ///< kDrop / kDuplicate / kCorrupt: chance per selected frame.
+  std::int64_t delay_ns = 0;         ///< kDelay: added latency; kDuplicate: gap to the copy (>= 0).
+  int bit_flips = 1;                 ///< kCorrupt: bits flipped per frame (1..8*len).
+  std::uint8_t dlc = 0;              ///< kWrongDlc: the length sent (0..8).
+  std::string counter_signal;        ///< kWrongCounter.
   std::int64_t counter_offset = -1;  ///< kWrongCounter: added to the counter (non-zero).
   std::string checksum_signal;       ///< kWrongChecksum; kWrongCounter: re-computed if set.
   ChecksumKind checksum = ChecksumKind::kXor;  ///< Algorithm for the re-computation.

@@ -43,8 +43,8 @@ SensorFaultInjector::SensorFaultInjector(std::string sensor, std::vector<SensorF
     : sensor_(std::move(sensor)), nominal_noise_std_(nominal_noise_std), rng_(seed) {
   log_ = log;
   if (!(nominal_noise_std >= 0.0) || !std::isfinite(nominal_noise_std)) {
-    throw std::invalid_argument(fmt::format(
-        "{}: nominal_noise_std ({}) must be finite and >= 0", sensor_, nominal_noise_std));
+    throw std::invalid_argument(fmt::format("{}: nominal_noise_std ({}) must be finite and >= 0",
+                                            sensor_, nominal_noise_std));
   }
   for (std::size_t i = 0; i < faults.size(); ++i) {
     const SensorFault& f = faults[i];
@@ -133,8 +133,7 @@ std::optional<double> SensorFaultInjector::Apply(double sample, std::int64_t t_n
 }
 
 std::optional<std::uint32_t> SensorFaultInjector::ApplyCounts(std::uint32_t counts,
-                                                              std::int64_t t_ns,
-                                                              int counter_bits) {
+                                                              std::int64_t t_ns, int counter_bits) {
   Track(t_ns);
   counter_bits = std::clamp(counter_bits, 1, 32);
   const std::uint64_t mask = (1ULL << counter_bits) - 1;
@@ -156,8 +155,8 @@ std::optional<std::uint32_t> SensorFaultInjector::ApplyCounts(std::uint32_t coun
   }
   have_last_counts_ = true;
   last_counts_ = counts;
-  const std::uint64_t base = (static_cast<std::uint64_t>(counts) -
-                              static_cast<std::uint64_t>(missed_total_)) & mask;
+  const std::uint64_t base =
+      (static_cast<std::uint64_t>(counts) - static_cast<std::uint64_t>(missed_total_)) & mask;
   // Signed view of the register so bias/saturation act around zero.
   double x = static_cast<double>(base);
   if (base >= half) x -= static_cast<double>(mask + 1);

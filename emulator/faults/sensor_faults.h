@@ -53,9 +53,8 @@ class SensorFaultInjector {
   /// `sensor` names the target in the event log; nominal_noise_std is the sensor's own noise
   /// per sample (for kNoiseScale). Throws std::invalid_argument ("sensor_faults[i].field:
   /// problem") on a bad window or value.
-  SensorFaultInjector(std::string sensor, std::vector<SensorFault> faults,
-                      double nominal_noise_std, std::uint64_t seed,
-                      FaultEventLog* log = nullptr);
+  SensorFaultInjector(std::string sensor, std::vector<SensorFault> faults, double nominal_noise_std,
+                      std::uint64_t seed, FaultEventLog* log = nullptr);
 
   /// The faulted sample at t_ns (nullopt: dropped). t_ns must not go backwards.
   std::optional<double> Apply(double sample, std::int64_t t_ns);

@@ -51,8 +51,8 @@ RollerVehicle& PhysicsWorld::AddVehicleAt(const VehicleSpec& spec, const Eigen::
 RollerVehicle& PhysicsWorld::AddVehicle(const VehicleSpec& spec, double x, double y, double yaw) {
   SurfaceHit hit;
   if (!terrain_->Raycast(Eigen::Vector3d(x, y, 1e3), -Eigen::Vector3d::UnitZ(), 2e3, &hit)) {
-    throw std::invalid_argument(fmt::format(
-        "vehicle '{}': start position ({}, {}): no floor under it", spec.name, x, y));
+    throw std::invalid_argument(
+        fmt::format("vehicle '{}': start position ({}, {}): no floor under it", spec.name, x, y));
   }
   // Orientation: z along the floor normal, x at heading yaw (projected onto the floor).
   const Eigen::Vector3d z = hit.normal_W;
@@ -64,12 +64,13 @@ RollerVehicle& PhysicsWorld::AddVehicle(const VehicleSpec& spec, double x, doubl
   R.col(1) = y_dir;
   R.col(2) = z;
   // Height: the mean over wheels of the static equilibrium (load shared evenly).
-  const double share = spec.mass_kg * gravity_W_.norm() / std::max<std::size_t>(1, spec.wheels.size());
+  const double share =
+      spec.mass_kg * gravity_W_.norm() / std::max<std::size_t>(1, spec.wheels.size());
   double h = 0;
   for (const auto& w : spec.wheels) {
     const auto& q = w.suspension;
-    const double len = std::clamp(q.free_length_m - share / q.stiffness_n_m, q.min_length_m,
-                                  q.max_length_m);
+    const double len =
+        std::clamp(q.free_length_m - share / q.stiffness_n_m, q.min_length_m, q.max_length_m);
     h += w.radius_m + len - w.mount_B.z();
   }
   h /= std::max<std::size_t>(1, spec.wheels.size());

@@ -26,8 +26,8 @@ class btDynamicsWorld;
 namespace wheelhil::emulator::physics {
 
 struct WorldOptions {
-  double step_s = 1e-3;                                        ///< fixed step, s
-  Eigen::Vector3d gravity_W = Eigen::Vector3d(0, 0, -9.81);   ///< m/s^2
+  double step_s = 1e-3;                                      ///< fixed step, s
+  Eigen::Vector3d gravity_W = Eigen::Vector3d(0, 0, -9.81);  ///< m/s^2
 };
 
 class PhysicsWorld {

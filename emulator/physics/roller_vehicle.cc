@@ -16,7 +16,7 @@ using Eigen::Matrix3d;
 using Eigen::Vector3d;
 
 constexpr double kPi = std::numbers::pi;
-constexpr double kAnchorGain = 0.2;     // fraction of the accumulated creep removed per step
+constexpr double kAnchorGain = 0.2;  // fraction of the accumulated creep removed per step
 constexpr double kRayMargin_m = 0.02;
 constexpr double kSolverTolerance = 1e-6;  // m/s (or rad/s) change of any row per sweep
 constexpr std::size_t kMaxWheels = 32;
@@ -36,13 +36,13 @@ void Require(bool ok, const std::string& where, const std::string& field, double
 
 // One velocity-level row of the contact/motor solve.
 struct Row {
-  Vector3d lin;   // direction of the impulse on the chassis
-  Vector3d ang;   // r x lin
-  Vector3d iang;  // Iinv * ang
-  Vector3d lin_m;                    // lin / m
+  Vector3d lin;    // direction of the impulse on the chassis
+  Vector3d ang;    // r x lin
+  Vector3d iang;   // Iinv * ang
+  Vector3d lin_m;  // lin / m
   // No default initialisers: a step's rows are filled completely where they are added.
-  double jw;             // coefficient on the wheel spin rate
-  double jw_i;           // jw / wheel inertia
+  double jw;    // coefficient on the wheel spin rate
+  double jw_i;  // jw / wheel inertia
   int wheel;
   double inv_k;          // 1 / (effective inverse mass + cfm)
   double cfm;            // softness: row velocity error per unit impulse (0 = rigid)
@@ -65,7 +65,8 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
   }
   Require(s.wheels.size() >= 1 && s.wheels.size() <= kMaxWheels, where, "wheels",
           static_cast<double>(s.wheels.size()), "must list 1 to 32 wheels");
-  Require(s.slip_threshold_m_s > 0, where, "slip_threshold_m_s", s.slip_threshold_m_s, "must be > 0");
+  Require(s.slip_threshold_m_s > 0, where, "slip_threshold_m_s", s.slip_threshold_m_s,
+          "must be > 0");
   Require(s.stribeck_velocity_m_s > 0, where, "stribeck_velocity_m_s", s.stribeck_velocity_m_s,
           "must be > 0");
   Require(s.solver_iterations >= 1 && s.solver_iterations <= 1000, where, "solver_iterations",
@@ -78,13 +79,14 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
             "must be finite and > 0");
     Require(std::isfinite(w.inertia_kg_m2) && w.inertia_kg_m2 > 0, where, f + "inertia_kg_m2",
             w.inertia_kg_m2, "must be finite and > 0");
-    Require(w.rolling_resistance >= 0 && w.rolling_resistance < 1, where,
-            f + "rolling_resistance", w.rolling_resistance, "must be in [0, 1)");
+    Require(w.rolling_resistance >= 0 && w.rolling_resistance < 1, where, f + "rolling_resistance",
+            w.rolling_resistance, "must be in [0, 1)");
     Require(w.bearing_friction_nm >= 0, where, f + "bearing_friction_nm", w.bearing_friction_nm,
             "must be >= 0");
-    Require(w.bearing_viscous_nm_s >= 0, where, f + "bearing_viscous_nm_s",
-            w.bearing_viscous_nm_s, "must be >= 0");
-    Require(w.lateral_mu_scale > 0, where, f + "lateral_mu_scale", w.lateral_mu_scale, "must be > 0");
+    Require(w.bearing_viscous_nm_s >= 0, where, f + "bearing_viscous_nm_s", w.bearing_viscous_nm_s,
+            "must be >= 0");
+    Require(w.lateral_mu_scale > 0, where, f + "lateral_mu_scale", w.lateral_mu_scale,
+            "must be > 0");
     if (w.kind == WheelKind::kMecanum || w.kind == WheelKind::kOmni ||
         w.kind == WheelKind::kOrthogonal) {
       Require(std::abs(std::sin(w.roller_angle_rad)) > 0.1, where, f + "roller_angle_deg",
@@ -97,8 +99,10 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
     const SuspensionSpec& q = w.suspension;
     Require(q.min_length_m >= 0 && q.min_length_m < q.max_length_m, where,
             f + "suspension.min_length_m", q.min_length_m, "must be >= 0 and < max_length_m");
-    Require(q.free_length_m > 0, where, f + "suspension.free_length_m", q.free_length_m, "must be > 0");
-    Require(q.stiffness_n_m > 0, where, f + "suspension.stiffness_n_m", q.stiffness_n_m, "must be > 0");
+    Require(q.free_length_m > 0, where, f + "suspension.free_length_m", q.free_length_m,
+            "must be > 0");
+    Require(q.stiffness_n_m > 0, where, f + "suspension.stiffness_n_m", q.stiffness_n_m,
+            "must be > 0");
     Require(q.damping_n_s_m >= 0, where, f + "suspension.damping_n_s_m", q.damping_n_s_m,
             "must be >= 0");
     Require(q.bump_stiffness_n_m >= 0, where, f + "suspension.bump_stiffness_n_m",
@@ -114,8 +118,10 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
       Require(m.gear_ratio > 0, where, f + "motor.gear_ratio", m.gear_ratio, "must be > 0");
       Require(m.torque_constant_nm_a > 0, where, f + "motor.torque_constant_nm_a",
               m.torque_constant_nm_a, "must be > 0");
-      Require(m.max_current_a > 0, where, f + "motor.max_current_a", m.max_current_a, "must be > 0");
-      Require(m.max_torque_nm > 0, where, f + "motor.max_torque_nm", m.max_torque_nm, "must be > 0");
+      Require(m.max_current_a > 0, where, f + "motor.max_current_a", m.max_current_a,
+              "must be > 0");
+      Require(m.max_torque_nm > 0, where, f + "motor.max_torque_nm", m.max_torque_nm,
+              "must be > 0");
       Require(m.rotor_inertia_kg_m2 >= 0, where, f + "motor.rotor_inertia_kg_m2",
               m.rotor_inertia_kg_m2, "must be >= 0");
       Require(m.winding_resistance_ohm >= 0, where, f + "motor.winding_resistance_ohm",
@@ -162,9 +168,8 @@ RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
   for (std::size_t i = 0; i < spec_.wheels.size(); ++i) {
     const WheelSpec& w = spec_.wheels[i];
     WheelState& st = state_[i];
-    const double rotor = w.driven ? w.motor.gear_ratio * w.motor.gear_ratio *
-                                        w.motor.rotor_inertia_kg_m2
-                                  : 0.0;
+    const double rotor =
+        w.driven ? w.motor.gear_ratio * w.motor.gear_ratio * w.motor.rotor_inertia_kg_m2 : 0.0;
     st.inv_inertia = 1.0 / (w.inertia_kg_m2 + rotor);
     st.axle_B = Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
     st.roller_cos = std::cos(w.roller_angle_rad);
@@ -305,9 +310,9 @@ void RollerVehicle::PreStep(double dt) noexcept {
     double f_tire = 0;
     if (ground && L + ldot * dt > l_ground) {
       const double kt = q.tire_stiffness_n_m, ct = q.tire_damping_n_s_m;
-      const double ld = (mu_h * st.length_rate_m_s +
-                         dt * (f_ext - kt * (L - l_ground) + ct * g_rate)) /
-                        (mu_h + dt * (q.damping_n_s_m + ct + dt * kt));
+      const double ld =
+          (mu_h * st.length_rate_m_s + dt * (f_ext - kt * (L - l_ground) + ct * g_rate)) /
+          (mu_h + dt * (q.damping_n_s_m + ct + dt * kt));
       const double f = kt * (L + ld * dt - l_ground) + ct * (ld - g_rate);
       if (f > 0) {
         ldot = ld;
@@ -339,8 +344,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
       st.lambda_a = st.lambda_b = st.lambda_spin = 0;
       st.anchor_a_m = st.anchor_b_m = 0;
       st.last_slip_m_s = 0;
-      contact[i] = Contact{Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(),
-                           r_eff};
+      contact[i] =
+          Contact{Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero(), r_eff};
     } else {
       const Vector3d nrm = hit.normal_W;
       const double n_load = n_axis / c;
@@ -404,8 +409,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
         case WheelKind::kOrthogonal: {
           u = st.roller_cos * l + st.roller_sin * f;
           const Vector3d free_dir = nrm.cross(u);
-          add_row(u, -r_eff * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim,
-                  &st.lambda_a);
+          add_row(u, -r_eff * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim, &st.lambda_a);
           add_row(free_dir, -r_eff * f.dot(free_dir), 0.0, -rr, rr, &st.lambda_b);
           break;
         }
@@ -552,9 +556,9 @@ void RollerVehicle::PreStep(double dt) noexcept {
     tr.rim_travel_m += omega[i] * ct.r_eff * dt;
     if (ws.driven) {
       tr.motor_torque_nm = st.lambda_motor / dt + st.motor_integral_nm;
-      st.motor_integral_nm +=
-          ws.motor.integral_gain_nm_rad * (st.omega_cmd_slewed - omega[i]) * dt;
-      tr.motor_current_a = tr.motor_torque_nm / (ws.motor.torque_constant_nm_a * ws.motor.gear_ratio);
+      st.motor_integral_nm += ws.motor.integral_gain_nm_rad * (st.omega_cmd_slewed - omega[i]) * dt;
+      tr.motor_current_a =
+          tr.motor_torque_nm / (ws.motor.torque_constant_nm_a * ws.motor.gear_ratio);
     }
     if (!tr.in_contact) {
       tr.slip_velocity_m_s.setZero();

@@ -37,22 +37,23 @@ namespace wheelhil::emulator::physics {
 
 /// Per-wheel ground truth after a step.
 struct WheelTruth {
-  double angle_rad = 0;          ///< accumulated spin angle (double), the encoder's truth
-  double omega_rad_s = 0;        ///< spin rate, positive rolls along the heading
+  double angle_rad = 0;    ///< accumulated spin angle (double), the encoder's truth
+  double omega_rad_s = 0;  ///< spin rate, positive rolls along the heading
   bool in_contact = false;
-  double normal_load_n = 0;      ///< >= 0, zero off the floor
-  Eigen::Vector2d slip_velocity_m_s = Eigen::Vector2d::Zero();  ///< (rolling, lateral) of the
-                                 ///< constrained slip: contact point against the rim
-  double slip_speed_m_s = 0;     ///< |slip_velocity_m_s|
-  bool slipping = false;         ///< slip_speed_m_s > VehicleSpec::slip_threshold_m_s
-  double rim_travel_m = 0;       ///< integral of omega * effective radius
-  double ground_travel_m = 0;    ///< integral of the rim speed the ground motion implies
+  double normal_load_n = 0;  ///< >= 0, zero off the floor
+  Eigen::Vector2d slip_velocity_m_s =
+      Eigen::Vector2d::Zero();  ///< (rolling, lateral) of the
+                                ///< constrained slip: contact point against the rim
+  double slip_speed_m_s = 0;    ///< |slip_velocity_m_s|
+  bool slipping = false;        ///< slip_speed_m_s > VehicleSpec::slip_threshold_m_s
+  double rim_travel_m = 0;      ///< integral of omega * effective radius
+  double ground_travel_m = 0;   ///< integral of the rim speed the ground motion implies
   double suspension_length_m = 0;
   double effective_radius_m = 0;
-  double motor_torque_nm = 0;    ///< wheel side (driven only)
+  double motor_torque_nm = 0;  ///< wheel side (driven only)
   double motor_current_a = 0;
   Eigen::Vector3d contact_point_W = Eigen::Vector3d::Zero();
-  double mu = 0;                 ///< friction limit used in the step
+  double mu = 0;  ///< friction limit used in the step
 };
 
 /// Body ground truth after a step.
@@ -99,18 +100,18 @@ class RollerVehicle : public btActionInterface {
   struct WheelState {
     double length_m = 0;
     double length_rate_m_s = 0;
-    double ground_length_m = 0;    // last step's ray distance to the floor, for its rate
+    double ground_length_m = 0;  // last step's ray distance to the floor, for its rate
     bool ground_valid = false;
     double omega_cmd_slewed = 0;
     double lambda_motor = 0;       // warm start, impulses
     double motor_integral_nm = 0;  // PI servo integral torque
     double lambda_spin = 0;
-    double lambda_a = 0;           // constrained row 1 (rolling or roller axis)
-    double lambda_b = 0;           // row 2 (lateral for conventional, free for rollers)
-    double anchor_a_m = 0;         // stiction anchors: accumulated creep while stuck
+    double lambda_a = 0;    // constrained row 1 (rolling or roller axis)
+    double lambda_b = 0;    // row 2 (lateral for conventional, free for rollers)
+    double anchor_a_m = 0;  // stiction anchors: accumulated creep while stuck
     double anchor_b_m = 0;
     double last_slip_m_s = 0;
-    double inv_inertia = 0;        // 1 / (wheel + reflected rotor inertia)
+    double inv_inertia = 0;                             // 1 / (wheel + reflected rotor inertia)
     Eigen::Vector3d axle_B = Eigen::Vector3d::UnitY();  // left of the rolling direction
     double roller_cos = 0, roller_sin = 1;
   };

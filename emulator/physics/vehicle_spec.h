@@ -14,10 +14,10 @@ namespace wheelhil::emulator::physics {
 /// How the contact between a wheel and the floor carries force.
 enum class WheelKind {
   kConventional,  ///< tyre: friction along and across the rolling direction (friction circle)
-  kMecanum,       ///< rollers at roller_angle (+-45 deg) to the axle: force only along the roller axis
-  kOmni,          ///< rollers along the rim (90 deg): force only along the rolling direction
-  kOrthogonal,    ///< orthogonal-wheel assembly: like omni, two half wheels take turns (paper 002)
-  kCaster,        ///< swivel/ball caster: carries load, only rolling resistance, no spin state
+  kMecanum,  ///< rollers at roller_angle (+-45 deg) to the axle: force only along the roller axis
+  kOmni,     ///< rollers along the rim (90 deg): force only along the rolling direction
+  kOrthogonal,  ///< orthogonal-wheel assembly: like omni, two half wheels take turns (paper 002)
+  kCaster,      ///< swivel/ball caster: carries load, only rolling resistance, no spin state
 };
 
 /// Raycast suspension along -z_B from the mount point. Lengths are mount -> wheel centre.
@@ -27,8 +27,8 @@ enum class WheelKind {
 /// hub meets the floor through a stiff tyre spring-damper (integrated implicitly).
 struct SuspensionSpec {
   double free_length_m = 0.10;
-  double min_length_m = 0.02;    ///< bump stop engages below this
-  double max_length_m = 0.12;    ///< droop stop: the wheel hangs here
+  double min_length_m = 0.02;  ///< bump stop engages below this
+  double max_length_m = 0.12;  ///< droop stop: the wheel hangs here
   double stiffness_n_m = 2.0e4;
   double damping_n_s_m = 4.0e2;
   double bump_stiffness_n_m = 2.0e5;
@@ -44,16 +44,16 @@ struct SuspensionSpec {
 /// (torque = gear_ratio * torque_constant * current) and, when winding_resistance_ohm > 0, the
 /// supply voltage against the back-EMF (anti-windup: the integral is clamped to the same window).
 struct MotorSpec {
-  double gear_ratio = 1.0;                ///< motor turns per wheel turn
-  double torque_constant_nm_a = 0.05;     ///< = back-EMF constant in V*s/rad
+  double gear_ratio = 1.0;             ///< motor turns per wheel turn
+  double torque_constant_nm_a = 0.05;  ///< = back-EMF constant in V*s/rad
   double max_current_a = 10.0;
-  double max_torque_nm = 1e9;             ///< wheel side
-  double rotor_inertia_kg_m2 = 0.0;       ///< reflected to the wheel as gear_ratio^2 * this
+  double max_torque_nm = 1e9;        ///< wheel side
+  double rotor_inertia_kg_m2 = 0.0;  ///< reflected to the wheel as gear_ratio^2 * this
   double supply_voltage_v = 24.0;
-  double winding_resistance_ohm = 0.0;    ///< 0 = no voltage limit
-  double max_accel_rad_s2 = 0.0;          ///< slew limit of the command at the wheel, 0 = none
-  double speed_gain_nm_s_rad = 30.0;      ///< proportional gain, wheel side
-  double integral_gain_nm_rad = 300.0;    ///< integral gain, wheel side
+  double winding_resistance_ohm = 0.0;  ///< 0 = no voltage limit
+  double max_accel_rad_s2 = 0.0;        ///< slew limit of the command at the wheel, 0 = none
+  double speed_gain_nm_s_rad = 30.0;    ///< proportional gain, wheel side
+  double integral_gain_nm_rad = 300.0;  ///< integral gain, wheel side
 };
 
 /// One wheel (or caster, or orthogonal-wheel assembly).
@@ -61,14 +61,14 @@ struct WheelSpec {
   std::string name;
   WheelKind kind = WheelKind::kConventional;
   Eigen::Vector3d mount_B = Eigen::Vector3d::Zero();  ///< suspension mount point in B, m
-  double heading_rad = 0.0;        ///< rolling direction in B, about z_B; positive spin rolls along it
+  double heading_rad = 0.0;  ///< rolling direction in B, about z_B; positive spin rolls along it
   double radius_m = 0.05;
-  double inertia_kg_m2 = 1e-3;     ///< about the axle (wheel only; motor rotor adds to it)
-  double roller_angle_rad = 0.0;   ///< Mecanum: +-pi/4 measured from the axle; omni: pi/2
-  double rolling_resistance = 0.01;  ///< coefficient: force = c*N along free directions
+  double inertia_kg_m2 = 1e-3;         ///< about the axle (wheel only; motor rotor adds to it)
+  double roller_angle_rad = 0.0;       ///< Mecanum: +-pi/4 measured from the axle; omni: pi/2
+  double rolling_resistance = 0.01;    ///< coefficient: force = c*N along free directions
   double bearing_friction_nm = 0.001;  ///< Coulomb torque on the spin
   double bearing_viscous_nm_s = 0.0;   ///< viscous torque per rad/s on the spin
-  double lateral_mu_scale = 1.0;   ///< conventional: friction ellipse lateral/longitudinal ratio
+  double lateral_mu_scale = 1.0;  ///< conventional: friction ellipse lateral/longitudinal ratio
   // Orthogonal wheel only: the active half wheel switches every pi/2 of wheel angle; within a
   // segment at phase phi in [-pi/4, pi/4) the rolling radius is radius - handover_dip*(4phi/pi)^2
   // and the contact sits half_offset_m along the axle (+ for one half, - for the other).
@@ -84,9 +84,10 @@ struct VehicleSpec {
   std::string name;
   double mass_kg = 10.0;  ///< sprung (chassis) mass; hub masses come on top
   Eigen::Vector3d inertia_kg_m2 = Eigen::Vector3d(0.1, 0.1, 0.1);  ///< principal, about COM, in B
-  Eigen::Vector3d half_extents_m = Eigen::Vector3d(0.2, 0.15, 0.05);  ///< chassis box (not colliding)
+  Eigen::Vector3d half_extents_m =
+      Eigen::Vector3d(0.2, 0.15, 0.05);  ///< chassis box (not colliding)
   std::vector<WheelSpec> wheels;
-  double slip_threshold_m_s = 0.02;  ///< ground-truth slip flag: |slip velocity| above this
+  double slip_threshold_m_s = 0.02;     ///< ground-truth slip flag: |slip velocity| above this
   double stribeck_velocity_m_s = 0.05;  ///< slip-curve decay from peak to sliding mu
   int solver_iterations = 10;
 };

@@ -38,7 +38,8 @@ class Reader {
   }
 
   // Looks a key up in `node`, then in `fallback` (defaults); required unless def given.
-  YAML::Node Find(const YAML::Node& node, const YAML::Node& fallback, const std::string& key) const {
+  YAML::Node Find(const YAML::Node& node, const YAML::Node& fallback,
+                  const std::string& key) const {
     if (node.IsDefined() && node.IsMap() && node[key]) return node[key];
     if (fallback.IsDefined() && fallback.IsMap() && fallback[key]) return fallback[key];
     return YAML::Node(YAML::NodeType::Undefined);
@@ -91,20 +92,30 @@ class Reader {
   std::string file_;
 };
 
-const std::set<std::string> kWheelKeys = {
-    "name", "kind", "mount_m", "heading_deg", "radius_m", "inertia_kg_m2", "roller_angle_deg",
-    "rolling_resistance", "bearing_friction_nm", "bearing_viscous_nm_s", "lateral_mu_scale",
-    "handover_dip_m", "half_offset_m", "encoder", "suspension", "motor"};
-const std::set<std::string> kSuspensionKeys = {"free_length_m",      "min_length_m",
-                                               "max_length_m",       "stiffness_n_m",
-                                               "damping_n_s_m",      "bump_stiffness_n_m",
-                                               "hub_mass_kg",        "tire_stiffness_n_m",
-                                               "tire_damping_n_s_m"};
-const std::set<std::string> kMotorKeys = {"gear_ratio",          "torque_constant_nm_a",
-                                          "max_current_a",       "max_torque_nm",
-                                          "rotor_inertia_kg_m2", "supply_voltage_v",
-                                          "winding_resistance_ohm", "max_accel_rad_s2",
-                                          "speed_gain_nm_s_rad", "integral_gain_nm_rad"};
+const std::set<std::string> kWheelKeys = {"name",
+                                          "kind",
+                                          "mount_m",
+                                          "heading_deg",
+                                          "radius_m",
+                                          "inertia_kg_m2",
+                                          "roller_angle_deg",
+                                          "rolling_resistance",
+                                          "bearing_friction_nm",
+                                          "bearing_viscous_nm_s",
+                                          "lateral_mu_scale",
+                                          "handover_dip_m",
+                                          "half_offset_m",
+                                          "encoder",
+                                          "suspension",
+                                          "motor"};
+const std::set<std::string> kSuspensionKeys = {
+    "free_length_m", "min_length_m",       "max_length_m",
+    "stiffness_n_m", "damping_n_s_m",      "bump_stiffness_n_m",
+    "hub_mass_kg",   "tire_stiffness_n_m", "tire_damping_n_s_m"};
+const std::set<std::string> kMotorKeys = {
+    "gear_ratio",          "torque_constant_nm_a", "max_current_a",          "max_torque_nm",
+    "rotor_inertia_kg_m2", "supply_voltage_v",     "winding_resistance_ohm", "max_accel_rad_s2",
+    "speed_gain_nm_s_rad", "integral_gain_nm_rad"};
 
 WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& defaults,
                      const std::string& prefix, bool* encoder) {
@@ -124,8 +135,9 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   } else if (kind == "caster") {
     w.kind = WheelKind::kCaster;
   } else {
-    rd.Fail(kind_node, prefix + "kind",
-            fmt::format("'{}' is not one of conventional, mecanum, omni, orthogonal, caster", kind));
+    rd.Fail(
+        kind_node, prefix + "kind",
+        fmt::format("'{}' is not one of conventional, mecanum, omni, orthogonal, caster", kind));
   }
   w.mount_B = rd.Vec3(n["mount_m"], prefix + "mount_m");
   w.heading_rad = rd.GetOr(n, defaults, "heading_deg", prefix, -360, 360, 0) * kDeg;
@@ -134,7 +146,8 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   const double def_roller = w.kind == WheelKind::kMecanum ? 45.0 : 90.0;
   w.roller_angle_rad =
       rd.GetOr(n, defaults, "roller_angle_deg", prefix, -90, 90, def_roller) * kDeg;
-  if (w.kind == WheelKind::kMecanum && std::abs(std::abs(w.roller_angle_rad) - 0.25 * std::numbers::pi) > 0.35) {
+  if (w.kind == WheelKind::kMecanum &&
+      std::abs(std::abs(w.roller_angle_rad) - 0.25 * std::numbers::pi) > 0.35) {
     rd.Fail(n, prefix + "roller_angle_deg", "a Mecanum roller angle must be near +-45");
   }
   w.rolling_resistance = rd.GetOr(n, defaults, "rolling_resistance", prefix, 0, 0.5, 0.01);
@@ -153,8 +166,8 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   }
 
   const YAML::Node susp = n["suspension"];
-  const YAML::Node dsusp = defaults.IsDefined() && defaults.IsMap() ? defaults["suspension"]
-                                                                    : YAML::Node();
+  const YAML::Node dsusp =
+      defaults.IsDefined() && defaults.IsMap() ? defaults["suspension"] : YAML::Node();
   if (susp.IsDefined()) rd.CheckKeys(susp, prefix + "suspension", kSuspensionKeys);
   if (!susp.IsDefined() && !dsusp.IsDefined()) rd.Fail(n, prefix + "suspension", "missing");
   const std::string sp = prefix + "suspension.";
@@ -167,17 +180,20 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   }
   q.stiffness_n_m = rd.Get(susp, dsusp, "stiffness_n_m", sp, 1e-3, 1e8);
   q.damping_n_s_m = rd.Get(susp, dsusp, "damping_n_s_m", sp, 0, 1e6);
-  q.bump_stiffness_n_m = rd.GetOr(susp, dsusp, "bump_stiffness_n_m", sp, 0, 1e9, 10 * q.stiffness_n_m);
+  q.bump_stiffness_n_m =
+      rd.GetOr(susp, dsusp, "bump_stiffness_n_m", sp, 0, 1e9, 10 * q.stiffness_n_m);
   q.hub_mass_kg = rd.Get(susp, dsusp, "hub_mass_kg", sp, 1e-4, 100);
-  q.tire_stiffness_n_m = rd.GetOr(susp, dsusp, "tire_stiffness_n_m", sp, 1, 1e9, q.tire_stiffness_n_m);
-  q.tire_damping_n_s_m = rd.GetOr(susp, dsusp, "tire_damping_n_s_m", sp, 0, 1e6, q.tire_damping_n_s_m);
+  q.tire_stiffness_n_m =
+      rd.GetOr(susp, dsusp, "tire_stiffness_n_m", sp, 1, 1e9, q.tire_stiffness_n_m);
+  q.tire_damping_n_s_m =
+      rd.GetOr(susp, dsusp, "tire_damping_n_s_m", sp, 0, 1e6, q.tire_damping_n_s_m);
 
   const YAML::Node motor = n["motor"];
   w.driven = motor.IsDefined() && !motor.IsNull();
   if (w.driven) {
     rd.CheckKeys(motor, prefix + "motor", kMotorKeys);
-    const YAML::Node dmotor = defaults.IsDefined() && defaults.IsMap() ? defaults["motor"]
-                                                                       : YAML::Node();
+    const YAML::Node dmotor =
+        defaults.IsDefined() && defaults.IsMap() ? defaults["motor"] : YAML::Node();
     const std::string mp = prefix + "motor.";
     auto& m = w.motor;
     m.gear_ratio = rd.Get(motor, dmotor, "gear_ratio", mp, 1e-3, 1e4);
@@ -224,8 +240,8 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
   }
   if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
   rd.CheckKeys(root, "(document)",
-               {"name", "description", "paper", "chassis", "wheel_defaults", "wheels",
-                "kinematics", "sensors", "solver"});
+               {"name", "description", "paper", "chassis", "wheel_defaults", "wheels", "kinematics",
+                "sensors", "solver"});
   Platform p;
   p.source_file = file;
   p.name = rd.String(root["name"], "name");
@@ -249,7 +265,8 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
 
   if (const YAML::Node s = root["solver"]; s.IsDefined()) {
     rd.CheckKeys(s, "solver", {"slip_threshold_m_s", "stribeck_velocity_m_s", "iterations"});
-    v.slip_threshold_m_s = rd.GetOr(s, none, "slip_threshold_m_s", "solver.", 1e-6, 10, v.slip_threshold_m_s);
+    v.slip_threshold_m_s =
+        rd.GetOr(s, none, "slip_threshold_m_s", "solver.", 1e-6, 10, v.slip_threshold_m_s);
     v.stribeck_velocity_m_s =
         rd.GetOr(s, none, "stribeck_velocity_m_s", "solver.", 1e-6, 10, v.stribeck_velocity_m_s);
     v.solver_iterations =
@@ -259,7 +276,8 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
   const YAML::Node defaults = root["wheel_defaults"];
   const YAML::Node wheels = root["wheels"];
   if (!wheels.IsDefined()) rd.Fail(root, "wheels", "missing");
-  if (!wheels.IsSequence() || wheels.size() == 0) rd.Fail(wheels, "wheels", "must be a non-empty list");
+  if (!wheels.IsSequence() || wheels.size() == 0)
+    rd.Fail(wheels, "wheels", "must be a non-empty list");
   if (wheels.size() > 32) rd.Fail(wheels, "wheels", "at most 32 wheels");
   std::set<std::string> names;
   for (std::size_t i = 0; i < wheels.size(); ++i) {
@@ -285,20 +303,21 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
   } else if (type == "omni3") {
     p.kinematics = KinematicsKind::kOmni3;
   } else {
-    rd.Fail(kin["type"], "kinematics.type", fmt::format("'{}' is not one of diff_drive, mecanum4, omni3", type));
+    rd.Fail(kin["type"], "kinematics.type",
+            fmt::format("'{}' is not one of diff_drive, mecanum4, omni3", type));
   }
   for (const auto& kv : kin) {
     const auto key = kv.first.as<std::string>();
     if (key == "type") continue;
     p.parameters.emplace_back(key, rd.Number(kv.second, "kinematics." + key));
   }
-  const std::size_t expected_drive = p.kinematics == KinematicsKind::kDiffDrive ? 2
+  const std::size_t expected_drive = p.kinematics == KinematicsKind::kDiffDrive  ? 2
                                      : p.kinematics == KinematicsKind::kMecanum4 ? 4
                                                                                  : 3;
   if (p.drive_wheels.size() != expected_drive) {
     rd.Fail(kin["type"], "kinematics.type",
-            fmt::format("{} needs {} driven wheels (with a motor:), found {}", type,
-                        expected_drive, p.drive_wheels.size()));
+            fmt::format("{} needs {} driven wheels (with a motor:), found {}", type, expected_drive,
+                        p.drive_wheels.size()));
   }
 
   if (const YAML::Node sensors = root["sensors"]; sensors.IsDefined()) {
@@ -312,7 +331,8 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
       s.position_B = rd.Vec3(sensors[i]["mount_m"], prefix + "mount_m");
       if (sensors[i]["axis"]) {
         s.axis_B = rd.Vec3(sensors[i]["axis"], prefix + "axis");
-        if (s.axis_B.norm() < 1e-9) rd.Fail(sensors[i]["axis"], prefix + "axis", "must be non-zero");
+        if (s.axis_B.norm() < 1e-9)
+          rd.Fail(sensors[i]["axis"], prefix + "axis", "must be non-zero");
         s.axis_B.normalize();
       }
       p.sensors.push_back(s);
@@ -328,7 +348,8 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
 
 Platform LoadPlatformFile(const std::string& path) {
   std::ifstream in(path);
-  if (!in) throw std::invalid_argument(fmt::format("{}:0: (file): cannot open platform file", path));
+  if (!in)
+    throw std::invalid_argument(fmt::format("{}:0: (file): cannot open platform file", path));
   std::stringstream ss;
   ss << in.rdbuf();
   return LoadPlatformYaml(ss.str(), path);

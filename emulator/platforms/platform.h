@@ -21,16 +21,16 @@ enum class KinematicsKind { kDiffDrive, kMecanum4, kOmni3 };
 /// A sensor mounting point (gyro, accelerometer, ...), in B.
 struct SensorMount {
   std::string name;
-  std::string kind;                                       ///< "gyro", "accelerometer", ...
-  Eigen::Vector3d position_B = Eigen::Vector3d::Zero();   ///< m
-  Eigen::Vector3d axis_B = Eigen::Vector3d::UnitZ();      ///< unit sensitive axis
+  std::string kind;                                      ///< "gyro", "accelerometer", ...
+  Eigen::Vector3d position_B = Eigen::Vector3d::Zero();  ///< m
+  Eigen::Vector3d axis_B = Eigen::Vector3d::UnitZ();     ///< unit sensitive axis
 };
 
 struct Platform {
   std::string name;
   std::string description;
   std::string source_file;
-  std::string chassis_mesh;        ///< as written in the file (relative to the repository root)
+  std::string chassis_mesh;  ///< as written in the file (relative to the repository root)
   physics::VehicleSpec vehicle;
   KinematicsKind kinematics = KinematicsKind::kDiffDrive;
   std::vector<std::size_t> drive_wheels;    ///< indices into vehicle.wheels
@@ -38,7 +38,7 @@ struct Platform {
   std::vector<SensorMount> sensors;
   /// Named kinematic parameters from the `kinematics:` block (track_m, l1_m, l2_m, d_m, ...).
   std::vector<std::pair<std::string, double>> parameters;
-  [[nodiscard]] double parameter(const std::string& key) const;  ///< throws if absent
+  [[nodiscard]] double parameter(const std::string& key) const;                ///< throws if absent
   [[nodiscard]] std::size_t wheel_index(const std::string& wheel_name) const;  ///< throws
 };
 

@@ -49,7 +49,8 @@ Motion MotionAt(double t_s) {
 const bus::DbcSignal& NeedSignal(const bus::DbcMessage& m, const char* name,
                                  const std::string& file) {
   const bus::DbcSignal* s = m.FindSignal(name);
-  if (!s) throw std::invalid_argument(fmt::format("{}: message {} has no signal {}", file, m.name, name));
+  if (!s)
+    throw std::invalid_argument(fmt::format("{}: message {} has no signal {}", file, m.name, name));
   return *s;
 }
 const bus::DbcMessage& NeedMessage(const bus::DbcDatabase& db, std::uint32_t id,
@@ -153,7 +154,8 @@ struct Paper002DeviceSet::Impl {
     }
     accel_node = bus.AddNode("accel4");
     imu_node = bus.AddNode("mm5_10");
-    // Paper 002 eq 3 mounting: a1 = ax - ath R, a2 = ay + ath R, a3 = -ay + ath R, a4 = -ax - ath R.
+    // Paper 002 eq 3 mounting: a1 = ax - ath R, a2 = ay + ath R, a3 = -ay + ath R, a4 = -ax - ath
+    // R.
     const double r = kAccelMountRadiusM;
     const std::array<std::pair<Eigen::Vector3d, Eigen::Vector3d>, 4> mounts = {{
         {Eigen::Vector3d(0, r, 0), Eigen::Vector3d::UnitX()},
@@ -244,10 +246,11 @@ struct Paper002DeviceSet::Impl {
       const double along_m = -std::sin(kWheelAngleRad[i]) * m.x_m;
       const double along_m_s = -std::sin(kWheelAngleRad[i]) * m.v_m_s;
       const std::uint32_t counts = encoders[i].Sample(along_m / kWheelRadiusM);
-      const double speed = along_m_s / kWheelRadiusM * encoders[i].counts_per_rev() /
-                           (2.0 * std::numbers::pi);
+      const double speed =
+          along_m_s / kWheelRadiusM * encoders[i].counts_per_rev() / (2.0 * std::numbers::pi);
       nodes[i].SetMeasurement(counts, speed);
-      for (const NodeFrame& f : nodes[i].Poll(t_ns)) Enqueue(encoder_bus_nodes[i], f.frame, f.due_ns);
+      for (const NodeFrame& f : nodes[i].Poll(t_ns))
+        Enqueue(encoder_bus_nodes[i], f.frame, f.due_ns);
     }
     Enqueue(master_node, sync, t_ns);
     Enqueue(accel_node, AccelFrame(k), t_ns);
@@ -255,8 +258,9 @@ struct Paper002DeviceSet::Impl {
 
     // Run the bus until the SYNC is complete; the encoders answer it then.
     const std::int64_t end_ns = t_ns + options.cycle_ns;
-    std::int64_t probe_ns = t_ns + static_cast<std::int64_t>(CanFrameBits(sync, StuffingMode::kExact) - 3) *
-                                       bus.bit_time_ns();
+    std::int64_t probe_ns =
+        t_ns +
+        static_cast<std::int64_t>(CanFrameBits(sync, StuffingMode::kExact) - 3) * bus.bit_time_ns();
     bool sync_seen = false;
     while (!sync_seen && probe_ns < end_ns) {
       const std::vector<WireFrame> wires = bus.AdvanceTo(probe_ns);

@@ -34,10 +34,10 @@ RealtimeStatus ApplyRealtimeSettings(const RealtimeOptions& options) {
       status.memory_locked = true;
     } else {
       const int e = errno;
-      status.notes.push_back(fmt::format(
-          "mlockall refused ({}): pages may fault on the send path; raise `ulimit -l` "
-          "(RLIMIT_MEMLOCK) or grant CAP_IPC_LOCK",
-          std::strerror(e)));
+      status.notes.push_back(
+          fmt::format("mlockall refused ({}): pages may fault on the send path; raise `ulimit -l` "
+                      "(RLIMIT_MEMLOCK) or grant CAP_IPC_LOCK",
+                      std::strerror(e)));
     }
   }
   if (options.sched_fifo) {
@@ -65,9 +65,8 @@ RealtimeStatus ApplyRealtimeSettings(const RealtimeOptions& options) {
       if (rc == 0) {
         status.pinned_cpu = options.cpu;
       } else {
-        status.notes.push_back(
-            fmt::format("pinning to CPU {} refused ({}): not pinned", options.cpu,
-                        std::strerror(rc)));
+        status.notes.push_back(fmt::format("pinning to CPU {} refused ({}): not pinned",
+                                           options.cpu, std::strerror(rc)));
       }
     }
   }
@@ -75,8 +74,7 @@ RealtimeStatus ApplyRealtimeSettings(const RealtimeOptions& options) {
 }
 
 PacerStats FramePacer::Run(std::int64_t start_ns, const std::atomic<bool>& producer_done,
-                           const std::atomic<bool>& stop,
-                           std::int64_t underrun_wait_ns) noexcept {
+                           const std::atomic<bool>& stop, std::int64_t underrun_wait_ns) noexcept {
   PacerStats stats;
   PacedFrame next;
   while (!stop.load(std::memory_order_relaxed)) {

@@ -61,10 +61,10 @@ std::int64_t MonotonicNowNs() noexcept;
 int SleepUntilNs(std::int64_t t_ns) noexcept;
 
 struct RealtimeOptions {
-  bool sched_fifo = true;  ///< Ask for SCHED_FIFO at fifo_priority.
-  int fifo_priority = 80;  ///< 1..99.
+  bool sched_fifo = true;   ///< Ask for SCHED_FIFO at fifo_priority.
+  int fifo_priority = 80;   ///< 1..99.
   bool lock_memory = true;  ///< mlockall(MCL_CURRENT | MCL_FUTURE) for the whole process.
-  int cpu = -1;            ///< Pin the calling thread to this CPU; -1 = no pinning.
+  int cpu = -1;             ///< Pin the calling thread to this CPU; -1 = no pinning.
 };
 
 /// What was granted; notes say what was refused, why, and how to allow it.

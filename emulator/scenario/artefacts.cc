@@ -27,11 +27,20 @@ std::string Escape(const std::string& s) {
   std::string o;
   for (char c : s) {
     switch (c) {
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '&': o += "&amp;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += c;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '&':
+        o += "&amp;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      default:
+        o += c;
     }
   }
   return o;
@@ -43,8 +52,8 @@ void WriteTruthCsv(const std::string& path, const std::vector<TruthRow>& rows) {
   auto out = Open(path);
   out << "t_s,x_m,y_m,z_m,theta_rad,vx_m_s,vy_m_s,omega_rad_s,slipping_wheels\n";
   for (const auto& r : rows) {
-    out << fmt::format("{:.6f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{}\n", r.t_s,
-                       r.x_m, r.y_m, r.z_m, r.theta_rad, r.vx_m_s, r.vy_m_s, r.omega_rad_s,
+    out << fmt::format("{:.6f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{:.9f},{}\n", r.t_s, r.x_m,
+                       r.y_m, r.z_m, r.theta_rad, r.vx_m_s, r.vy_m_s, r.omega_rad_s,
                        r.slipping_wheels);
   }
   Check(out, path);
@@ -82,8 +91,8 @@ void WriteText(const std::string& path, const std::string& text) {
 }
 
 std::string SvgPlot(const std::string& title, const std::string& x_label,
-                    const std::string& y_label, const std::vector<Series>& series,
-                    bool equal_axes, int width, int height) {
+                    const std::string& y_label, const std::vector<Series>& series, bool equal_axes,
+                    int width, int height) {
   double x0 = std::numeric_limits<double>::infinity(), x1 = -x0, y0 = x0, y1 = -x0;
   for (const auto& s : series) {
     for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
@@ -160,11 +169,11 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
       "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}.pass{color:#070}"
       ".fail{color:#b00}</style></head><body>\n";
   const std::string verdict = report.value("verdict", std::string());
-  h += fmt::format("<h1>{}</h1>\n<p>seed {} &middot; {:.3f} s simulated &middot; verdict <b "
-                   "class=\"{}\">{}</b></p>\n",
-                   Escape(report.value("scenario", std::string())),
-                   report.value("seed", std::uint64_t{0}), report.value("sim_time_s", 0.0),
-                   verdict == "pass" ? "pass" : "fail", Escape(verdict));
+  h += fmt::format(
+      "<h1>{}</h1>\n<p>seed {} &middot; {:.3f} s simulated &middot; verdict <b "
+      "class=\"{}\">{}</b></p>\n",
+      Escape(report.value("scenario", std::string())), report.value("seed", std::uint64_t{0}),
+      report.value("sim_time_s", 0.0), verdict == "pass" ? "pass" : "fail", Escape(verdict));
   if (report.contains("failure")) {
     h += "<p class=\"fail\">" + Escape(report["failure"].get<std::string>()) + "</p>\n";
   }

@@ -28,8 +28,8 @@ struct VelocitySample {
 struct PoseMetrics {
   double final_position_error_m = 0;   ///< Paper 000 eq 13: |p_est(end) - p_truth(end)|.
   double final_heading_error_rad = 0;  ///< |wrap(theta_est - theta_truth)| at the end.
-  double ape_rmse_m = 0;  ///< RMS of position errors, estimate samples vs truth at their times.
-  double distance_m = 0;  ///< Path length of the truth.
+  double ape_rmse_m = 0;    ///< RMS of position errors, estimate samples vs truth at their times.
+  double distance_m = 0;    ///< Path length of the truth.
   double rotation_rad = 0;  ///< Sum of |heading increments| of the truth.
   std::size_t samples = 0;
 };

@@ -29,8 +29,8 @@
 #include "bus/socketcan_transport.h"
 #include "bus/ucan_broker.h"
 #include "bus/ucan_runtime_dir.h"
-#include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/accel4_node.h"
+#include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
 #include "emulator/devices/mm5_imu_node.h"
@@ -71,7 +71,8 @@ class Firmware {
  public:
   ~Firmware() { Stop(); }
 
-  void Start(const std::string& command, const std::vector<std::pair<std::string, std::string>>& env,
+  void Start(const std::string& command,
+             const std::vector<std::pair<std::string, std::string>>& env,
              const std::string& log_path) {
     const int log_fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     pid_ = ::fork();
@@ -329,8 +330,8 @@ void Run::BuildDevices() {
     }
     auto db = std::make_shared<const bus::DbcDatabase>(
         bus::DbcDatabase::LoadFile(dir + "/wheelhil_accel4.dbc"));
-    accel4_ = std::make_unique<Accel4Node>(db, params,
-                                           std::llround(1e9 / s_.sensors.accel4_rate_hz));
+    accel4_ =
+        std::make_unique<Accel4Node>(db, params, std::llround(1e9 / s_.sensors.accel4_rate_hz));
     bus_accel4_ = bus_->AddNode("accel4");
   }
 }
@@ -399,9 +400,9 @@ void Run::OnWire(const WireFrame& w) {
     if (can_->Send(w.frame)) ++enqueue_failures_;
     // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
     const std::uint32_t id = w.frame.id;
-    if (!w.frame.extended && ((id >= 0x701 && id <= 0x77F && w.frame.len == 1 &&
-                               w.frame.data[0] == 0) ||
-                              (id >= 0x581 && id <= 0x5FF))) {
+    if (!w.frame.extended &&
+        ((id >= 0x701 && id <= 0x77F && w.frame.len == 1 && w.frame.data[0] == 0) ||
+         (id >= 0x581 && id <= 0x5FF))) {
       awaiting_nodes_.insert(static_cast<int>(id & 0x7F));
     }
   }
@@ -485,11 +486,11 @@ void Run::Step(bool motion) {
       const bool was = t_now - static_cast<double>(step_ns_) * 1e-9 >= t_start &&
                        t_now - static_cast<double>(step_ns_) * 1e-9 < t_end;
       if (on == was) continue;
-      events_.push_back(json{{"t_s", t_now - t_motion0_s_},
-                             {"event", on ? "fault_start" : "fault_end"},
-                             {"fault", f.kind == FaultSpec::Kind::kEncoderEmcy ? "encoder_emcy"
-                                                                                : "encoder_silent"},
-                             {"node_id", f.node_id}});
+      events_.push_back(json{
+          {"t_s", t_now - t_motion0_s_},
+          {"event", on ? "fault_start" : "fault_end"},
+          {"fault", f.kind == FaultSpec::Kind::kEncoderEmcy ? "encoder_emcy" : "encoder_silent"},
+          {"node_id", f.node_id}});
       if (f.kind == FaultSpec::Kind::kEncoderEmcy) {
         if (on) {
           e.node->RaiseFault(f.error_code, 0x81, t_ns_);
@@ -674,8 +675,8 @@ void Run::Progress(bool final) {
   last_progress_ = Clock::now();
   const double sim = static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_;
   const double wall = WallSeconds(wall0_);
-  fmt::print(stderr, "\r{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}",
-             s_.name, std::max(0.0, sim), s_.timing.duration_s, syncs_sent_,
+  fmt::print(stderr, "\r{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}", s_.name,
+             std::max(0.0, sim), s_.timing.duration_s, syncs_sent_,
              wall > 0 ? std::max(0.0, sim) / wall : 0.0, final ? "\n" : "");
 }
 
@@ -699,8 +700,11 @@ RunResult Run::Execute() {
   BuildWorld();
   BuildDevices();
   OpenBus();
-  events_.push_back(json{{"t_s", 0.0}, {"event", "run_start"}, {"seed", seed_},
-                         {"lockstep", lockstep}, {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
+  events_.push_back(json{{"t_s", 0.0},
+                         {"event", "run_start"},
+                         {"seed", seed_},
+                         {"lockstep", lockstep},
+                         {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
 
   // The firmware.
   if (!s_.firmware.command.empty()) {
@@ -795,15 +799,15 @@ RunResult Run::Execute() {
         if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
                           s_.timing.timeout_s) &&
             failure_.empty()) {
-          failure_ = fmt::format(
-              "timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s", k,
-              s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
+          failure_ =
+              fmt::format("timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s",
+                          k, s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
         }
       }
       if (!lockstep) {
         DrainFirmware(0);
-        std::this_thread::sleep_until(wall_motion0 +
-                                      std::chrono::nanoseconds(t_ns_ - std::llround(t_motion0_s_ * 1e9)));
+        std::this_thread::sleep_until(
+            wall_motion0 + std::chrono::nanoseconds(t_ns_ - std::llround(t_motion0_s_ * 1e9)));
       }
       Progress(false);
     }
@@ -879,21 +883,25 @@ json Run::BuildReport(double wall_s) {
     metrics[name]["velocity_rmse_m_s"] = VelocityRmse(truth_vel_, est);
     metrics[name]["samples"] = est.size();
   }
-  const auto intervals = FlagsToIntervals(slip_t_, slip_flag_, static_cast<double>(step_ns_) * 1e-9,
-                                          0.02, 0.0);
+  const auto intervals =
+      FlagsToIntervals(slip_t_, slip_flag_, static_cast<double>(step_ns_) * 1e-9, 0.02, 0.0);
   for (const auto& iv : intervals) {
-    events_.push_back(json{{"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s},
-                           {"end_s", iv.end_s}});
+    events_.push_back(
+        json{{"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s}, {"end_s", iv.end_s}});
   }
   std::stable_sort(events_.begin(), events_.end(), [](const json& a, const json& b) {
     return a["t_s"].get<double>() < b["t_s"].get<double>();
   });
   if (!detections_.empty()) {
     const SlipMetrics sm = ComputeSlipMetrics(intervals, detections_, s_.timing.sync_period_s);
-    json j{{"precision", sm.precision}, {"recall", sm.recall},
-           {"true_positive", sm.true_positive}, {"false_positive", sm.false_positive},
-           {"false_negative", sm.false_negative}, {"true_negative", sm.true_negative},
-           {"truth_intervals", sm.intervals}, {"intervals_detected", sm.intervals_detected},
+    json j{{"precision", sm.precision},
+           {"recall", sm.recall},
+           {"true_positive", sm.true_positive},
+           {"false_positive", sm.false_positive},
+           {"false_negative", sm.false_negative},
+           {"true_negative", sm.true_negative},
+           {"truth_intervals", sm.intervals},
+           {"intervals_detected", sm.intervals_detected},
            {"detections", std::count_if(detections_.begin(), detections_.end(),
                                         [](const DetectionSample& d) { return d.detected; })}};
     if (sm.mean_latency_s) j["mean_latency_s"] = *sm.mean_latency_s;
@@ -901,24 +909,26 @@ json Run::BuildReport(double wall_s) {
     metrics["slip"] = j;
     if (!residual_.empty()) {
       const NormalityResult n = NormalityTest(residual_);
-      metrics["residual"] = json{{"samples", n.n}, {"skewness_g1", n.g1},
-                                 {"excess_kurtosis_g2", n.g2}, {"u1", n.u1}, {"u2", n.u2},
-                                 {"normality_accepted", n.accepted}};
+      metrics["residual"] =
+          json{{"samples", n.n}, {"skewness_g1", n.g1}, {"excess_kurtosis_g2", n.g2},
+               {"u1", n.u1},     {"u2", n.u2},          {"normality_accepted", n.accepted}};
     }
   } else if (!intervals.empty()) {
     metrics["slip"] = json{{"truth_intervals", intervals.size()}};
   }
   double slip_time = 0;
   for (const auto& iv : intervals) slip_time += iv.end_s - iv.start_s;
-  metrics["truth"] = json{{"slip_intervals", intervals.size()}, {"slip_time_s", slip_time},
+  metrics["truth"] = json{{"slip_intervals", intervals.size()},
+                          {"slip_time_s", slip_time},
                           {"distance_m", PathLength(truth_pose_)},
                           {"rotation_rad", TotalRotation(truth_pose_)}};
-  metrics["bus"] = json{{"frames", bus_->frames_sent()},
-                        {"load", bus_->BusLoad()},
-                        {"drops", bus_->frames_dropped() + enqueue_failures_},
-                        {"silenced_frames", silenced_},
-                        {"firmware_frames", fw_frames_},
-                        {"max_queue_delay_s", static_cast<double>(bus_->max_queue_delay_ns()) * 1e-9}};
+  metrics["bus"] =
+      json{{"frames", bus_->frames_sent()},
+           {"load", bus_->BusLoad()},
+           {"drops", bus_->frames_dropped() + enqueue_failures_},
+           {"silenced_frames", silenced_},
+           {"firmware_frames", fw_frames_},
+           {"max_queue_delay_s", static_cast<double>(bus_->max_queue_delay_ns()) * 1e-9}};
   r["metrics"] = metrics;
   r["wall"] = json{{"wall_time_s", wall_s}, {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0}};
   return r;
@@ -954,8 +964,8 @@ void Run::WriteArtefacts(const json& report) {
     std::vector<Series> ss{{"residual r", "#1f77b4", residual_t_, residual_},
                            {"band lower", "#d62728", residual_t_, band_lo_, true},
                            {"band upper", "#d62728", residual_t_, band_hi_, true}};
-    plots.push_back(SvgPlot("Paper 000 residual against its band (cf. fig 8)", "t [s]",
-                            "r [rad]", ss));
+    plots.push_back(
+        SvgPlot("Paper 000 residual against its band (cf. fig 8)", "t [s]", "r [rad]", ss));
   }
   if (!vel_streams_.empty()) {
     std::vector<Series> ss;
@@ -990,8 +1000,8 @@ void Run::WriteArtefacts(const json& report) {
       }
       ss.push_back(e);
     }
-    plots.push_back(SvgPlot("Position error over distance travelled", "distance [m]",
-                            "error [m]", ss));
+    plots.push_back(
+        SvgPlot("Position error over distance travelled", "distance [m]", "error [m]", ss));
   }
   WriteText(out_ + "/report.html", HtmlReport(report, plots));
 }
@@ -1034,7 +1044,9 @@ bool EvaluateExpectations(const std::vector<Expectation>& expectations, const js
     }
     const std::string rhs =
         e.other_metric.empty() ? fmt::format("{}", e.value.value_or(0.0)) : e.other_metric;
-    json j{{"metric", e.metric}, {"op", e.op}, {"text", fmt::format("{} {} {}", e.metric, e.op, rhs)},
+    json j{{"metric", e.metric},
+           {"op", e.op},
+           {"text", fmt::format("{} {} {}", e.metric, e.op, rhs)},
            {"passed", ok}};
     if (value) j["value"] = *value;
     if (limit) j["limit"] = *limit;

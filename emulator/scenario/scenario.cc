@@ -224,8 +224,7 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n, std:
   return out;
 }
 
-SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
-                        const platforms::Platform& platform) {
+SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::Platform& platform) {
   SensorsSpec s;
   if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
   r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4"});
@@ -258,14 +257,16 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
     d.node_id = static_cast<int>(r.Number(nodes[i], "node_id", f, 1, 127, std::nullopt));
     if (!ids.insert(d.node_id).second) r.Fail(nodes[i]["node_id"], f + ".node_id", "repeated");
     const double dir = r.Number(nodes[i], "direction", f, -1, 1, 1.0);
-    if (dir != 1.0 && dir != -1.0) r.Fail(nodes[i]["direction"], f + ".direction", "must be 1 or -1");
+    if (dir != 1.0 && dir != -1.0)
+      r.Fail(nodes[i]["direction"], f + ".direction", "must be 1 or -1");
     d.direction = static_cast<int>(dir);
     s.encoders.push_back(d);
   }
   if (const auto g = n["gyro"]) {
     const std::string f = "sensors.gyro";
-    r.CheckKeys(g, f, {"rate_hz", "noise_density_rad_s_sqrt_hz", "bias_rad_s",
-                       "bias_random_walk_rad_s_sqrt_s"});
+    r.CheckKeys(
+        g, f,
+        {"rate_hz", "noise_density_rad_s_sqrt_hz", "bias_rad_s", "bias_random_walk_rad_s_sqrt_s"});
     s.gyro = true;
     s.gyro_rate_hz = r.Number(g, "rate_hz", f, 1e-3, 1e4, 100.0);
     s.gyro_noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", f, 0, 1, 0.0);
@@ -275,8 +276,8 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
   }
   if (const auto a = n["accel4"]) {
     const std::string f = "sensors.accel4";
-    r.CheckKeys(a, f, {"rate_hz", "radius_m", "noise_density_m_s2_sqrt_hz", "bias_m_s2",
-                       "scale_error"});
+    r.CheckKeys(a, f,
+                {"rate_hz", "radius_m", "noise_density_m_s2_sqrt_hz", "bias_m_s2", "scale_error"});
     s.accel4 = true;
     s.accel4_rate_hz = r.Number(a, "rate_hz", f, 1, 1e5, 1000.0);
     std::optional<double> radius_default;
@@ -289,8 +290,7 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n,
                          platform.name));
     }
     s.accel4_radius_m = r.Number(a, "radius_m", f, 1e-3, 10, radius_default);
-    s.accel4_noise_density_m_s2_sqrt_hz =
-        r.Number(a, "noise_density_m_s2_sqrt_hz", f, 0, 10, 0.0);
+    s.accel4_noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", f, 0, 10, 0.0);
     auto four = [&](const char* key, double lim) {
       std::vector<double> out;
       const auto v = a[key];
@@ -381,8 +381,7 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   TimingSpec t;
   t.duration_s = motion_s;
   if (!n.IsDefined()) return t;
-  r.CheckKeys(n, "timing",
-              {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s"});
+  r.CheckKeys(n, "timing", {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s"});
   const std::string mode = r.String(n, "mode", "timing", std::string("lockstep"));
   if (mode == "lockstep") {
     t.lockstep = true;
@@ -396,8 +395,7 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   t.sync_period_s = r.Number(n, "sync_period_s", "timing", 1e-4, 10, 0.01);
   const double steps = t.sync_period_s * t.physics_rate_hz;
   if (std::abs(steps - std::round(steps)) > 1e-6) {
-    r.Fail(n["sync_period_s"], "timing.sync_period_s",
-           "must be a whole number of physics steps");
+    r.Fail(n["sync_period_s"], "timing.sync_period_s", "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
   return t;
@@ -488,8 +486,8 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   }
   if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
   r.CheckKeys(root, "",
-              {"name", "description", "seed", "platform", "terrain", "motion", "sensors",
-               "faults", "firmware", "timing", "expectations", "slip_threshold_m_s"});
+              {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "faults",
+               "firmware", "timing", "expectations", "slip_threshold_m_s"});
   Scenario s;
   s.source_path = file;
   s.name = r.String(root, "name", "", std::nullopt);

@@ -50,15 +50,15 @@ struct PatchSpec {
 /// straight run: the paper-000 floor where the wheels "slip now and then".
 struct RandomPatchesSpec {
   int count = 0;
-  double x_min_m = 0, x_max_m = 0;       ///< Along the world x axis.
+  double x_min_m = 0, x_max_m = 0;  ///< Along the world x axis.
   double length_min_m = 0.05, length_max_m = 0.2;
-  double width_m = 0.1;                   ///< Across, centred on a wheel track.
-  std::vector<double> track_y_m;          ///< Wheel track lines (world y) to choose from.
+  double width_m = 0.1;           ///< Across, centred on a wheel track.
+  std::vector<double> track_y_m;  ///< Wheel track lines (world y) to choose from.
   Friction friction{0.05, 0.03};
 };
 
 struct TerrainSpec {
-  Friction friction;  ///< The floor plane.
+  Friction friction;                ///< The floor plane.
   std::vector<std::string> meshes;  ///< Optional mesh floors (absolute paths after loading).
   std::vector<PatchSpec> patches;
   RandomPatchesSpec random_patches;
@@ -89,7 +89,7 @@ struct SensorsSpec {
   double accel4_rate_hz = 1000;
   double accel4_radius_m = 0.15;  ///< R of paper 002 eq 3 (platform accelerometer_radius_m).
   double accel4_noise_density_m_s2_sqrt_hz = 0;
-  std::vector<double> accel4_bias_m_s2;  ///< 4 values (calibration error), empty: none.
+  std::vector<double> accel4_bias_m_s2;    ///< 4 values (calibration error), empty: none.
   std::vector<double> accel4_scale_error;  ///< 4 values, empty: none.
 };
 
@@ -107,13 +107,13 @@ struct FirmwareSpec {
   /// Command line; `${CAN}`, `${CONFIG}` and `${BIN}` (directory of the wheelhil executable)
   /// are substituted. Empty: none started (attach an external firmware to the bus).
   std::string command;
-  std::string config;        ///< Firmware config file (absolute after loading); may be empty.
+  std::string config;          ///< Firmware config file (absolute after loading); may be empty.
   std::string overrides_yaml;  ///< YAML map merged into the config (as text), may be empty.
 };
 
 struct TimingSpec {
   bool lockstep = true;
-  double duration_s = 10;       ///< Virtual time of the motion phase.
+  double duration_s = 10;  ///< Virtual time of the motion phase.
   double physics_rate_hz = 1000;
   double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.

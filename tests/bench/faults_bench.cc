@@ -63,9 +63,9 @@ void BM_FrameFaultFilterContentFaults(benchmark::State& state) {
 BENCHMARK(BM_FrameFaultFilterContentFaults);
 
 void BM_SensorFaultInjectorNoiseBias(benchmark::State& state) {
-  SensorFaultInjector inj("gyro", {{SensorFaultKind::kBiasStep, {0}, 0.01},
-                                   {SensorFaultKind::kNoiseScale, {0}, 3.0}},
-                          0.001, 1);
+  SensorFaultInjector inj(
+      "gyro", {{SensorFaultKind::kBiasStep, {0}, 0.01}, {SensorFaultKind::kNoiseScale, {0}, 3.0}},
+      0.001, 1);
   std::int64_t t = 0;
   for (auto _ : state) {
     benchmark::DoNotOptimize(inj.Apply(0.5, t));

@@ -96,8 +96,8 @@ void BM_UcanFanOut(benchmark::State& state) {
     for (auto& t : threads) t.join();
     for (int fd : rx) ::close(fd);
     state.SetItemsProcessed(static_cast<std::int64_t>(sent));
-    state.counters["deliveries_per_s"] = benchmark::Counter(
-        static_cast<double>(sent) * readers, benchmark::Counter::kIsRate);
+    state.counters["deliveries_per_s"] =
+        benchmark::Counter(static_cast<double>(sent) * readers, benchmark::Counter::kIsRate);
   }
   const std::string rm = "rm -rf '" + dir + "'";
   [[maybe_unused]] int rc = std::system(rm.c_str());

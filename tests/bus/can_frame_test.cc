@@ -49,7 +49,7 @@ TEST(CanFrame, RejectsOversizeIdAndPayload) {
 
 TEST(CanFrame, DlcMapping) {
   EXPECT_EQ(LengthToDlc(8), 8);
-  EXPECT_EQ(LengthToDlc(9), 9);   // rounds up to 12
+  EXPECT_EQ(LengthToDlc(9), 9);  // rounds up to 12
   EXPECT_EQ(LengthToDlc(64), 15);
   EXPECT_EQ(DlcToLength(15, true), 64u);
   EXPECT_EQ(DlcToLength(15, false), 8u);

@@ -86,8 +86,8 @@ TEST(CandumpFormatTest, MatchesCandumpDashL) {
 TEST(CandumpFormatTest, BufferFormIsBoundedAndAllocationFree) {
   const CanFrame f = Fd(0x1FFFFFFF, 3, 64, true);
   std::string buf(MaxCandumpLineLength(6), '\0');
-  const std::size_t n = FormatCandumpLine(9'223'372'036'854'775'807LL, "vcan10", f, buf.data(),
-                                          buf.size());
+  const std::size_t n =
+      FormatCandumpLine(9'223'372'036'854'775'807LL, "vcan10", f, buf.data(), buf.size());
   EXPECT_EQ(n, buf.size() - 1);  // 10-digit seconds: one char under the bound
   EXPECT_THAT(buf.substr(0, n), StartsWith("(9223372036.854775) vcan10 1FFFFFFF##3000102"));
   EXPECT_EQ(FormatCandumpLine(0, "vcan10", f, buf.data(), buf.size() - 1), 0u);
@@ -161,7 +161,8 @@ TEST(CandumpParseTest, AcceptsWhatOtherWritersProduce) {
   std::string err;
   // python-can's CanutilsLogWriter: unpadded seconds, direction flag.
   ASSERT_EQ(ParseCandumpLine("(1700000000.123456) can0 123#11 R\n", 1, r, &err),
-            CandumpLineStatus::kRecord) << err;
+            CandumpLineStatus::kRecord)
+      << err;
   EXPECT_EQ(r.timestamp_ns, 1'700'000'000'123'456'000LL);
   EXPECT_EQ(r.direction, 'R');
   // Fewer fraction digits, nanosecond precision (candump -N style), CRLF.
@@ -171,7 +172,8 @@ TEST(CandumpParseTest, AcceptsWhatOtherWritersProduce) {
   EXPECT_EQ(r.timestamp_ns, 12'000'000'001LL);
   // Lower-case hex, '.' separators, lower-case r, padded interface column, t flag.
   ASSERT_EQ(ParseCandumpLine("(1.000000)   can0 1ab#de.ad.be.ef t", 4, r, &err),
-            CandumpLineStatus::kRecord) << err;
+            CandumpLineStatus::kRecord)
+      << err;
   EXPECT_EQ(r.frame, Classic(0x1AB, {0xDE, 0xAD, 0xBE, 0xEF}));
   EXPECT_EQ(r.interface, "can0");
   EXPECT_EQ(r.direction, 'T');
@@ -179,7 +181,8 @@ TEST(CandumpParseTest, AcceptsWhatOtherWritersProduce) {
   EXPECT_TRUE(r.frame.rtr);
   // Raw DLC suffix of newer can-utils on an 8-byte classic frame.
   ASSERT_EQ(ParseCandumpLine("(1.0) can0 123#0011223344556677_C", 6, r, &err),
-            CandumpLineStatus::kRecord) << err;
+            CandumpLineStatus::kRecord)
+      << err;
   EXPECT_EQ(r.frame.len, 8);
   // Comments and blank lines.
   EXPECT_EQ(ParseCandumpLine("", 7, r, &err), CandumpLineStatus::kSkipped);
@@ -233,7 +236,8 @@ TEST(CandumpParseTest, RejectsMalformedLinesWithLineNumber) {
 TEST(CandumpParseTest, MutatedLinesNeverCrash) {
   std::mt19937 rng(1234);
   std::vector<std::string> lines;
-  for (const auto& f : AllKinds()) lines.push_back(FormatCandumpLine(9'223'372'035'999'999'999LL, "vcan0", f) + " R");
+  for (const auto& f : AllKinds())
+    lines.push_back(FormatCandumpLine(9'223'372'035'999'999'999LL, "vcan0", f) + " R");
   int records = 0, errors = 0;
   for (int i = 0; i < 20000; ++i) {
     std::string l = lines[rng() % lines.size()];
@@ -314,10 +318,11 @@ TEST(CandumpGoldenTest, ReadsCanUtilsOutput) {
   CanFrame fd = Fd(0x181, 0x1, 8);
   const std::uint8_t tpdo[] = {0xE8, 0x03, 0, 0, 0xFA, 0, 0, 0};
   std::copy(std::begin(tpdo), std::end(tpdo), fd.data.begin());
-  EXPECT_THAT(frames, ElementsAre(Classic(0x123, {0xDE, 0xAD, 0xBE, 0xEF}),
-                                  Classic(0x12345678, {0}, true), Rtr(0x7FF, 8),
-                                  Classic(0, {}), Classic(0x1FFFFFFF, {1, 0x23, 0x45, 0x67, 0x89, 0xAB, 0xCD, 0xEF}, true),
-                                  Error(0x80, {0, 0, 0, 0, 0, 0, 0, 0}), Classic(0x80, {}), fd));
+  EXPECT_THAT(frames,
+              ElementsAre(Classic(0x123, {0xDE, 0xAD, 0xBE, 0xEF}), Classic(0x12345678, {0}, true),
+                          Rtr(0x7FF, 8), Classic(0, {}),
+                          Classic(0x1FFFFFFF, {1, 0x23, 0x45, 0x67, 0x89, 0xAB, 0xCD, 0xEF}, true),
+                          Error(0x80, {0, 0, 0, 0, 0, 0, 0, 0}), Classic(0x80, {}), fd));
   EXPECT_EQ(log.records[0].interface, "can0");
   EXPECT_EQ(log.records[2].interface, "can1");
   EXPECT_EQ(log.records[2].direction, 'T');
@@ -417,10 +422,9 @@ TEST(CandumpCompatTest, PythonCanReadsOurOutput) {
   if (python.empty()) GTEST_SKIP() << "python3-can not installed (./hil setup installs it)";
   const std::string path = WriteAllKindsLog("ours_for_python_can.log", true);
   int status = 0;
-  const std::string out =
-      RunAndCapture(python + " " + WHEELHIL_SOURCE_DIR +
-                        "/tests/bus/scripts/candump_python_can_read.py " + path,
-                    status);
+  const std::string out = RunAndCapture(
+      python + " " + WHEELHIL_SOURCE_DIR + "/tests/bus/scripts/candump_python_can_read.py " + path,
+      status);
   ASSERT_EQ(status, 0) << out;
   const auto ours = LoadCandumpFile(path);
   ASSERT_TRUE(ours.errors.empty());

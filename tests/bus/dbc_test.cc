@@ -65,8 +65,8 @@ TEST(DbcCodecTest, MotorolaMatchesCantoolsExample) {
   // c0 01 40 00 00 00 00 00; Enable is a signed 1-bit signal, so raw 1 is physical -1.
   CanFrame f;
   std::string problem;
-  ASSERT_TRUE(EncodeMessage(*m, {{"Temperature", 250.1}, {"AverageRadius", 3.2}, {"Enable", -1}},
-                            f, &problem))
+  ASSERT_TRUE(EncodeMessage(*m, {{"Temperature", 250.1}, {"AverageRadius", 3.2}, {"Enable", -1}}, f,
+                            &problem))
       << problem;
   EXPECT_THAT(Bytes(f.payload()), ElementsAre(0xC0, 0x01, 0x40, 0, 0, 0, 0, 0));
   const auto v = DecodeMessage(*m, f);
@@ -200,7 +200,7 @@ SIG_VALTYPE_ 2147484672 F64 : 2;
   EXPECT_TRUE(f.extended);
   EXPECT_EQ(f.len, 16);
   EXPECT_THAT(Bytes(f.payload()).at(3), 0x3F);  // 1.5f = 0x3FC00000, little-endian
-  EXPECT_EQ(f.data[12], 0xBE);                   // bytes 12-13 via the bit-by-bit path
+  EXPECT_EQ(f.data[12], 0xBE);                  // bytes 12-13 via the bit-by-bit path
   EXPECT_EQ(f.data[13], 0xEF);
   std::array<std::uint8_t, 16> bytes{};
   EXPECT_FALSE(EncodeSignal(*m->FindSignal("F32"), 1e40, bytes));  // beyond float: +inf
@@ -316,9 +316,10 @@ VAL_ 100 Flag 1 "Set" 0 "Clear" ;
 }
 
 TEST(DbcParseTest, NamespaceBlockWithoutIndentation) {
-  const auto db = DbcDatabase::Parse("VERSION \"\"\nNS_ :\nCM_\nBA_DEF_\nVAL_TABLE_\nBS_:\nBU_: A\n"
-                                     "BO_ 1 M: 1 A\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" A\n",
-                                     "ns.dbc");
+  const auto db = DbcDatabase::Parse(
+      "VERSION \"\"\nNS_ :\nCM_\nBA_DEF_\nVAL_TABLE_\nBS_:\nBU_: A\n"
+      "BO_ 1 M: 1 A\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" A\n",
+      "ns.dbc");
   EXPECT_THAT(db.nodes(), ElementsAre("A"));
   ASSERT_NE(db.FindMessage("M"), nullptr);
 }
@@ -342,28 +343,36 @@ CM_ SG_ 3221225472 Orphan "dropped";
 
 TEST(DbcParseTest, ErrorsNameFileAndLine) {
   auto parse = [](std::string_view text) { return DbcDatabase::Parse(text, "bad.dbc"); };
-  EXPECT_THAT([&] { parse("VERSION \"\"\nBU_: A\nBO_ 1 M: 8 A\n SG_ S : 60|8@1+ (1,0) [0|0] \"\" A\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:4: signal S: 60|8@1")));
+  EXPECT_THAT(
+      [&] { parse("VERSION \"\"\nBU_: A\nBO_ 1 M: 8 A\n SG_ S : 60|8@1+ (1,0) [0|0] \"\" A\n"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:4: signal S: 60|8@1")));
   EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\n SG_ S : 0|8@2+ (1,0) [0|0] \"\" A\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: signal S: byte order")));
   EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\n SG_ S : 0|8@1+ (0,0) [0|0] \"\" A\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: signal S: factor")));
   EXPECT_THAT([&] { parse("BU_: A\n\nBO_ 4096 M: 8 A\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: message M: id 0x1000")));
-  EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\nBO_ 1 N: 8 A\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: message N: id 1 defined twice")));
+  EXPECT_THAT(
+      [&] { parse("BU_: A\nBO_ 1 M: 8 A\nBO_ 1 N: 8 A\n"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: message N: id 1 defined twice")));
   EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\n SG_ S m1 : 0|8@1+ (1,0) [0|0] \"\" A\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:2: message M: signal S is multiplexed")));
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("bad.dbc:2: message M: signal S is multiplexed")));
   EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\n SG_ S m1M : 0|8@1+ (1,0) [0|0] \"\" A\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("extended multiplexing")));
-  EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\nCM_ SG_ 1 T \"x\";\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: message M has no signal 'T'")));
+  EXPECT_THAT(
+      [&] { parse("BU_: A\nBO_ 1 M: 8 A\nCM_ SG_ 1 T \"x\";\n"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: message M has no signal 'T'")));
   EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 8 A\nCM_ BO_ 1 \"never closed;\n\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:3: unterminated string")));
   EXPECT_THAT([&] { parse("BU_: A\nFOO_ 1;\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:2: unknown keyword 'FOO_'")));
-  EXPECT_THAT([&] { parse("BU_: A\nBO_ 1 M: 4 A\n SG_ F : 0|16@1- (1,0) [0|0] \"\" A\nSIG_VALTYPE_ 1 F : 1;\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("bad.dbc:4: signal F: SIG_VALTYPE_ 1 needs a 32-bit")));
+  EXPECT_THAT(
+      [&] {
+        parse("BU_: A\nBO_ 1 M: 4 A\n SG_ F : 0|16@1- (1,0) [0|0] \"\" A\nSIG_VALTYPE_ 1 F : 1;\n");
+      },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("bad.dbc:4: signal F: SIG_VALTYPE_ 1 needs a 32-bit")));
   EXPECT_THAT([&] { DbcDatabase::LoadFile("/nonexistent/x.dbc"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/x.dbc")));
 }
@@ -379,7 +388,8 @@ TEST(DbcParseTest, TruncatedAndMutatedFilesNeverCrash) {
     const std::string text = ss.str();
     int parsed = 0, rejected = 0;
     for (int i = 0; i < 200; ++i) {
-      std::string t = text.substr(0, std::uniform_int_distribution<std::size_t>(0, text.size())(rng));
+      std::string t =
+          text.substr(0, std::uniform_int_distribution<std::size_t>(0, text.size())(rng));
       if (i % 2 == 1 && !t.empty()) {
         for (int k = 0; k < 3; ++k) {
           t[std::uniform_int_distribution<std::size_t>(0, t.size() - 1)(rng)] =
@@ -466,7 +476,8 @@ CanFrame Frame(std::uint32_t id, std::vector<std::uint8_t> bytes) {
 TEST(ProjectDbcTest, Cia406GoldenFrames) {
   const auto db = DbcDatabase::LoadFile(kDbcDir + "/cia406_encoder.dbc");
   // From tests/data/golden/cia406_sync_tpdo.log: 181#785634129CFF
-  auto v = DecodeMessage(*db.FindMessage(0x181, false), Frame(0x181, {0x78, 0x56, 0x34, 0x12, 0x9C, 0xFF}));
+  auto v = DecodeMessage(*db.FindMessage(0x181, false),
+                         Frame(0x181, {0x78, 0x56, 0x34, 0x12, 0x9C, 0xFF}));
   EXPECT_EQ(v.at("PositionValue"), 0x12345678);
   EXPECT_EQ(v.at("SpeedValue"), -100);
   // 085#0573010000000000: EMCY 0x7305 incremental sensor 1 fault, error register 1.
@@ -486,7 +497,8 @@ TEST(ProjectDbcTest, Cia406GoldenFrames) {
   EXPECT_EQ(hb.FindSignal("NMT_State")->value_names.at(127), "PreOperational");
   EXPECT_EQ(hb.FindSignal("NMT_State")->value_names.at(5), "Operational");
   // 583#4318100178563412: SDO upload response 0x1018:1 = 0x12345678.
-  v = DecodeMessage(Msg(db, "Enc3_SDO_Tx"), Frame(0x583, {0x43, 0x18, 0x10, 0x01, 0x78, 0x56, 0x34, 0x12}));
+  v = DecodeMessage(Msg(db, "Enc3_SDO_Tx"),
+                    Frame(0x583, {0x43, 0x18, 0x10, 0x01, 0x78, 0x56, 0x34, 0x12}));
   EXPECT_EQ(v.at("SDO_Command"), 0x43);
   EXPECT_EQ(v.at("SDO_Index"), 0x1018);
   EXPECT_EQ(v.at("SDO_SubIndex"), 1);
@@ -522,8 +534,13 @@ TEST(ProjectDbcTest, Accel4AndFirmwareLayouts) {
   EXPECT_EQ(a.cycle_time_ms, 1);
   CanFrame f;
   const double g = 9.80665;
-  ASSERT_TRUE(EncodeMessage(a, {{"ACC4_A1", g}, {"ACC4_A2", -g}, {"ACC4_A3", 0.5 * g},
-                                {"ACC4_A4", -4 * g}, {"ACC4_Counter", 9}, {"ACC4_Checksum", 3}},
+  ASSERT_TRUE(EncodeMessage(a,
+                            {{"ACC4_A1", g},
+                             {"ACC4_A2", -g},
+                             {"ACC4_A3", 0.5 * g},
+                             {"ACC4_A4", -4 * g},
+                             {"ACC4_Counter", 9},
+                             {"ACC4_Checksum", 3}},
                             f));
   auto v = DecodeMessage(a, f);
   EXPECT_THAT(v.at("ACC4_A1"), DoubleNear(g, 1e-9));  // 1 g = 2048 LSB exactly
@@ -533,17 +550,21 @@ TEST(ProjectDbcTest, Accel4AndFirmwareLayouts) {
 
   const auto fw = DbcDatabase::LoadFile(kDbcDir + "/wheelhil_fw.dbc");
   const auto& pose = Msg(fw, "FW_Pose");
-  ASSERT_TRUE(EncodeMessage(pose, {{"Pose_Cycle", 200}, {"Pose_X", -12.3455}, {"Pose_Y", 250.0},
-                                   {"Pose_Theta", -3.14159}},
-                            f));
+  ASSERT_TRUE(EncodeMessage(
+      pose,
+      {{"Pose_Cycle", 200}, {"Pose_X", -12.3455}, {"Pose_Y", 250.0}, {"Pose_Theta", -3.14159}}, f));
   v = DecodeMessage(pose, f);
   EXPECT_THAT(v.at("Pose_X"), DoubleNear(-12.3455, 0.00025 + 1e-12));
   EXPECT_THAT(v.at("Pose_Y"), DoubleNear(250.0, 1e-9));
   EXPECT_THAT(v.at("Pose_Theta"), DoubleNear(-3.14159, 0.00005 + 1e-12));
   EXPECT_EQ(v.at("Pose_Cycle"), 200);
   const auto& slip = Msg(fw, "FW_SlipStatus");
-  ASSERT_TRUE(EncodeMessage(slip, {{"Slip_Residual", -0.004321}, {"Slip_BandLower", -0.00335}, {"Slip_OutOfBand", 1},
-                                   {"Slip_BandUpper", 0.00328}, {"Slip_Left", 1}},
+  ASSERT_TRUE(EncodeMessage(slip,
+                            {{"Slip_Residual", -0.004321},
+                             {"Slip_BandLower", -0.00335},
+                             {"Slip_OutOfBand", 1},
+                             {"Slip_BandUpper", 0.00328},
+                             {"Slip_Left", 1}},
                             f));
   v = DecodeMessage(slip, f);
   EXPECT_THAT(v.at("Slip_Residual"), DoubleNear(-0.004321, 1e-12));
@@ -573,7 +594,8 @@ std::string FindPythonWith(const char* module) {
 
 TEST(ProjectDbcTest, CanmatrixDecodesTheSameValues) {
   const std::string python = FindPythonWith("canmatrix");
-  if (python.empty()) GTEST_SKIP() << "python3-canmatrix is not installed (./hil setup installs it)";
+  if (python.empty())
+    GTEST_SKIP() << "python3-canmatrix is not installed (./hil setup installs it)";
   const std::string dir = ::testing::TempDir();
   const std::string in_path = dir + "/wheelhil_bus_codec_canmatrix_in.txt";
   const std::string out_path = dir + "/wheelhil_bus_codec_canmatrix_out.txt";

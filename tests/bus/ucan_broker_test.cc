@@ -6,8 +6,8 @@
 #include "bus/ucan_broker.h"
 
 #include <fcntl.h>
-#include <linux/close_range.h>
 #include <linux/can/error.h>
+#include <linux/close_range.h>
 #include <linux/sockios.h>
 #include <sys/epoll.h>
 #include <sys/ioctl.h>
@@ -482,9 +482,9 @@ TEST_F(UcanBusTest, GarbageCrashedAndSilentClientsDoNotHurtOthers) {
   }
   can_frame dlc_too_big = Frame(0x1);
   dlc_too_big.can_dlc = 200;
-  ASSERT_EQ(::syscall(SYS_sendto, garbage, &dlc_too_big, sizeof(dlc_too_big), MSG_NOSIGNAL,
-                      nullptr, 0),
-            static_cast<long>(sizeof(dlc_too_big)));
+  ASSERT_EQ(
+      ::syscall(SYS_sendto, garbage, &dlc_too_big, sizeof(dlc_too_big), MSG_NOSIGNAL, nullptr, 0),
+      static_cast<long>(sizeof(dlc_too_big)));
   ++bad;
   // Garbage as the first message of a fresh connection, then a broken-off connection.
   for (std::size_t size : {std::size_t{3}, sizeof(ucan::Request)}) {

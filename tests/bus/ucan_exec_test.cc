@@ -118,15 +118,15 @@ TEST_F(UcanExecTest, CandumpLogsWhatCansendSends) {
   EXPECT_EQ(RunCommand(Exec({"cansend", "ucan0", "7FF#R"})), 0);
   std::string out;
   EXPECT_EQ(dump.Wait(&out), 0);
-  EXPECT_THAT(LogBodies(out), ::testing::ElementsAre("ucan0 123#DEADBEEF", "ucan0 12345678#0011",
-                                                     "ucan0 7FF#R"));
+  EXPECT_THAT(LogBodies(out),
+              ::testing::ElementsAre("ucan0 123#DEADBEEF", "ucan0 12345678#0011", "ucan0 7FF#R"));
 }
 
 TEST_F(UcanExecTest, CangenBurstArrivesCompleteAndInOrder) {
   Child dump(Exec({"candump", "-L", "-n", "200", "ucan0"}));
   ASSERT_TRUE(WaitForClients(1));
-  EXPECT_EQ(RunCommand(Exec({"cangen", "ucan0", "-g", "0", "-n", "200", "-I", "42", "-L", "8", "-D",
-                      "i"})),
+  EXPECT_EQ(RunCommand(Exec(
+                {"cangen", "ucan0", "-g", "0", "-n", "200", "-I", "42", "-L", "8", "-D", "i"})),
             0);
   std::string out;
   EXPECT_EQ(dump.Wait(&out), 0);
@@ -143,15 +143,17 @@ TEST_F(UcanExecTest, CangenBurstArrivesCompleteAndInOrder) {
 
 TEST_F(UcanExecTest, PythonSocketModule) {
   std::string out;
-  EXPECT_EQ(RunCommand(Exec({"/usr/bin/python3", kScripts + "/ucan_socket_check.py", "ucan0"}), &out), 0)
+  EXPECT_EQ(
+      RunCommand(Exec({"/usr/bin/python3", kScripts + "/ucan_socket_check.py", "ucan0"}), &out), 0)
       << out;
   EXPECT_THAT(out, ::testing::HasSubstr("OK"));
 }
 
 TEST_F(UcanExecTest, PythonCan) {
   std::string out;
-  EXPECT_EQ(RunCommand(Exec({"/usr/bin/python3", kScripts + "/ucan_python_can_check.py", "ucan0"}), &out),
-            0)
+  EXPECT_EQ(
+      RunCommand(Exec({"/usr/bin/python3", kScripts + "/ucan_python_can_check.py", "ucan0"}), &out),
+      0)
       << out;
   EXPECT_THAT(out, ::testing::HasSubstr("OK"));
 }
@@ -160,8 +162,8 @@ TEST_F(UcanExecTest, KernelInterfaceNamesPassThrough) {
   // vcan0 is not a ucan bus: cansend gets the kernel's own answer and fails.
   EXPECT_NE(RunCommand(Exec({"cansend", "vcan0", "123#00"})), 0);
   std::string out;
-  EXPECT_EQ(RunCommand(Exec({"/usr/bin/python3", kScripts + "/ucan_socket_check.py", "--kernel",
-                      "vcan0"}),
+  EXPECT_EQ(RunCommand(
+                Exec({"/usr/bin/python3", kScripts + "/ucan_socket_check.py", "--kernel", "vcan0"}),
                 &out),
             0)
       << out;
@@ -190,8 +192,8 @@ TEST(UcanDaemon, BusUpListDown) {
     if (stats.size() == 2 && stats[1].clients == 1) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  EXPECT_EQ(RunCommand({"timeout", "20", kWheelhil, "exec", "--bus", "ucan6", "--", "cansend", "ucan6",
-                 "321#01"}),
+  EXPECT_EQ(RunCommand({"timeout", "20", kWheelhil, "exec", "--bus", "ucan6", "--", "cansend",
+                        "ucan6", "321#01"}),
             0);
   std::string dumped;
   EXPECT_EQ(dump.Wait(&dumped), 0);

@@ -7,8 +7,8 @@
 // (expectation bound), fake.exit_without_report (simulates a crashing runner).
 // $FAKE_WHEELHIL_RUN_LOG: append the run dir to this file after report.json is complete.
 
-#include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cmath>
@@ -48,9 +48,12 @@ int main(int argc, char** argv) {
   scenario = argv[2];
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string k = argv[i];
-    if (k == "--out") out = argv[i + 1];
-    else if (k == "--seed") seed = std::strtoull(argv[i + 1], nullptr, 10);
-    else if (k == "--can") continue;
+    if (k == "--out")
+      out = argv[i + 1];
+    else if (k == "--seed")
+      seed = std::strtoull(argv[i + 1], nullptr, 10);
+    else if (k == "--can")
+      continue;
     else {
       std::fprintf(stderr, "fake_wheelhil_run: unknown option %s\n", k.c_str());
       return 2;

@@ -47,7 +47,7 @@ const bus::DbcDatabase& CiaDbc() {
 }
 
 struct RunOptions {
-  std::vector<FrameFault> frame;  // applied to both devices' outputs
+  std::vector<FrameFault> frame;    // applied to both devices' outputs
   std::vector<DeviceFault> device;  // on the encoder node
   std::vector<BusFault> bus;
   std::uint64_t seed = 42;
@@ -311,7 +311,8 @@ TEST(FrameFaults, CorruptFlipsExactlyTheGivenBitsSeeded) {
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t i = 0; i < a.size(); ++i) {
     int diff = 0;
-    for (int k = 0; k < 8; ++k) diff += std::popcount(static_cast<unsigned>(a[i].frame.data[k] ^ b[i].frame.data[k]));
+    for (int k = 0; k < 8; ++k)
+      diff += std::popcount(static_cast<unsigned>(a[i].frame.data[k] ^ b[i].frame.data[k]));
     EXPECT_EQ(diff, kWindow.Contains(a[i].ready_ns) ? 2 : 0) << i;
   }
   const RunResult again = RunDevices(o);
@@ -332,7 +333,8 @@ TEST(FrameFaults, WrongCounterKeepsAValidChecksum) {
   for (std::size_t i = 0; i < a.size(); ++i) {
     const auto va = bus::DecodeMessage(m, a[i].frame), vb = bus::DecodeMessage(m, b[i].frame);
     EXPECT_EQ(vb.at("ACC4_Checksum"), NibbleXorOf15(b[i].frame));
-    for (const char* ch : {"ACC4_A1", "ACC4_A2", "ACC4_A3", "ACC4_A4"}) EXPECT_EQ(va.at(ch), vb.at(ch));
+    for (const char* ch : {"ACC4_A1", "ACC4_A2", "ACC4_A3", "ACC4_A4"})
+      EXPECT_EQ(va.at(ch), vb.at(ch));
     const double want = kWindow.Contains(a[i].ready_ns)
                             ? std::fmod(va.at("ACC4_Counter") + 15.0, 16.0)
                             : va.at("ACC4_Counter");
@@ -351,7 +353,8 @@ TEST(FrameFaults, WrongChecksumAndWrongDlc) {
   for (std::size_t i = 0; i < a.size(); ++i) {
     const bool in = kWindow.Contains(a[i].ready_ns);
     EXPECT_EQ(NibbleXorOf15(b[i].frame) == (b[i].frame.data[7] >> 4), !in) << i;
-    EXPECT_EQ(b[i].frame.data[7] >> 4, in ? ((a[i].frame.data[7] >> 4) + 1) % 16 : a[i].frame.data[7] >> 4);
+    EXPECT_EQ(b[i].frame.data[7] >> 4,
+              in ? ((a[i].frame.data[7] >> 4) + 1) % 16 : a[i].frame.data[7] >> 4);
     for (int k = 0; k < 7; ++k) EXPECT_EQ(a[i].frame.data[k], b[i].frame.data[k]);
   }
 
@@ -585,10 +588,16 @@ TEST(SensorFaults, MissedCountsAreLostForGoodAndWrap) {
 }
 
 TEST(SensorFaults, LoadErrorsNameTheField) {
-  EXPECT_THAT([] { SensorFaultInjector("g", {{SensorFaultKind::kNoiseScale, {0, 10}, 0.5}}, 0.1, 1); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("sensor_faults[0].value")));
-  EXPECT_THAT([] { SensorFaultInjector("g", {{SensorFaultKind::kBiasStep, {10, 5}, 1.0}}, 0.1, 1); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("sensor_faults[0].window")));
+  EXPECT_THAT(
+      [] {
+        SensorFaultInjector("g", {{SensorFaultKind::kNoiseScale, {0, 10}, 0.5}}, 0.1, 1);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("sensor_faults[0].value")));
+  EXPECT_THAT(
+      [] {
+        SensorFaultInjector("g", {{SensorFaultKind::kBiasStep, {10, 5}, 1.0}}, 0.1, 1);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("sensor_faults[0].window")));
   EXPECT_THAT(
       [] {
         FrameFault f;
@@ -596,8 +605,11 @@ TEST(SensorFaults, LoadErrorsNameTheField) {
         FrameFaultFilter({f}, nullptr, 1);
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr("frame_faults[0].counter_signal")));
-  EXPECT_THAT([] { DeviceFaultInjector("enc", 1, {{DeviceFaultKind::kReboot, {5}}}); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("needs an end")));
+  EXPECT_THAT(
+      [] {
+        DeviceFaultInjector("enc", 1, {{DeviceFaultKind::kReboot, {5}}});
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("needs an end")));
   EXPECT_EQ(ParseSensorFaultKind("missed_counts"), SensorFaultKind::kMissedCounts);
   EXPECT_EQ(ParseFrameFaultKind("wrong_dlc"), FrameFaultKind::kWrongDlc);
   EXPECT_EQ(ParseDeviceFaultKind("heartbeat_lost"), DeviceFaultKind::kHeartbeatLost);
@@ -607,8 +619,9 @@ TEST(SensorFaults, LoadErrorsNameTheField) {
 
 TEST(FaultEventLog, JsonLines) {
   FaultEvent e{1'500'000, "frame", "drop", "start", "id 0x170 mask 0x7FF", "p=\"0.5\""};
-  EXPECT_EQ(FaultEventJson(e),
-            R"({"t_ns":1500000,"t_s":0.001500000,"category":"frame","kind":"drop","phase":"start","target":"id 0x170 mask 0x7FF","detail":"p=\"0.5\""})");
+  EXPECT_EQ(
+      FaultEventJson(e),
+      R"({"t_ns":1500000,"t_s":0.001500000,"category":"frame","kind":"drop","phase":"start","target":"id 0x170 mask 0x7FF","detail":"p=\"0.5\""})");
   FaultEventLog log;
   log.Record({5, "bus", "flood", "start", "", ""});
   log.Record({2, "bus", "flood", "end", "", ""});

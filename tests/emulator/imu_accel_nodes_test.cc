@@ -248,7 +248,7 @@ TEST(DbcImuNode, PollCatchesUpInDueOrder) {
   std::vector<std::pair<std::int64_t, std::uint32_t>> got;
   for (const NodeFrame& f : frames) got.emplace_back(f.due_ns, f.frame.id);
   const std::vector<std::pair<std::int64_t, std::uint32_t>> want = {
-      {0, 1280},        {0, 1281},        {0, 1282},        {5'000'000, 1282},
+      {0, 1280},          {0, 1281},          {0, 1282},          {5'000'000, 1282},
       {10'000'000, 1280}, {10'000'000, 1282}, {15'000'000, 1282}, {20'000'000, 1280},
       {20'000'000, 1281}, {20'000'000, 1282}};
   EXPECT_EQ(got, want);
@@ -272,8 +272,8 @@ TEST(DbcImuNode, RejectsConfigurationsTheDbcCannotCarry) {
   c.message_options[1].checksum = ChecksumKind::kXor;
   c.message_options[1].checksum_signal = "IMU_Cnt";  // 4 bits fit XOR; use a CRC on it instead
   c.message_options[1].checksum = ChecksumKind::kCrc8SaeJ1850;
-  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("message_options[1].checksum_signal")));
+  EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); }, ThrowsMessage<std::invalid_argument>(
+                                                  HasSubstr("message_options[1].checksum_signal")));
   c = UserImuConfig();
   c.message_options.push_back({"IMU_NoCycle", "", "", ChecksumKind::kXor});
   EXPECT_THAT([&] { DbcImuNode(dbc, c, 0); },

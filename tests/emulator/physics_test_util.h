@@ -24,8 +24,8 @@ struct Rig {
                double slope_deg = 0.0, double yaw = 0.0)
       : platform(LoadShipped(platform_name)) {
     const double s = slope_deg * M_PI / 180.0;
-    world.terrain().AddPlane(Eigen::Vector3d(-std::sin(s), 0, std::cos(s)),
-                             Eigen::Vector3d::Zero(), Friction{mu_peak, mu_slide});
+    world.terrain().AddPlane(Eigen::Vector3d(-std::sin(s), 0, std::cos(s)), Eigen::Vector3d::Zero(),
+                             Friction{mu_peak, mu_slide});
     vehicle = &world.AddVehicle(platform.vehicle, 0, 0, yaw);
   }
   Rig(platforms::Platform p, bool /*no_floor*/) : platform(std::move(p)) {}

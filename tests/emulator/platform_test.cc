@@ -80,7 +80,8 @@ TEST(PlatformFile, Omni3InverseKinematics) {
   const auto w = InverseKinematics(p, t);
   for (int i = 0; i < 3; ++i) {
     const double th = i * 2 * std::numbers::pi / 3;
-    const double expected = (-std::sin(th) * t.vx_m_s + std::cos(th) * t.vy_m_s + L * t.wz_rad_s) / r;
+    const double expected =
+        (-std::sin(th) * t.vx_m_s + std::cos(th) * t.vy_m_s + L * t.wz_rad_s) / r;
     EXPECT_NEAR(w[static_cast<std::size_t>(i)], expected, 1e-5) << i;  // mounts have 6 digits
   }
 }
@@ -106,8 +107,8 @@ TEST(PlatformFile, BadFieldNamesFileLineAndField) {
   std::string typo = Shipped("diff2");
   typo.replace(typo.find("heading_deg"), 11, "headin_deg");
   EXPECT_THAT([&] { LoadPlatformYaml(typo, "typo.yaml"); },
-              ThrowsMessage<std::invalid_argument>(
-                  AllOf(HasSubstr("typo.yaml:"), HasSubstr("headin_deg"), HasSubstr("unknown key"))));
+              ThrowsMessage<std::invalid_argument>(AllOf(
+                  HasSubstr("typo.yaml:"), HasSubstr("headin_deg"), HasSubstr("unknown key"))));
   std::string nan = Shipped("mecanum4_omni3");
   nan.replace(nan.find("mass_kg: 25.0"), 13, "mass_kg: abc");
   EXPECT_THAT([&] { LoadPlatformYaml(nan, "nan.yaml"); },

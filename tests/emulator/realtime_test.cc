@@ -25,12 +25,12 @@
 namespace wheelhil::emulator {
 namespace {
 
-using ::testing::ElementsAre;
-using ::testing::HasSubstr;
-using ::testing::IsEmpty;
 using realtime::PacedFrame;
 using realtime::SendRecord;
 using realtime::SpscRing;
+using ::testing::ElementsAre;
+using ::testing::HasSubstr;
+using ::testing::IsEmpty;
 
 TEST(SpscRing, CapacityRoundsUpToPowerOfTwo) {
   EXPECT_EQ(SpscRing<int>(1).capacity(), 2u);
@@ -116,8 +116,8 @@ TEST(Deadlines, PeriodicDeadlinesDoNotAccumulateRounding) {
 
 TEST(Deadlines, NextPeriodIndexSkipsMissedDeadlines) {
   using realtime::NextPeriodIndex;
-  EXPECT_EQ(NextPeriodIndex(1000, 100, 0), 0);      // before the start
-  EXPECT_EQ(NextPeriodIndex(1000, 100, 1000), 1);   // exactly on deadline 0: next is 1
+  EXPECT_EQ(NextPeriodIndex(1000, 100, 0), 0);     // before the start
+  EXPECT_EQ(NextPeriodIndex(1000, 100, 1000), 1);  // exactly on deadline 0: next is 1
   EXPECT_EQ(NextPeriodIndex(1000, 100, 1099), 1);
   EXPECT_EQ(NextPeriodIndex(1000, 100, 1100), 2);
   EXPECT_EQ(NextPeriodIndex(1000, 100, 1950), 10);  // overran nine periods
@@ -218,8 +218,8 @@ TEST(Paper002DeviceSet, AccelFramesDecodeThroughTheDbcWithCounterAndChecksum) {
   realtime::Paper002DeviceSet devices(o);
   std::vector<PacedFrame> frames;
   for (int c = 0; c < 100; ++c) devices.NextCycle(frames);  // 0.1 s: accelerating at 0.5 m/s^2
-  const auto db = bus::DbcDatabase::LoadFile(std::string(WHEELHIL_SOURCE_DIR) +
-                                             "/bus/dbc/wheelhil_accel4.dbc");
+  const auto db =
+      bus::DbcDatabase::LoadFile(std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc/wheelhil_accel4.dbc");
   const bus::DbcMessage* m = db.FindMessage(0x170, false);
   ASSERT_NE(m, nullptr);
   int n = 0;
@@ -304,13 +304,26 @@ nlohmann::json CompleteReport() {
 
 TEST(BenchReport, KeySetNamesEveryRequiredFigure) {
   const auto keys = bench::DocumentedMetricKeys();
-  for (const char* k :
-       {"physics.diff2.flat_rtf", "physics.diff2.mesh_rtf", "physics.mecanum4_omni3.flat_rtf",
-        "physics.ortho3.mesh_rtf", "physics.platforms_1.rtf", "physics.platforms_4.rtf",
-        "physics.platforms_16.rtf", "lockstep.paper000.rtf", "lockstep.paper002.rtf",
-        "lockstep.paper002.vcan_rtf", "bus.ucan_frames_per_s", "bus.ucan_fanout4_frames_per_s",
-        "bus.vcan_frames_per_s", "bus.ucan_vs_vcan_ratio", "realtime.p50_us", "realtime.p99_us",
-        "realtime.max_us", "realtime.missed_deadlines", "rss.peak_mib", "machine.cores"}) {
+  for (const char* k : {"physics.diff2.flat_rtf",
+                        "physics.diff2.mesh_rtf",
+                        "physics.mecanum4_omni3.flat_rtf",
+                        "physics.ortho3.mesh_rtf",
+                        "physics.platforms_1.rtf",
+                        "physics.platforms_4.rtf",
+                        "physics.platforms_16.rtf",
+                        "lockstep.paper000.rtf",
+                        "lockstep.paper002.rtf",
+                        "lockstep.paper002.vcan_rtf",
+                        "bus.ucan_frames_per_s",
+                        "bus.ucan_fanout4_frames_per_s",
+                        "bus.vcan_frames_per_s",
+                        "bus.ucan_vs_vcan_ratio",
+                        "realtime.p50_us",
+                        "realtime.p99_us",
+                        "realtime.max_us",
+                        "realtime.missed_deadlines",
+                        "rss.peak_mib",
+                        "machine.cores"}) {
     EXPECT_THAT(keys, ::testing::Contains(std::string(k)));
   }
   const auto text = bench::DocumentedTextKeys();

@@ -39,8 +39,8 @@ TEST(ScenarioArtefacts, HtmlReportListsEveryMetricOnce) {
   const std::string html = HtmlReport(report, {"<svg id=\"p\"></svg>"});
   for (int s = 0; s < 12; ++s) {
     for (int k = 0; k < 9; ++k) {
-      const std::string row = fmt::format("<tr><td>stream{:02}</td><td>metric{:02}</td><td>{}</td></tr>",
-                                          s, k, s * 100 + k);
+      const std::string row = fmt::format(
+          "<tr><td>stream{:02}</td><td>metric{:02}</td><td>{}</td></tr>", s, k, s * 100 + k);
       const auto first = html.find(row);
       ASSERT_NE(first, std::string::npos) << row;
       EXPECT_EQ(html.find(row, first + 1), std::string::npos) << row;

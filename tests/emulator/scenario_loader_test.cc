@@ -40,13 +40,13 @@ TEST(ScenarioLoader, MinimalLoadsWithDefaults) {
 }
 
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
-  EXPECT_THAT([] { (void)ParseScenario(Minimal("speed: 3\n"), kFile); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("inline.yaml:10:1: speed: unknown key")));
+  EXPECT_THAT(
+      [] { (void)ParseScenario(Minimal("speed: 3\n"), kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("inline.yaml:10:1: speed: unknown key")));
 }
 
 TEST(ScenarioLoader, BadNumberNamesTheField) {
-  const std::string text =
-      Minimal("timing: {sync_period_s: -1}\n");
+  const std::string text = Minimal("timing: {sync_period_s: -1}\n");
   EXPECT_THAT([&] { (void)ParseScenario(text, kFile); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("timing.sync_period_s")));
 }
@@ -61,8 +61,8 @@ TEST(ScenarioLoader, UnknownWheelIsRejected) {
   std::string text = Minimal();
   text.replace(text.find("wheel: right"), 12, "wheel: front");
   EXPECT_THAT([&] { (void)ParseScenario(text, kFile); },
-              ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("sensors.encoders.nodes[1].wheel: platform diff2 has no wheel 'front'")));
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "sensors.encoders.nodes[1].wheel: platform diff2 has no wheel 'front'")));
 }
 
 TEST(ScenarioLoader, RepeatedNodeIdIsRejected) {
@@ -81,13 +81,15 @@ TEST(ScenarioLoader, MotionTypeMustBeKnown) {
 
 TEST(ScenarioLoader, ExpectationNeedsOneOperator) {
   const std::string text = Minimal("expectations:\n  - {metric: pose.ape_rmse_m}\n");
-  EXPECT_THAT([&] { (void)ParseScenario(text, kFile); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("expectations[0]: needs exactly one")));
+  EXPECT_THAT(
+      [&] { (void)ParseScenario(text, kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("expectations[0]: needs exactly one")));
 }
 
 TEST(ScenarioLoader, ExpectationAgainstAnotherMetric) {
   const Scenario s = ParseScenario(
-      Minimal("expectations:\n  - {metric: pose.x, \"<\": pose_raw.x}\n  - {metric: a, \">=\": 2}\n"),
+      Minimal(
+          "expectations:\n  - {metric: pose.x, \"<\": pose_raw.x}\n  - {metric: a, \">=\": 2}\n"),
       kFile);
   ASSERT_EQ(s.expectations.size(), 2u);
   EXPECT_EQ(s.expectations[0].other_metric, "pose_raw.x");

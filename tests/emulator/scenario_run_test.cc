@@ -49,7 +49,8 @@ Scenario ShortPaper000() {
 class ScenarioRun : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / fs::path("wheelhil_scenario_run_" + std::to_string(::getpid()));
+    dir_ =
+        fs::temp_directory_path() / fs::path("wheelhil_scenario_run_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
@@ -103,9 +104,9 @@ TEST_F(ScenarioRun, SilentFirmwareFailsWithTheReason) {
   EXPECT_EQ(r.report["verdict"], "fail");
 }
 
-// Paper 002 shortened to 2 s of the 100 mm/s run (2 ms SYNC, 1 kHz accelerometers): the accel4 node is on the bus,
-// the firmware's three velocity streams are scored; the biased accelerometers' pure integration
-// drifts, so its RMSE is the largest.
+// Paper 002 shortened to 2 s of the 100 mm/s run (2 ms SYNC, 1 kHz accelerometers): the accel4 node
+// is on the bus, the firmware's three velocity streams are scored; the biased accelerometers' pure
+// integration drifts, so its RMSE is the largest.
 TEST_F(ScenarioRun, Paper002VelocityStreamsAreScored) {
   Scenario s =
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper002_velocity.yaml");

@@ -17,8 +17,8 @@ namespace {
 
 using ::testing::AllOf;
 using ::testing::HasSubstr;
-using ::testing::ThrowsMessage;
 using testing::SourcePath;
+using ::testing::ThrowsMessage;
 
 TEST(TerrainMesh, PlaneRaycast) {
   Terrain t;
@@ -74,8 +74,8 @@ TEST(TerrainMesh, ShippedMeshesHaveTheirFeatures) {
   tiles.AddMesh(SourcePath("meshes/uneven_tiles.obj"), MeshOptions{});
   double zmin = 1, zmax = -1;
   for (int i = 0; i < 40; ++i) {
-    ASSERT_TRUE(tiles.Raycast(Eigen::Vector3d(-1.5 + 0.0743 * i, 0.11, 1), -Eigen::Vector3d::UnitZ(),
-                              2, &hit));
+    ASSERT_TRUE(tiles.Raycast(Eigen::Vector3d(-1.5 + 0.0743 * i, 0.11, 1),
+                              -Eigen::Vector3d::UnitZ(), 2, &hit));
     zmin = std::min(zmin, hit.point_W.z());
     zmax = std::max(zmax, hit.point_W.z());
   }
@@ -130,10 +130,16 @@ TEST(TerrainMesh, ErrorsNameFileAndField) {
   o.up_axis = 'x';
   EXPECT_THAT([&] { t.AddMesh(SourcePath("meshes/floor_flat.obj"), o); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("up_axis")));
-  EXPECT_THAT([&] { t.AddPatch(FrictionPatch{"p", {{0, 0}, {1, 0}}, Friction{}}); },
-              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("'p'"), HasSubstr("polygon"))));
-  EXPECT_THAT([&] { t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.5, 0.9}); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("mu_slide")));
+  EXPECT_THAT(
+      [&] {
+        t.AddPatch(FrictionPatch{"p", {{0, 0}, {1, 0}}, Friction{}});
+      },
+      ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("'p'"), HasSubstr("polygon"))));
+  EXPECT_THAT(
+      [&] {
+        t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.5, 0.9});
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("mu_slide")));
 }
 
 }  // namespace

@@ -14,9 +14,9 @@ namespace wheelhil::emulator::campaign {
 namespace {
 
 using ::testing::HasSubstr;
-using ::testing::ThrowsMessage;
 using testing::kBaseScenario;
 using testing::TempDir;
+using ::testing::ThrowsMessage;
 
 class CampaignSpecTest : public ::testing::Test {
  protected:
@@ -182,19 +182,25 @@ pass:
 
 TEST_F(CampaignSpecTest, LoadErrorsNameFileLineAndField) {
   const std::string file = (dir_.path() / "camp.yaml").string();
-  EXPECT_THAT([&] { Parse("base: base.yaml\nparameterz: []\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr(file + ":2: parameterz: unknown key")));
+  EXPECT_THAT(
+      [&] { Parse("base: base.yaml\nparameterz: []\n"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr(file + ":2: parameterz: unknown key")));
   EXPECT_THAT([&] { Parse("base: nothere.yaml\nparameters: [{path: a, values: [1]}]\n"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr(":1: base: scenario")));
   EXPECT_THAT(
       [&] {
-        Parse("base: base.yaml\nparameters:\n  - path: terrain.friction\n    uniform: {min: 0, max: 1}\n");
+        Parse(
+            "base: base.yaml\nparameters:\n  - path: terrain.friction\n    uniform: {min: 0, max: "
+            "1}\n");
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr(":3: parameters[0]: a random distribution")));
-  EXPECT_THAT([&] { Parse("base: base.yaml\nsampling: lhs\nparameters: [{path: a, values: [1]}]\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("runs")));
   EXPECT_THAT(
-      [&] { Parse("base: base.yaml\nparameters:\n  - path: a\n    range: {from: 0, to: 1, steps: 0}\n"); },
+      [&] { Parse("base: base.yaml\nsampling: lhs\nparameters: [{path: a, values: [1]}]\n"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("runs")));
+  EXPECT_THAT(
+      [&] {
+        Parse("base: base.yaml\nparameters:\n  - path: a\n    range: {from: 0, to: 1, steps: 0}\n");
+      },
       ThrowsMessage<std::invalid_argument>(HasSubstr(":4: parameters[0].range.steps")));
 }
 
@@ -232,7 +238,9 @@ parameters:
   const YAML::Node n = YAML::LoadFile(out.string());
   EXPECT_DOUBLE_EQ(n["sensors"]["gyro_noise"].as<double>(), 0.125);
   EXPECT_DOUBLE_EQ(n["fake"]["sleep_s"].as<double>(), 0.25);
-  const auto bad = Parse("base: base.yaml\nset:\n  nothere.x: 1\nparameters: [{path: terrain.friction, values: [1]}]\n");
+  const auto bad = Parse(
+      "base: base.yaml\nset:\n  nothere.x: 1\nparameters: [{path: terrain.friction, values: "
+      "[1]}]\n");
   EXPECT_THAT([&] { CheckParameterPaths(bad); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("camp.yaml:3: set: nothere.x")));
 }

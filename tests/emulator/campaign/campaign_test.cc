@@ -4,10 +4,10 @@
 
 #include "emulator/campaign/campaign.h"
 
+#include <fcntl.h>
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -64,10 +64,11 @@ std::string ReadAll(const fs::path& p) {
 std::map<std::string, std::string> Comparable(const std::vector<RunRecord>& runs) {
   std::map<std::string, std::string> out;
   for (const auto& r : runs) {
-    out[r.key] = nlohmann::json{{"index", r.index}, {"seed", r.seed},       {"params", r.params},
-                                {"verdict", r.verdict}, {"passed", r.passed}, {"failure", r.failure},
-                                {"metrics", r.metrics}}
-                     .dump();
+    out[r.key] =
+        nlohmann::json{{"index", r.index},     {"seed", r.seed},     {"params", r.params},
+                       {"verdict", r.verdict}, {"passed", r.passed}, {"failure", r.failure},
+                       {"metrics", r.metrics}}
+            .dump();
   }
   return out;
 }
@@ -139,16 +140,18 @@ TEST_F(CampaignTest, RunsStoresAndSummarises) {
 TEST_F(CampaignTest, ResumeAfterRepeatedSigkillMatchesUninterruptedRun) {
   // Slow runs so that kills land mid-run; every kill waits for progress, not for a clock.
   dir_.Write("base.yaml",
-             std::string(kBaseScenario).replace(std::string(kBaseScenario).find("sleep_s: 0.0"),
-                                                12, "sleep_s: 0.03"));
+             std::string(kBaseScenario)
+                 .replace(std::string(kBaseScenario).find("sleep_s: 0.0"), 12, "sleep_s: 0.03"));
   const auto spec = LoadCampaignFile(campaign_file_);
   const fs::path db = dir_.path() / "killed.sqlite";
   const fs::path log = dir_.path() / "executions.log";
   ::setenv("FAKE_WHEELHIL_RUN_LOG", log.c_str(), 1);
   const std::string out_dir = (dir_.path() / "killed").string();
-  std::vector<std::string> args = {WHEELHIL_EXE, "campaign", campaign_file_.string(), "--jobs",
-                                   "2", "--db", db.string(), "--out", out_dir, "--runner",
-                                   FAKE_RUNNER, "--quiet", "--no-html"};
+  std::vector<std::string> args = {WHEELHIL_EXE, "campaign",  campaign_file_.string(),
+                                   "--jobs",     "2",         "--db",
+                                   db.string(),  "--out",     out_dir,
+                                   "--runner",   FAKE_RUNNER, "--quiet",
+                                   "--no-html"};
   auto spawn = [&] {
     const pid_t pid = ::fork();
     if (pid == 0) {
@@ -250,9 +253,9 @@ TEST_F(CampaignTest, MergedShardsEqualTheUnshardedCampaign) {
   // Shards of another campaign are refused.
   TempDir other;
   other.Write("base.yaml", kBaseScenario);
-  auto other_spec = ParseCampaign(
-      "base: base.yaml\nparameters: [{path: terrain.friction, values: [0.3]}]\n",
-      (other.path() / "c.yaml").string());
+  auto other_spec =
+      ParseCampaign("base: base.yaml\nparameters: [{path: terrain.friction, values: [0.3]}]\n",
+                    (other.path() / "c.yaml").string());
   auto oo = Options("other");
   oo.db = other.path() / "other.sqlite";
   RunCampaign(other_spec, oo);
@@ -277,9 +280,10 @@ TEST_F(CampaignTest, JUnitXmlValidatesAgainstTheSchema) {
   // Hostile text is escaped; control characters dropped.
   const fs::path odd = dir_.path() / "odd.xml";
   WriteJUnit(odd,
-             {{"s<&>\"'", {{"c", "n\x01<a>", 1.5, "fail & \"quote\"\nsecond line", "", "out]]>"},
-                           {"c", "err", 0, "", "no report", ""},
-                           {"c", "ok", 0.25, "", "", ""}}}},
+             {{"s<&>\"'",
+               {{"c", "n\x01<a>", 1.5, "fail & \"quote\"\nsecond line", "", "out]]>"},
+                {"c", "err", 0, "", "no report", ""},
+                {"c", "ok", 0.25, "", "", ""}}}},
              "all");
   const std::string cmd2 = "xmllint --noout --schema " + xsd + " " + odd.string() + " 2>&1";
   EXPECT_EQ(std::system(cmd2.c_str()), 0) << ReadAll(odd);
@@ -377,10 +381,11 @@ TEST_F(CampaignTest, RealRunnerSmokeSuiteAndShortCampaign) {
   EXPECT_TRUE(smoke.passed);
 
   const auto spec = ParseCampaign(
-      "base: " + std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml\n"
-      "set:\n  motion[1].distance: 1.0\n"
-      "parameters: [{path: terrain.random_patches.count, values: [0, 4]}]\n"
-      "pass:\n  verdict: false\n  run: [{metric: pose.final_position_error_m, max: 0.25}]\n",
+      "base: " + std::string(WHEELHIL_SOURCE_DIR) +
+          "/scenarios/paper000_slip.yaml\n"
+          "set:\n  motion[1].distance: 1.0\n"
+          "parameters: [{path: terrain.random_patches.count, values: [0, 4]}]\n"
+          "pass:\n  verdict: false\n  run: [{metric: pose.final_position_error_m, max: 0.25}]\n",
       (dir_.path() / "real.yaml").string());
   auto o = Options("real");
   o.runner_exe = WHEELHIL_EXE;

@@ -27,7 +27,8 @@ fake:
 class TempDir {
  public:
   TempDir() {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "wheelhil_campaign_XXXXXX").string();
+    std::string tmpl =
+        (std::filesystem::temp_directory_path() / "wheelhil_campaign_XXXXXX").string();
     path_ = ::mkdtemp(tmpl.data());
   }
   ~TempDir() {
