@@ -54,4 +54,17 @@ std::string CreateTempUcanRuntimeDir(const std::string& prefix) {
   return std::string(buf.data());
 }
 
+std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
+    const std::string& preload_library, const std::string& runtime_dir) {
+  std::string preload = preload_library;
+  if (const char* old = std::getenv("LD_PRELOAD"); old != nullptr && old[0] != '\0') {
+    preload += ":" + std::string(old);
+  }
+  std::string asan = "verify_asan_link_order=0";
+  if (const char* old = std::getenv("ASAN_OPTIONS"); old != nullptr && old[0] != '\0') {
+    asan = std::string(old) + ":" + asan;
+  }
+  return {{"LD_PRELOAD", preload}, {"WHEELHIL_UCAN_DIR", runtime_dir}, {"ASAN_OPTIONS", asan}};
+}
+
 }  // namespace wheelhil::bus

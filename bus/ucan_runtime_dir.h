@@ -10,6 +10,8 @@
 
 #include <string>
 #include <system_error>
+#include <utility>
+#include <vector>
 
 namespace wheelhil::bus {
 
@@ -30,5 +32,12 @@ std::string UcanSocketPath(const std::string& dir);
 /// one run's private buses (e.g. UcanBrokerOptions{.runtime_dir = ..., .remove_runtime_dir =
 /// true}). Throws std::system_error when it cannot.
 std::string CreateTempUcanRuntimeDir(const std::string& prefix = "wheelhil-ucan-");
+
+/// Environment entries that put a child program on the buses of `runtime_dir`:
+/// LD_PRELOAD = `preload_library`[:the current $LD_PRELOAD], WHEELHIL_UCAN_DIR = `runtime_dir`,
+/// and ASAN_OPTIONS = the current value + `verify_asan_link_order=0`, because an
+/// AddressSanitizer-built child otherwise refuses to start when a preload precedes libasan.
+std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
+    const std::string& preload_library, const std::string& runtime_dir);
 
 }  // namespace wheelhil::bus

@@ -170,11 +170,7 @@ int EnsureUcanBus(const std::string& runtime_dir, const std::string& name) {
 
 std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
     const std::string& runtime_dir) {
-  std::string preload = UcanPreloadLibraryPath();
-  if (const char* old = std::getenv("LD_PRELOAD"); old != nullptr && old[0] != '\0') {
-    preload += ":" + std::string(old);
-  }
-  return {{"LD_PRELOAD", preload}, {"WHEELHIL_UCAN_DIR", runtime_dir}};
+  return bus::UcanChildEnvironment(UcanPreloadLibraryPath(), runtime_dir);
 }
 
 std::string UcanPreloadLibraryPath() {

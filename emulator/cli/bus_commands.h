@@ -42,8 +42,8 @@ class BusCommands {
 int EnsureUcanBus(const std::string& runtime_dir, const std::string& name);
 
 /// Environment for a child process that must see the buses of `runtime_dir` through the plain
-/// SocketCAN API: {"LD_PRELOAD", lib[:old LD_PRELOAD]}, {"WHEELHIL_UCAN_DIR", runtime_dir}.
-/// Set these in the child before exec (what `wheelhil exec` does).
+/// SocketCAN API: bus::UcanChildEnvironment with UcanPreloadLibraryPath(). Set these in the child
+/// before exec (what `wheelhil exec` does).
 std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
     const std::string& runtime_dir);
 

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <string>
 
+#include "bus/ucan_runtime_dir.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 
@@ -32,9 +33,8 @@ RunOptions Options(const fs::path& out) {
   o.bin_dir = std::string(WHEELHIL_BINARY_DIR) + "/bin";
   o.dbc_dir = std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc";
   o.ucan_child_env = [](const std::string& dir) {
-    return std::vector<std::pair<std::string, std::string>>{
-        {"LD_PRELOAD", std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_ucan.so"},
-        {"WHEELHIL_UCAN_DIR", dir}};
+    return bus::UcanChildEnvironment(std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_ucan.so",
+                                     dir);
   };
   return o;
 }
