@@ -58,11 +58,11 @@ std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
     const std::string& preload_library, const std::string& runtime_dir) {
   std::string preload = preload_library;
   if (const char* old = std::getenv("LD_PRELOAD"); old != nullptr && old[0] != '\0') {
-    preload += ":" + std::string(old);
+    preload.append(":").append(old);  // not `":" + std::string(old)`: GCC 12 -Wrestrict (-O2)
   }
   std::string asan = "verify_asan_link_order=0";
   if (const char* old = std::getenv("ASAN_OPTIONS"); old != nullptr && old[0] != '\0') {
-    asan = std::string(old) + ":" + asan;
+    asan = std::string(old).append(":").append(asan);
   }
   return {{"LD_PRELOAD", preload}, {"WHEELHIL_UCAN_DIR", runtime_dir}, {"ASAN_OPTIONS", asan}};
 }
