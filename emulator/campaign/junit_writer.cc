@@ -5,37 +5,10 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "emulator/xml_escape.h"
+
 namespace wheelhil::emulator::campaign {
 namespace {
-
-std::string Escape(const std::string& s) {
-  std::string out;
-  out.reserve(s.size());
-  for (unsigned char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      case '\'':
-        out += "&apos;";
-        break;
-      default:
-        // XML 1.0 forbids most C0 controls even as references.
-        if (c < 0x20 && c != '\n' && c != '\t' && c != '\r') continue;
-        out += static_cast<char>(c);
-    }
-  }
-  return out;
-}
 
 std::string FirstLine(const std::string& s) {
   const auto nl = s.find('\n');
@@ -57,7 +30,7 @@ std::string JUnitXml(const std::vector<JUnitSuite>& suites, const std::string& n
     for (const auto& c : suite.cases) {
       t += c.time_s;
       cases += fmt::format("    <testcase classname=\"{}\" name=\"{}\" time=\"{:.3f}\"",
-                           Escape(c.classname), Escape(c.name), c.time_s);
+                           EscapeXml(c.classname), EscapeXml(c.name), c.time_s);
       if (c.failure.empty() && c.error.empty() && c.system_out.empty()) {
         cases += "/>\n";
         continue;
@@ -66,21 +39,21 @@ std::string JUnitXml(const std::vector<JUnitSuite>& suites, const std::string& n
       if (!c.error.empty()) {
         ++e;
         cases += fmt::format("      <error message=\"{}\" type=\"error\">{}</error>\n",
-                             Escape(FirstLine(c.error)), Escape(c.error));
+                             EscapeXml(FirstLine(c.error)), EscapeXml(c.error));
       } else if (!c.failure.empty()) {
         ++f;
         cases += fmt::format("      <failure message=\"{}\" type=\"failure\">{}</failure>\n",
-                             Escape(FirstLine(c.failure)), Escape(c.failure));
+                             EscapeXml(FirstLine(c.failure)), EscapeXml(c.failure));
       }
       if (!c.system_out.empty()) {
-        cases += fmt::format("      <system-out>{}</system-out>\n", Escape(c.system_out));
+        cases += fmt::format("      <system-out>{}</system-out>\n", EscapeXml(c.system_out));
       }
       cases += "    </testcase>\n";
     }
     body += fmt::format(
         "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{}\" errors=\"{}\" skipped=\"0\" "
         "time=\"{:.3f}\">\n{}  </testsuite>\n",
-        Escape(suite.name), suite.cases.size(), f, e, t, cases);
+        EscapeXml(suite.name), suite.cases.size(), f, e, t, cases);
     tests += suite.cases.size();
     failures += f;
     errors += e;
@@ -90,7 +63,7 @@ std::string JUnitXml(const std::vector<JUnitSuite>& suites, const std::string& n
       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
       "<testsuites name=\"{}\" tests=\"{}\" failures=\"{}\" errors=\"{}\" time=\"{:.3f}\">\n"
       "{}</testsuites>\n",
-      Escape(name), tests, failures, errors, time_s, body);
+      EscapeXml(name), tests, failures, errors, time_s, body);
 }
 
 void WriteJUnit(const std::filesystem::path& file, const std::vector<JUnitSuite>& suites,

@@ -11,6 +11,8 @@
 #include <set>
 #include <stdexcept>
 
+#include "emulator/xml_escape.h"
+
 namespace wheelhil::emulator::campaign {
 namespace {
 
@@ -114,29 +116,6 @@ Stats StatsOf(const std::vector<RunRecord>& runs, const std::vector<std::size_t>
   return s;
 }
 
-std::string Html(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
-
 std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.4g}", v) : "-"; }
 
 // Scatter plot: parameter (x) against metric (y); passed runs green dots, failed red crosses,
@@ -196,14 +175,14 @@ std::string SvgPlot(const CampaignSpec& spec, const std::vector<RunRecord>& runs
   }
   for (std::size_t c = 0; c < categories.size(); ++c) {
     svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                       sx(static_cast<double>(c)), H - B + 14, Html(categories[c]));
+                       sx(static_cast<double>(c)), H - B + 14, EscapeXml(categories[c]));
   }
   svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                     L + (W - L - R) / 2, H - 6, Html(path));
+                     L + (W - L - R) / 2, H - 6, EscapeXml(path));
   svg += fmt::format(
       "<text x=\"12\" y=\"{:.1f}\" transform=\"rotate(-90 12 {:.1f})\" "
       "text-anchor=\"middle\">{}</text>\n",
-      T + (H - T - B) / 2, T + (H - T - B) / 2, Html(metric));
+      T + (H - T - B) / 2, T + (H - T - B) / 2, EscapeXml(metric));
   for (double b : bounds) {
     svg += fmt::format(
         "<line x1=\"{}\" x2=\"{}\" y1=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"#c60\" "
@@ -343,7 +322,7 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
       "figure{{display:inline-block;margin:0.5em}}</style></head><body>\n"
       "<h1>Campaign {0}</h1>\n<p>Base scenario <code>{1}</code>; {2} of {3} runs stored; "
       "{4} passed; pass rate <b>{5:.1f} %</b>; verdict <b class=\"{6}\">{7}</b>.</p>\n",
-      Html(spec.name), Html(spec.base_scenario.string()), s.stored, s.expected, s.passed,
+      EscapeXml(spec.name), EscapeXml(spec.base_scenario.string()), s.stored, s.expected, s.passed,
       s.pass_rate * 100, s.campaign_passed ? "pass" : "fail",
       !s.complete ? "incomplete" : (s.campaign_passed ? "pass" : "FAIL"));
   if (!s.criteria.empty()) {
@@ -352,39 +331,39 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
     for (const auto& c : s.criteria) {
       h +=
           fmt::format("<tr><td class=\"l\">{}</td><td>{:.1f} %</td><td class=\"{}\">{}</td></tr>\n",
-                      Html(c.description), c.achieved * 100, c.holds ? "pass" : "fail",
+                      EscapeXml(c.description), c.achieved * 100, c.holds ? "pass" : "fail",
                       c.holds ? "holds" : "fails");
     }
     h += "</table>\n";
   }
   h += "<h2>Worst runs</h2><table><tr><th class=\"l\">run</th><th>seed</th><th>result</th>"
        "<th class=\"l\">parameters</th>";
-  for (const auto& m : s.key_metrics) h += fmt::format("<th>{}</th>", Html(m));
+  for (const auto& m : s.key_metrics) h += fmt::format("<th>{}</th>", EscapeXml(m));
   h += "<th class=\"l\">failure</th></tr>\n";
   for (const auto i : s.worst) {
     const auto& r = runs[i];
     h += fmt::format(
         "<tr><td class=\"l\"><a href=\"{}\">{}</a></td><td>{}</td>"
         "<td class=\"{}\">{}</td><td class=\"l\">{}</td>",
-        Html(r.run_dir), Html(r.key), r.seed, r.passed ? "pass" : "fail",
-        r.passed ? "pass" : "FAIL", Html(ParamsText(r)));
+        EscapeXml(r.run_dir), EscapeXml(r.key), r.seed, r.passed ? "pass" : "fail",
+        r.passed ? "pass" : "FAIL", EscapeXml(ParamsText(r)));
     for (const auto& m : s.key_metrics)
       h += fmt::format("<td>{}</td>", Num(MetricOf(r, m).value_or(NAN)));
-    h += fmt::format("<td class=\"l\">{}</td></tr>\n", Html(r.failure));
+    h += fmt::format("<td class=\"l\">{}</td></tr>\n", EscapeXml(r.failure));
   }
   h += "</table>\n";
   for (const auto& p : spec.parameters) {
     h += fmt::format(
         "<h2>{}</h2>\n<table><tr><th class=\"l\">value</th><th>runs</th>"
         "<th>pass %</th>",
-        Html(p.path));
+        EscapeXml(p.path));
     for (const auto& m : s.key_metrics) {
-      h += fmt::format("<th>{} mean</th><th>{} max</th>", Html(m), Html(m));
+      h += fmt::format("<th>{} mean</th><th>{} max</th>", EscapeXml(m), EscapeXml(m));
     }
     h += "</tr>\n";
     for (const auto& g : GroupBy(runs, p.path)) {
       const Stats any = StatsOf(runs, g.runs, "");
-      h += fmt::format("<tr><td class=\"l\">{}</td><td>{}</td><td>{:.1f}</td>", Html(g.label),
+      h += fmt::format("<tr><td class=\"l\">{}</td><td>{}</td><td>{:.1f}</td>", EscapeXml(g.label),
                        any.n, any.n ? 100.0 * any.passed / any.n : 0.0);
       for (const auto& m : s.key_metrics) {
         const Stats st = StatsOf(runs, g.runs, m);

@@ -8,6 +8,8 @@
 
 #include <fmt/format.h>
 
+#include "emulator/xml_escape.h"
+
 namespace wheelhil::emulator::scenario {
 
 namespace {
@@ -21,29 +23,6 @@ std::ofstream Open(const std::string& path) {
 void Check(std::ofstream& out, const std::string& path) {
   out.flush();
   if (!out) throw std::runtime_error(fmt::format("{}: write failed", path));
-}
-
-std::string Escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '&':
-        o += "&amp;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      default:
-        o += c;
-    }
-  }
-  return o;
 }
 
 }  // namespace
@@ -125,11 +104,11 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
       "font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" "
       "fill=\"white\"/>\n<text x=\"{}\" y=\"18\" font-size=\"13\" font-weight=\"bold\">{}</text>\n"
       "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>\n",
-      width, height, ml, Escape(title), ml, mt, pw, ph);
+      width, height, ml, EscapeXml(title), ml, mt, pw, ph);
   svg += fmt::format(
       "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n<text x=\"14\" y=\"{}\" "
       "transform=\"rotate(-90 14 {})\" text-anchor=\"middle\">{}</text>\n",
-      ml + pw / 2, height - 8, Escape(x_label), mt + ph / 2, mt + ph / 2, Escape(y_label));
+      ml + pw / 2, height - 8, EscapeXml(x_label), mt + ph / 2, mt + ph / 2, EscapeXml(y_label));
   for (int i = 0; i <= 4; ++i) {
     const double xv = x0 + (x1 - x0) * i / 4, yv = y0 + (y1 - y0) * i / 4;
     svg += fmt::format(
@@ -154,7 +133,7 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
         "<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"{}\" stroke-width=\"2\"/><text "
         "x=\"{}\" y=\"{}\">{}</text>\n",
         ml + 8, mt + 12 + 14 * legend, ml + 28, mt + 12 + 14 * legend, s.color, ml + 32,
-        mt + 16 + 14 * legend, Escape(s.name));
+        mt + 16 + 14 * legend, EscapeXml(s.name));
     ++legend;
   }
   svg += "</svg>\n";
@@ -164,7 +143,7 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
 std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots) {
   std::string h =
       "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>wheelhil run: " +
-      Escape(report.value("scenario", std::string())) +
+      EscapeXml(report.value("scenario", std::string())) +
       "</title><style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
       "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}.pass{color:#070}"
       ".fail{color:#b00}</style></head><body>\n";
@@ -172,17 +151,17 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
   h += fmt::format(
       "<h1>{}</h1>\n<p>seed {} &middot; {:.3f} s simulated &middot; verdict <b "
       "class=\"{}\">{}</b></p>\n",
-      Escape(report.value("scenario", std::string())), report.value("seed", std::uint64_t{0}),
-      report.value("sim_time_s", 0.0), verdict == "pass" ? "pass" : "fail", Escape(verdict));
+      EscapeXml(report.value("scenario", std::string())), report.value("seed", std::uint64_t{0}),
+      report.value("sim_time_s", 0.0), verdict == "pass" ? "pass" : "fail", EscapeXml(verdict));
   if (report.contains("failure")) {
-    h += "<p class=\"fail\">" + Escape(report["failure"].get<std::string>()) + "</p>\n";
+    h += "<p class=\"fail\">" + EscapeXml(report["failure"].get<std::string>()) + "</p>\n";
   }
   h += "<h2>Expectations</h2>\n<table><tr><th>expectation</th><th>value</th><th>result</th></tr>\n";
   for (const auto& e : report.value("expectations", nlohmann::json::array())) {
     const bool ok = e.value("passed", false);
     h += fmt::format("<tr><td>{}</td><td>{}</td><td class=\"{}\">{}</td></tr>\n",
-                     Escape(e.value("text", std::string())),
-                     Escape(e.contains("value") ? e["value"].dump() : std::string("-")),
+                     EscapeXml(e.value("text", std::string())),
+                     EscapeXml(e.contains("value") ? e["value"].dump() : std::string("-")),
                      ok ? "pass" : "fail", ok ? "pass" : "FAIL");
   }
   h += "</table>\n<h2>Metrics</h2>\n<table><tr><th>stream</th><th>metric</th><th>value</th></tr>\n";
@@ -192,8 +171,8 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
   for (const auto& [stream, m] : metrics.items()) {
     if (!m.is_object()) continue;
     for (const auto& [k, v] : m.items()) {
-      h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td></tr>\n", Escape(stream), Escape(k),
-                       Escape(v.dump()));
+      h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td></tr>\n", EscapeXml(stream),
+                       EscapeXml(k), EscapeXml(v.dump()));
     }
   }
   h += "</table>\n<h2>Plots</h2>\n";
