@@ -83,6 +83,18 @@ class Loader {
     }
     return s;
   }
+  // A scalar, or a non-empty flow list of scalars (a list value, for a path that holds a list
+  // in the base scenario, e.g. sensors.accel4.bias_m_s2).
+  json ScalarOrList(const YAML::Node& node, const std::string& field) const {
+    if (!node.IsSequence()) return Scalar(node, field);
+    if (node.size() == 0) Fail(node, field, "a list value must not be empty");
+    json out = json::array();
+    for (const auto& e : node) {
+      if (!e.IsScalar()) Fail(e, field, "a list value holds scalars only");
+      out.push_back(Scalar(e, field));
+    }
+    return out;
+  }
 
   MetricBound Bound(const YAML::Node& node, const std::string& field,
                     const std::set<std::string>& extra) const {
@@ -295,7 +307,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
       Override o;
       o.path = kv.first.as<std::string>();
       o.line = L.Line(kv.first);
-      o.value = L.Scalar(kv.second, "set." + o.path);
+      o.value = L.ScalarOrList(kv.second, "set." + o.path);
       spec.overrides.push_back(std::move(o));
     }
   }
@@ -318,7 +330,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
       ++kinds;
       ps.kind = ParameterSpec::Kind::kList;
       if (!v.IsSequence() || v.size() == 0) L.Fail(v, field + ".values", "needs a non-empty list");
-      for (const auto& e : v) ps.values.push_back(L.Scalar(e, field + ".values"));
+      for (const auto& e : v) ps.values.push_back(L.ScalarOrList(e, field + ".values"));
     }
     if (const auto r = p["range"]) {
       ++kinds;

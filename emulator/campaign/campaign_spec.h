@@ -21,7 +21,8 @@
 namespace wheelhil::emulator::campaign {
 
 /// One varied parameter. Values are JSON scalars (numbers, strings, bools) so that a list may
-/// also vary e.g. a terrain name.
+/// also vary e.g. a terrain name, or, in a `values:` list, arrays of scalars for a path that
+/// holds a list in the base (e.g. `sensors.accel4.bias_m_s2`).
 struct ParameterSpec {
   enum class Kind { kList, kRange, kUniform, kNormal, kLogUniform };
   std::string path;  ///< dotted path into the base scenario

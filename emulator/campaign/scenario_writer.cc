@@ -58,7 +58,32 @@ YAML::Node ToYaml(const nlohmann::json& v) {
     return YAML::Node(fmt::format("{}", d));
   }
   if (v.is_string()) return YAML::Node(v.get<std::string>());
+  if (v.is_array()) {
+    YAML::Node seq(YAML::NodeType::Sequence);
+    seq.SetStyle(YAML::EmitterStyle::Flow);
+    for (const auto& e : v) seq.push_back(ToYaml(e));
+    return seq;
+  }
   return YAML::Node(v.dump());
+}
+
+// A string value naming an existing file or folder relative to `dir` (the campaign file's
+// folder) becomes absolute, like the base scenario's own references; lists entry by entry.
+nlohmann::json ResolveFiles(const nlohmann::json& v, const fs::path& dir) {
+  if (v.is_array()) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& e : v) out.push_back(ResolveFiles(e, dir));
+    return out;
+  }
+  if (!v.is_string()) return v;
+  const auto& s = v.get_ref<const std::string&>();
+  if (s.empty() || s.size() > 4096 || s.front() == '/' ||
+      s.find_first_of("/.") == std::string::npos || s.find('\n') != std::string::npos) {
+    return v;
+  }
+  std::error_code ec;
+  const fs::path candidate = (dir / s).lexically_normal();
+  return fs::exists(candidate, ec) ? nlohmann::json(candidate.string()) : v;
 }
 
 // Recursive so that every step works on a fresh YAML::Node handle (assigning one Node to
@@ -78,9 +103,14 @@ void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
     }
     prefix = here;
     if (last) {
-      if (node[*key] && !node[*key].IsScalar() && !node[*key].IsNull()) {
-        throw std::invalid_argument(
-            fmt::format("{}: {}: '{}' is not a scalar in the base scenario", where, path, here));
+      const YAML::Node old = node[*key];
+      // A scalar replaces a scalar; a list value replaces a list (or fills a new/null key).
+      const bool fits =
+          !old || old.IsNull() || (value.is_array() ? old.IsSequence() : old.IsScalar());
+      if (!fits) {
+        throw std::invalid_argument(fmt::format("{}: {}: '{}' is not a {} in the base scenario",
+                                                where, path, here,
+                                                value.is_array() ? "list" : "scalar"));
       }
       node[*key] = ToYaml(value);
     } else {
@@ -97,6 +127,11 @@ void SetRec(YAML::Node node, const std::vector<Segment>& segs, std::size_t i,
     }
     prefix = here;
     if (last) {
+      if (value.is_array() != node[idx].IsSequence()) {
+        throw std::invalid_argument(fmt::format("{}: {}: '{}' is not a {} in the base scenario",
+                                                where, path, here,
+                                                value.is_array() ? "list" : "scalar"));
+      }
       node[idx] = ToYaml(value);
     } else {
       SetRec(node[idx], segs, i + 1, value, path, where, prefix, create_leaf);
@@ -140,9 +175,12 @@ void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& v
 }
 
 namespace {
+fs::path CampaignDir(const CampaignSpec& spec) { return fs::absolute(spec.file).parent_path(); }
+
 void ApplyOverrides(const CampaignSpec& spec, YAML::Node root) {
   for (const auto& o : spec.overrides) {
-    SetAtPath(root, o.path, o.value, fmt::format("{}:{}: set", spec.file, o.line),
+    SetAtPath(root, o.path, ResolveFiles(o.value, CampaignDir(spec)),
+              fmt::format("{}:{}: set", spec.file, o.line),
               /*create_leaf=*/true);
   }
 }
@@ -163,7 +201,7 @@ void WriteRunScenario(const CampaignSpec& spec, const RunSpec& run, const fs::pa
   AbsolutizeRelativePaths(root, spec.base_scenario.parent_path());
   ApplyOverrides(spec, root);
   for (std::size_t i = 0; i < spec.parameters.size(); ++i) {
-    SetAtPath(root, spec.parameters[i].path, run.values.at(i),
+    SetAtPath(root, spec.parameters[i].path, ResolveFiles(run.values.at(i), CampaignDir(spec)),
               fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));
   }
   YAML::Emitter out;

@@ -2,7 +2,9 @@
 /// Writes the scenario file of one campaign run: the base scenario with the varied parameters
 /// set at their dotted paths. Relative file references of the base (any string value naming an
 /// existing file or folder relative to the base's directory) become absolute, so the generated
-/// file works from the run directory. Thread-compatible.
+/// file works from the run directory; so do those among the `set:` and parameter values
+/// (relative to the campaign file's directory). A list value (JSON array) replaces a list of
+/// the base, a scalar a scalar. Thread-compatible.
 
 #include <yaml-cpp/yaml.h>
 #include <nlohmann/json.hpp>

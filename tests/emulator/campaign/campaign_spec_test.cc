@@ -280,6 +280,54 @@ parameters:
   EXPECT_EQ(n["name"].as<std::string>(), "fake_base");
 }
 
+TEST_F(CampaignSpecTest, ListValuesReplaceListsAndFileValuesResolveAgainstTheCampaign) {
+  dir_.Write("with_list.yaml",
+             std::string(kBaseScenario) + "bias: [0.1, 0.2, 0.3, 0.4]\nfloor: {mesh: none.obj}\n");
+  dir_.Write("meshes/rough.obj", "v 0 0 0\n");
+  const auto spec = Parse(R"(base: with_list.yaml
+set:
+  bias[3]: 0.5
+parameters:
+  - path: bias
+    values: [[0, 0, 0, 0], [0.01, -0.01, 0.01, -0.01]]
+  - path: floor.mesh
+    values: [meshes/rough.obj, not/a/file.obj]
+)");
+  ASSERT_EQ(spec.parameters[0].values.size(), 2u);
+  EXPECT_TRUE(spec.parameters[0].values[1].is_array());
+  EXPECT_NO_THROW(CheckParameterPaths(spec));
+  const auto runs = ExpandRuns(spec);
+  ASSERT_EQ(runs.size(), 4u);
+  EXPECT_NE(runs[0].key, runs[2].key);
+  const auto out = dir_.path() / "list.yaml";
+  WriteRunScenario(spec, runs.at(2), out);  // bias point 1, mesh point 0
+  const YAML::Node n = YAML::LoadFile(out.string());
+  ASSERT_TRUE(n["bias"].IsSequence());
+  ASSERT_EQ(n["bias"].size(), 4u);
+  EXPECT_DOUBLE_EQ(n["bias"][1].as<double>(), -0.01);
+  EXPECT_DOUBLE_EQ(n["bias"][3].as<double>(), -0.01);
+  EXPECT_EQ(n["floor"]["mesh"].as<std::string>(), (dir_.path() / "meshes/rough.obj").string());
+  WriteRunScenario(spec, runs.at(1), out);
+  EXPECT_EQ(YAML::LoadFile(out.string())["floor"]["mesh"].as<std::string>(), "not/a/file.obj");
+  // Shapes must match: a list for a scalar or a scalar for a list is refused.
+  YAML::Node root = YAML::Load(kBaseScenario);
+  EXPECT_THAT(
+      [&] {
+        SetAtPath(root, "terrain.friction", nlohmann::json::array({1, 2}), "here");
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("is not a list")));
+  EXPECT_THAT(
+      [&] {
+        CheckParameterPaths(
+            Parse("base: with_list.yaml\nparameters: [{path: bias, values: [1]}]\n"));
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("'bias' is not a scalar")));
+  EXPECT_THAT([&] { Parse("base: base.yaml\nparameters: [{path: x, values: [[]]}]\n"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("must not be empty")));
+  EXPECT_THAT([&] { Parse("base: base.yaml\nparameters: [{path: x, values: [[[1]]]}]\n"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("scalars only")));
+}
+
 TEST_F(CampaignSpecTest, ShardsPartitionTheRunList) {
   const auto spec = Parse(R"(base: base.yaml
 parameters:

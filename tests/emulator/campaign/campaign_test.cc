@@ -379,6 +379,13 @@ TEST_F(CampaignTest, RealRunnerSmokeSuiteAndShortCampaign) {
   ASSERT_FALSE(smoke.runs.empty());
   for (const auto& r : smoke.runs) EXPECT_TRUE(r.passed) << r.key << ": " << r.failure;
   EXPECT_TRUE(smoke.passed);
+  const std::string smoke_xml = ReadAll(so.junit);
+  EXPECT_THAT(smoke_xml, HasSubstr(fmt::format("tests=\"{}\"", smoke.runs.size())));
+  if (std::system("command -v xmllint >/dev/null 2>&1") == 0) {
+    const std::string cmd = "xmllint --noout --schema " + std::string(WHEELHIL_SOURCE_DIR) +
+                            "/tests/data/junit/junit.xsd " + so.junit.string() + " 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << smoke_xml;
+  }
 
   const auto spec = ParseCampaign(
       "base: " + std::string(WHEELHIL_SOURCE_DIR) +
