@@ -1,5 +1,7 @@
 #include "emulator/platforms/platform.h"
 
+#include <fnmatch.h>
+
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -229,7 +231,50 @@ std::size_t Platform::wheel_index(const std::string& wheel_name) const {
   throw std::invalid_argument(fmt::format("{}: wheel '{}' not found", source_file, wheel_name));
 }
 
-Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
+namespace {
+
+// Deep merge of `over` into `base` (both mappings); see LoadPlatformFile. `field` names the
+// position for errors ("" at the document root).
+void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& field,
+                    const Reader& rd) {
+  if (!over.IsMap()) rd.Fail(over, field.empty() ? "overrides" : field, "must be a mapping");
+  for (const auto& kv : over) {
+    const auto key = kv.first.as<std::string>();
+    const std::string here = field.empty() ? key : field + "." + key;
+    const YAML::Node value = kv.second;
+    if (field.empty() && key == "wheels") {
+      YAML::Node wheels = base["wheels"];
+      if (!wheels.IsDefined() || !wheels.IsSequence())
+        rd.Fail(value, here, "file has no wheel list");
+      if (!value.IsMap()) rd.Fail(value, here, "must map wheel names (or globs) to overrides");
+      for (const auto& w : value) {
+        const auto pattern = w.first.as<std::string>();
+        std::size_t matched = 0;
+        for (std::size_t i = 0; i < wheels.size(); ++i) {
+          const YAML::Node name = wheels[i]["name"];
+          if (name.IsDefined() && name.IsScalar() &&
+              ::fnmatch(pattern.c_str(), name.Scalar().c_str(), 0) == 0) {
+            MergeOverrides(wheels[i], w.second, fmt::format("wheels[{}]", i), rd);
+            ++matched;
+          }
+        }
+        if (matched == 0) rd.Fail(w.first, here + "." + pattern, "matches no wheel name");
+      }
+      continue;
+    }
+    YAML::Node target = base[key];
+    if (value.IsMap() && target.IsDefined() && target.IsMap()) {
+      MergeOverrides(target, value, here, rd);
+    } else {
+      base[key] = YAML::Clone(value);
+    }
+  }
+}
+
+}  // namespace
+
+Platform LoadPlatformYaml(const std::string& text, const std::string& file,
+                          const YAML::Node& overrides) {
   Reader rd(file);
   YAML::Node root;
   try {
@@ -239,6 +284,7 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
         fmt::format("{}:{}: (document): YAML syntax error: {}", file, e.mark.line + 1, e.msg));
   }
   if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
+  if (overrides.IsDefined() && !overrides.IsNull()) MergeOverrides(root, overrides, "", rd);
   rd.CheckKeys(root, "(document)",
                {"name", "description", "paper", "chassis", "wheel_defaults", "wheels", "kinematics",
                 "sensors", "solver"});
@@ -346,13 +392,13 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file) {
   return p;
 }
 
-Platform LoadPlatformFile(const std::string& path) {
+Platform LoadPlatformFile(const std::string& path, const YAML::Node& overrides) {
   std::ifstream in(path);
   if (!in)
     throw std::invalid_argument(fmt::format("{}:0: (file): cannot open platform file", path));
   std::stringstream ss;
   ss << in.rdbuf();
-  return LoadPlatformYaml(ss.str(), path);
+  return LoadPlatformYaml(ss.str(), path, overrides);
 }
 
 double WheelSpeedForTwist(const WheelSpec& w, const BodyTwist& t) noexcept {

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include <yaml-cpp/yaml.h>
 #include <Eigen/Core>
 
 #include "emulator/physics/roller_vehicle.h"
@@ -50,9 +51,16 @@ struct BodyTwist {
 };
 
 /// Loads a platform file. Throws std::invalid_argument naming file, line and field.
-Platform LoadPlatformFile(const std::string& path);
-/// Parses platform YAML text; `file` is used in error messages.
-Platform LoadPlatformYaml(const std::string& text, const std::string& file);
+/// `overrides` (a YAML mapping, or undefined/null for none) is deep-merged into the file before
+/// it is read, so a scenario or campaign can vary e.g. a spring stiffness without a copy of the
+/// file: mappings merge key by key, scalars and lists replace, a key the file lacks is added and
+/// then checked like any other. Under `wheels` (a list in the file) the override is a mapping
+/// from a wheel name, or an fnmatch glob such as `follower_*`, to that wheel's overrides; a name
+/// matching no wheel is an error. Errors in overridden values carry the override's line.
+Platform LoadPlatformFile(const std::string& path, const YAML::Node& overrides = YAML::Node());
+/// Parses platform YAML text; `file` is used in error messages. `overrides` as above.
+Platform LoadPlatformYaml(const std::string& text, const std::string& file,
+                          const YAML::Node& overrides = YAML::Node());
 
 /// No-slip spin rate (rad/s) of any wheel for a body twist: the rim speed the contact point's
 /// motion implies along the wheel's constrained direction, divided by the radius. Conventional:

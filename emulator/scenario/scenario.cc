@@ -504,12 +504,17 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
       r.Fail(p, "platform", e.what());
     }
   } else {
-    r.CheckKeys(p, "platform", {"file"});
+    r.CheckKeys(p, "platform", {"file", "overrides"});
     const std::string path = r.Path(r.String(p, "file", "platform", std::nullopt));
+    const YAML::Node overrides = p["overrides"];
+    if (overrides && !overrides.IsMap()) {
+      r.Fail(overrides, "platform.overrides", "must be a mapping");
+    }
     try {
-      s.platform = platforms::LoadPlatformFile(path);
+      s.platform = platforms::LoadPlatformFile(path, overrides);
     } catch (const std::invalid_argument& e) {
-      r.Fail(p["file"], "platform.file", e.what());
+      r.Fail(overrides ? overrides : p["file"], overrides ? "platform.overrides" : "platform.file",
+             e.what());
     }
   }
   s.terrain = ReadTerrain(r, root["terrain"]);

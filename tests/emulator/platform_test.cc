@@ -127,5 +127,55 @@ TEST(PlatformFile, LineNumberPointsAtTheBadValue) {
                   AllOf(HasSubstr("k.yaml:8:"), HasSubstr("wheels[0].kind"))));
 }
 
+TEST(PlatformFile, OverridesMergeIntoTheFileAndWheelsByNameOrGlob) {
+  const std::string text = Shipped("mecanum4_omni3");
+  const YAML::Node over = YAML::Load(
+      "chassis: {mass_kg: 30}\n"
+      "wheels:\n"
+      "  follower_*: {suspension: {stiffness_n_m: 900}}\n"
+      "  front_left: {radius_m: 0.08}\n");
+  const Platform base = LoadPlatformYaml(text, "m.yaml");
+  const Platform p = LoadPlatformYaml(text, "m.yaml", over);
+  EXPECT_DOUBLE_EQ(p.vehicle.mass_kg, 30.0);
+  ASSERT_EQ(p.vehicle.wheels.size(), base.vehicle.wheels.size());
+  int followers = 0;
+  for (std::size_t i = 0; i < p.vehicle.wheels.size(); ++i) {
+    const auto& w = p.vehicle.wheels[i];
+    const auto& b = base.vehicle.wheels[i];
+    // Untouched keys of a merged mapping keep the file's values.
+    EXPECT_DOUBLE_EQ(w.suspension.damping_n_s_m, b.suspension.damping_n_s_m) << w.name;
+    if (w.name.rfind("follower_", 0) == 0) {
+      ++followers;
+      EXPECT_DOUBLE_EQ(w.suspension.stiffness_n_m, 900.0) << w.name;
+      EXPECT_NE(b.suspension.stiffness_n_m, 900.0);
+    } else {
+      EXPECT_DOUBLE_EQ(w.suspension.stiffness_n_m, b.suspension.stiffness_n_m) << w.name;
+      EXPECT_DOUBLE_EQ(w.radius_m, w.name == "front_left" ? 0.08 : b.radius_m) << w.name;
+    }
+  }
+  EXPECT_EQ(followers, 3);
+  // A null override changes nothing; unknown wheels, bad values and typos are errors.
+  EXPECT_DOUBLE_EQ(LoadPlatformYaml(text, "m.yaml", YAML::Node(YAML::NodeType::Null))
+                       .vehicle.wheels[4]
+                       .suspension.stiffness_n_m,
+                   base.vehicle.wheels[4].suspension.stiffness_n_m);
+  EXPECT_THAT([&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("wheels: {caster_*: {}}")); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("m.yaml:1:"), HasSubstr("wheels.caster_*"),
+                        HasSubstr("matches no wheel"))));
+  EXPECT_THAT(
+      [&] {
+        LoadPlatformYaml(text, "m.yaml",
+                         YAML::Load("wheels: {follower_front: {suspension: {stiffness_n_m: -1}}}"));
+      },
+      ThrowsMessage<std::invalid_argument>(
+          AllOf(HasSubstr("suspension.stiffness_n_m"), HasSubstr("outside"))));
+  EXPECT_THAT([&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("chassis: {mass_kgg: 3}")); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("chassis.mass_kgg"), HasSubstr("unknown key"))));
+  EXPECT_THAT([&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("[1, 2]")); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("must be a mapping")));
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator::platforms

@@ -11,6 +11,7 @@
 namespace wheelhil::emulator::scenario {
 namespace {
 
+using ::testing::AllOf;
 using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 
@@ -117,6 +118,42 @@ TEST(ScenarioLoader, ShippedPaper000Loads) {
   EXPECT_EQ(s.terrain.random_patches.count, 16);
   ASSERT_TRUE(s.slip_threshold_m_s.has_value());
   EXPECT_FALSE(s.firmware.overrides_yaml.empty());
+}
+
+TEST(ScenarioLoader, PlatformOverridesAreMergedIntoThePlatformFile) {
+  const Scenario s =
+      LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper001_rough_floor.yaml");
+  std::string text =
+      "name: t\n"
+      "platform:\n"
+      "  file: platforms/mecanum4_omni3.yaml\n"
+      "  overrides: {wheels: {follower_*: {suspension: {stiffness_n_m: 75}}}}\n"
+      "motion:\n"
+      "  - {type: hold, duration_s: 1}\n"
+      "sensors:\n"
+      "  encoders:\n"
+      "    nodes: [{wheel: follower_front, node_id: 1}]\n";
+  const Scenario o = ParseScenario(text, kFile);
+  int followers = 0;
+  for (std::size_t i = 0; i < o.platform.vehicle.wheels.size(); ++i) {
+    const auto& w = o.platform.vehicle.wheels[i];
+    if (w.name.rfind("follower_", 0) != 0) continue;
+    ++followers;
+    EXPECT_DOUBLE_EQ(w.suspension.stiffness_n_m, 75.0);
+    EXPECT_DOUBLE_EQ(s.platform.vehicle.wheels[i].suspension.stiffness_n_m, 300.0);  // as file
+  }
+  EXPECT_EQ(followers, 3);
+  text.replace(text.find("follower_*"), 10, "folower_*");
+  EXPECT_THAT([&] { (void)ParseScenario(text, kFile); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("inline.yaml:4:"),
+                                                         HasSubstr("platform.overrides"),
+                                                         HasSubstr("matches no wheel"))));
+  std::string scalar = Minimal();
+  scalar.replace(scalar.find("platform: platforms/diff2.yaml"), 30,
+                 "platform: {file: platforms/diff2.yaml, overrides: 3}");
+  EXPECT_THAT(
+      [&] { (void)ParseScenario(scalar, kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("platform.overrides: must be a mapping")));
 }
 
 TEST(MotionProfile, TrapezoidCoversTheDistance) {
