@@ -7,6 +7,7 @@ Floors (OBJ, load with up_axis z):
   door_threshold.obj    flat floor with a 12 mm door threshold (40 mm top, 20 mm bevels) at x = 1 m
   ramp.obj              flat approach, 5 deg ramp from x = 1 m to 3 m, then a plateau
   uneven_tiles.obj      0.30 m tiles with seeded +-1.5 mm height offsets and 3 mm grout gaps
+  uneven_tiles_3mm.obj  the same tiles with +-3 mm offsets and 4 mm deep grout (rougher floor)
 Chassis (OBJ): diff2_chassis.obj, mecanum4_omni3_chassis.obj, ortho3_chassis.obj (boxes / prism)
 Format samples (one 1 x 1 m tile each): formats/tile.stl, formats/tile.ply, formats/tile.gltf
 """
@@ -53,6 +54,32 @@ def box(hx, hy, hz, z0=0.0):
     return v, f
 
 
+def write_tiles(name, amplitude, grout_depth):
+    """0.30 m tiles with seeded +-amplitude height offsets (the same pattern, scaled, for every
+    amplitude) and 3 mm grout gaps grout_depth deep."""
+    rng = random.Random(20261123)
+    tile, gap, n = 0.30, 0.003, 14
+    verts, faces = [], []
+    x0 = -2.1
+    # grout base
+    gv, gf = heightfield([x0, x0 + n * tile], [x0, x0 + n * tile], lambda x, y: -grout_depth)
+    verts += gv
+    faces += gf
+    for j in range(n):
+        for i in range(n):
+            h = rng.uniform(-amplitude, amplitude)
+            ax, ay = x0 + i * tile + gap / 2, x0 + j * tile + gap / 2
+            bx, by = ax + tile - gap, ay + tile - gap
+            tv, tf = box((bx - ax) / 2, (by - ay) / 2, (h + grout_depth) / 2 + 0.001, 0)
+            cx, cy, cz = (ax + bx) / 2, (ay + by) / 2, (h - grout_depth) / 2 - 0.0005
+            base = len(verts)
+            verts += [(p[0] + cx, p[1] + cy, p[2] + cz) for p in tv]
+            faces += [(a + base, b + base, c + base) for a, b, c in tf]
+    write_obj(name, verts, faces,
+              "0.30 m tiles, seeded +-%g mm height offsets, 3 mm grout gaps %g mm deep"
+              % (amplitude * 1000, grout_depth * 1000))
+
+
 def main():
     ys = lin(-2.0, 2.0, 9)
     v, f = heightfield(lin(-2.0, 2.0, 9), ys, lambda x, y: 0.0)
@@ -76,26 +103,8 @@ def main():
     v, f = heightfield(xs, ys, lambda x, y: min(max(x - 1.0, 0.0), 2.0) * slope)
     write_obj("ramp.obj", v, f, "flat approach, 5 deg ramp x = 1..3 m, plateau")
 
-    rng = random.Random(20261123)
-    tile, gap, n = 0.30, 0.003, 14
-    verts, faces = [], []
-    x0 = -2.1
-    # grout base
-    gv, gf = heightfield([x0, x0 + n * tile], [x0, x0 + n * tile], lambda x, y: -0.002)
-    verts += gv
-    faces += gf
-    for j in range(n):
-        for i in range(n):
-            h = rng.uniform(-0.0015, 0.0015)
-            ax, ay = x0 + i * tile + gap / 2, x0 + j * tile + gap / 2
-            bx, by = ax + tile - gap, ay + tile - gap
-            tv, tf = box((bx - ax) / 2, (by - ay) / 2, (h + 0.002) / 2 + 0.001, 0)
-            cx, cy, cz = (ax + bx) / 2, (ay + by) / 2, (h - 0.002) / 2 - 0.0005
-            base = len(verts)
-            verts += [(p[0] + cx, p[1] + cy, p[2] + cz) for p in tv]
-            faces += [(a + base, b + base, c + base) for a, b, c in tf]
-    write_obj("uneven_tiles.obj", verts, faces,
-              "0.30 m tiles, seeded +-1.5 mm height offsets, 3 mm grout gaps 2 mm deep")
+    write_tiles("uneven_tiles.obj", 0.0015, 0.002)
+    write_tiles("uneven_tiles_3mm.obj", 0.003, 0.004)
 
     v, f = box(0.225, 0.175, 0.075)
     write_obj("diff2_chassis.obj", v, f, "diff2 chassis box 0.45 x 0.35 x 0.15 m")
