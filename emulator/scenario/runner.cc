@@ -209,6 +209,14 @@ class Run {
   std::set<int> awaiting_nodes_;  // Nodes whose boot-up/SDO answer the firmware must react to.
   int last_fw_state_ = -1;
   std::uint64_t fw_frames_ = 0;
+  // Which encoders' TPDO1 (their COB-ID and DBC length, as the firmware accepts it) went out
+  // since the last SYNC: a cycle is complete on the bus when all of them did.
+  std::uint32_t tpdos_since_sync_ = 0;
+  std::uint32_t all_tpdos_ = 0;
+  std::vector<std::uint8_t> tpdo_len_;  // By encoder; 0: no TPDO1 in the DBC.
+  // Lockstep: the cycle whose FW_Status is awaited after the next SYNC (-1: none).
+  int pending_status_cycle_ = -1;
+  bool CycleCompleteOnBus() const { return tpdos_since_sync_ == all_tpdos_; }
 
   // Recorded data.
   double t_motion0_s_ = 0;
@@ -400,6 +408,15 @@ void Run::OnWire(const WireFrame& w) {
     if (can_->Send(w.frame)) ++enqueue_failures_;
     // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
     const std::uint32_t id = w.frame.id;
+    if (!w.frame.extended && id == kSyncId && w.node == bus_emulator_) tpdos_since_sync_ = 0;
+    // tpdo_len_ is filled at the motion start; before it no cycle runs.
+    for (std::size_t i = 0; i < tpdo_len_.size() && !w.frame.extended; ++i) {
+      if (w.node == encoders_[i].bus_node &&
+          id == 0x180u + static_cast<std::uint32_t>(encoders_[i].spec.node_id) &&
+          w.frame.len == tpdo_len_[i]) {
+        tpdos_since_sync_ |= 1u << i;
+      }
+    }
     if (!w.frame.extended &&
         ((id >= 0x701 && id <= 0x77F && w.frame.len == 1 && w.frame.data[0] == 0) ||
          (id >= 0x581 && id <= 0x5FF))) {
@@ -711,7 +728,9 @@ RunResult Run::Execute() {
     std::string cmd = s_.firmware.command;
     if (!s_.firmware.config.empty()) {
       const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
-      WriteText(cfg_path, DerivedFirmwareConfig(s_.firmware, s_.timing));
+      TimingSpec timing = s_.timing;
+      timing.lockstep = lockstep;
+      WriteText(cfg_path, DerivedFirmwareConfig(s_.firmware, timing));
       cmd = Substitute(cmd, "${CONFIG}", cfg_path);
     }
     cmd = Substitute(Substitute(cmd, "${CAN}", iface_), "${BIN}", o_.bin_dir);
@@ -774,6 +793,25 @@ RunResult Run::Execute() {
   truth_pose_.clear();
   truth_vel_.clear();
   const auto wall_motion0 = Clock::now();
+  // Lockstep waits only where the firmware's answer is fixed by the frames it was given: after
+  // the cycle's last TPDO1 when every encoder answered the SYNC in time, else after the next
+  // SYNC (which closes the cycle). The firmware runs without a deadline in lockstep.
+  all_tpdos_ = encoders_.empty() ? 0u : static_cast<std::uint32_t>((1ull << encoders_.size()) - 1);
+  tpdo_len_.clear();
+  for (const auto& e : encoders_) {
+    const bus::DbcMessage* m =
+        cia406_->database().FindMessage(0x180u + static_cast<std::uint32_t>(e.spec.node_id), false);
+    tpdo_len_.push_back(m != nullptr ? static_cast<std::uint8_t>(m->length) : 0);
+  }
+  auto wait_status = [&](int cycle, std::int64_t k) {
+    if (!WaitFirmware([&] { return last_status_cycle_ == cycle && status_frames_ > 0; },
+                      s_.timing.timeout_s) &&
+        failure_.empty()) {
+      failure_ =
+          fmt::format("timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s", k,
+                      s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
+    }
+  };
   for (std::int64_t k = 0; failure_.empty() && k <= cycles; ++k) {
     // SYNC k at the start of the cycle.
     RecordTruth(true);
@@ -791,17 +829,27 @@ RunResult Run::Execute() {
     // The SYNC and the TPDOs answering it (the encoder readings at this instant) go out
     // before the physics moves on.
     AdvanceBus(t_ns_ + step_ns_ / 2);
+    if (lockstep && pending_status_cycle_ >= 0) {
+      // The previous cycle was incomplete on the bus: this SYNC closed it.
+      wait_status(std::exchange(pending_status_cycle_, -1), k - 1);
+    }
+    if (lockstep && k == cycles && failure_.empty()) {
+      // The last cycle: no physics step follows, so let the bus finish its TPDO1s (at most
+      // one period) before waiting for the answer.
+      for (const std::int64_t until = t_ns_ + period_ns;
+           !CycleCompleteOnBus() && bus_->now_ns() < until;) {
+        AdvanceBus(std::min(until, bus_->now_ns() + step_ns_ / 2));
+      }
+    }
     for (std::int64_t i = 0; i < steps_per_cycle && k < cycles; ++i) {
       Step(true);
       RecordTruth(false);
       AdvanceBus(t_ns_);
       if (i == 0 && lockstep) {
-        if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
-                          s_.timing.timeout_s) &&
-            failure_.empty()) {
-          failure_ =
-              fmt::format("timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s",
-                          k, s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
+        if (CycleCompleteOnBus()) {
+          wait_status(want, k);
+        } else {
+          pending_status_cycle_ = want;
         }
       }
       if (!lockstep) {
@@ -812,12 +860,20 @@ RunResult Run::Execute() {
       Progress(false);
     }
     if (k == cycles && failure_.empty()) {
-      if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
-                        s_.timing.timeout_s)) {
-        if (failure_.empty()) {
-          failure_ = fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
-                                 s_.timing.timeout_s);
+      if (!lockstep || CycleCompleteOnBus()) {
+        if (!WaitFirmware([&] { return last_status_cycle_ == want && status_frames_ > 0; },
+                          s_.timing.timeout_s)) {
+          if (failure_.empty()) {
+            failure_ = fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
+                                   s_.timing.timeout_s);
+          }
         }
+      } else {
+        // A TPDO1 of the last SYNC never came (silent node, dropped frame): no later SYNC
+        // closes that cycle, so its answer is not awaited.
+        events_.push_back(json{{"t_s", static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_},
+                               {"event", "last_cycle_incomplete"},
+                               {"cycle", k}});
       }
     }
   }
@@ -1069,8 +1125,11 @@ std::string DerivedFirmwareConfig(const FirmwareSpec& firmware, const TimingSpec
   }
   cfg["sync"]["produce"] = false;
   cfg["sync"]["period_s"] = timing.sync_period_s;
-  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames.
-  cfg["sync"]["deadline_s"] = timing.sync_period_s;
+  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames. In
+  // lockstep there is none: the firmware would apply it on its own clock, which is not the
+  // virtual time of the frames, so whether a frame counts as in time would depend on how the
+  // host scheduled the run. The next SYNC closes an incomplete cycle instead (docs/firmware.md).
+  cfg["sync"]["deadline_s"] = timing.lockstep ? 0.0 : timing.sync_period_s;
   YAML::Emitter e;
   e << cfg;
   return std::string("# Derived by wheelhil run from ") + firmware.config + "\n" + e.c_str() + "\n";

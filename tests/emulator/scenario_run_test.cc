@@ -136,6 +136,78 @@ TEST_F(ScenarioRun, Paper002VelocityStreamsAreScored) {
   EXPECT_THAT(Slurp(dir_ / "p002" / "report.html"), HasSubstr("paper 002"));
 }
 
+// Paper 002 (1 kHz accelerometer frames inside a 2 ms SYNC cycle) twice with the same seed: the
+// firmware's cycles close on frames only in lockstep (docs/firmware.md), so no FW_* frame may
+// depend on how the two runs were scheduled: byte-identical can.log and report.json (minus
+// `wall`). Before the fix the firmware applied its deadline on its own read clock and the runs
+// parted from ~0.4 s on (FW_VelocityAccel / FW_Status).
+TEST_F(ScenarioRun, Paper002SameSeedGivesIdenticalLogAndReport) {
+  Scenario s =
+      LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper002_velocity.yaml");
+  s.timing.duration_s = 2.0;
+  s.expectations.clear();
+  const RunResult a = RunScenario(s, Options(dir_ / "a"));
+  const RunResult b = RunScenario(s, Options(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  EXPECT_EQ(a.report["cycles"].get<int>(), 1001);
+  const std::string log_a = Slurp(dir_ / "a" / "can.log");
+  const std::string log_b = Slurp(dir_ / "b" / "can.log");
+  EXPECT_GT(log_a.size(), 100000u);
+  if (log_a != log_b) {
+    // Name the first line that differs (a full 10k-line diff helps nobody).
+    std::istringstream ia(log_a), ib(log_b);
+    std::string la, lb;
+    int line = 0;
+    while (std::getline(ia, la) && std::getline(ib, lb) && la == lb) ++line;
+    ADD_FAILURE() << "can.log differs from line " << line + 1 << ": '" << la << "' vs '" << lb
+                  << "'";
+  }
+  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "a" / "report.json"));
+  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "b" / "report.json"));
+  ra.erase("wall");
+  rb.erase("wall");
+  EXPECT_EQ(ra.dump(1), rb.dump(1));
+  EXPECT_EQ(Slurp(dir_ / "a" / "estimate.csv"), Slurp(dir_ / "b" / "estimate.csv"));
+}
+
+// A cycle the bus leaves incomplete (encoder 3 silent for 50 ms, encoder 2 silent from 0.9 s to
+// the end, so the last SYNC's cycle never completes): lockstep waits for that cycle's FW_Status
+// after the next SYNC instead of on a firmware deadline, so the runs stay byte-identical, no
+// cycle times out, and the firmware reports the gaps (Degraded).
+TEST_F(ScenarioRun, Paper002SilentEncoderStaysDeterministic) {
+  Scenario s =
+      LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper002_velocity.yaml");
+  s.timing.duration_s = 1.0;
+  s.expectations.clear();
+  FaultSpec gap;
+  gap.kind = FaultSpec::Kind::kEncoderSilent;
+  gap.node_id = 3;
+  gap.start_s = 0.3;
+  gap.end_s = 0.35;
+  FaultSpec tail = gap;
+  tail.node_id = 2;
+  tail.start_s = 0.9;
+  tail.end_s = 10.0;
+  s.faults = {gap, tail};
+  const RunResult a = RunScenario(s, Options(dir_ / "a"));
+  const RunResult b = RunScenario(s, Options(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  EXPECT_EQ(a.report["cycles"].get<int>(), 501);
+  EXPECT_GT(a.report["metrics"]["bus"]["silenced_frames"].get<int>(), 70);
+  EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
+  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "a" / "report.json"));
+  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "b" / "report.json"));
+  ra.erase("wall");
+  rb.erase("wall");
+  EXPECT_EQ(ra.dump(1), rb.dump(1));
+  const std::string events = Slurp(dir_ / "a" / "events.jsonl");
+  EXPECT_EQ(events, Slurp(dir_ / "b" / "events.jsonl"));
+  EXPECT_THAT(events, HasSubstr("\"event\":\"last_cycle_incomplete\""));
+  EXPECT_THAT(events, HasSubstr("\"event\":\"firmware_state\",\"state\":4"));
+}
+
 TEST(ScenarioAccel4, BadBiasListNamesFileLineAndField) {
   const std::string text = R"(name: t
 platform: )" + std::string(WHEELHIL_SOURCE_DIR) +
