@@ -413,10 +413,21 @@ void RollerVehicle::PreStep(double dt) noexcept {
           add_row(free_dir, -r_eff * f.dot(free_dir), 0.0, -rr, rr, &st.lambda_b);
           break;
         }
-        case WheelKind::kCaster:
-          add_row(f, 0.0, 0.0, -rr, rr, &st.lambda_a);
+        case WheelKind::kCaster: {
+          // A swivel caster turns into its direction of travel: its rolling resistance c_rr*N
+          // opposes the contact's velocity, whatever its direction (one circle, not a box per
+          // axis). Two independent +-c_rr*N rows would hold the contact sideways with full
+          // stiction while it rolls forward, i.e. resist yaw like a skid.
+          Row* a = add_row(f, 0.0, 0.0, -rr, rr, &st.lambda_a);
+          const std::size_t ia = nrows - 1;
           add_row(l, 0.0, 0.0, -rr, rr, &st.lambda_b);
+          if (a != nullptr && nrows == ia + 2) {
+            a->partner = static_cast<int>(ia + 1);
+            a->radius = rr;
+            a->lateral_scale = 1.0;
+          }
           break;
+        }
       }
       contact[i] = Contact{f, l, u, r_c, r_eff};
     }

@@ -199,6 +199,40 @@ TEST(PhysicsSlip, LowMuPatchMakesDriveWheelSlipAndRecoverOffIt) {
   EXPECT_NEAR(w3.rim_travel_m - w2.rim_travel_m, w3.ground_travel_m - w2.ground_travel_m, 1e-3);
 }
 
+// Paper 000: at constant speed one drive wheel crosses an oily spot that cannot carry its share
+// of the casters' rolling resistance. The other wheel pushes harder, the robot yaws toward the
+// oily side and the wheel on the spot spins faster than the ground passes (its encoder
+// over-counts). The swivel casters must not hold the heading: their rolling resistance opposes
+// their velocity (a circle), it is no sideways stiction.
+TEST(PhysicsSlip, OilySpotUnderOneDriveWheelAtCruiseTurnsRobotAndOverCounts) {
+  Rig rig("diff2");
+  // Left track (y = +0.16), x = 1.0 .. 1.2 m; mu N = 0.004 * 42 N < the ~0.4 N the wheel carries.
+  rig.world.terrain().AddPatch(FrictionPatch{
+      "oil", {{1.0, 0.10}, {1.2, 0.10}, {1.2, 0.22}, {1.0, 0.22}}, Friction{0.004, 0.003}});
+  rig.world.StepFor(1.0);
+  rig.Command(0.25, 0, 0);
+  const std::size_t left = rig.platform.wheel_index("left");
+  const std::size_t right = rig.platform.wheel_index("right");
+  while (rig.vehicle->body_truth().p_WB.x() < 0.9) rig.world.Step();
+  const WheelTruth l0 = rig.vehicle->wheel_truth()[left];
+  const WheelTruth r0 = rig.vehicle->wheel_truth()[right];
+  const double yaw0 = rig.vehicle->body_truth().yaw_rad;
+  EXPECT_LT(std::abs(yaw0), 1e-4);
+  while (rig.vehicle->body_truth().p_WB.x() < 1.6 && rig.world.time_s() < 20) rig.world.Step();
+  const WheelTruth& l1 = rig.vehicle->wheel_truth()[left];
+  const WheelTruth& r1 = rig.vehicle->wheel_truth()[right];
+  const double slip_l =
+      (l1.rim_travel_m - l0.rim_travel_m) - (l1.ground_travel_m - l0.ground_travel_m);
+  const double slip_r =
+      (r1.rim_travel_m - r0.rim_travel_m) - (r1.ground_travel_m - r0.ground_travel_m);
+  const double dyaw = rig.vehicle->body_truth().yaw_rad - yaw0;
+  EXPECT_GT(slip_l, 0.005) << "the wheel on the spot must spin ahead of the ground";
+  EXPECT_LT(std::abs(slip_r), 1e-3);
+  EXPECT_GT(dyaw, 0.01) << "the robot turns toward the oily (left) side";
+  // The encoders miss exactly the heading the slip causes: dyaw = (slip_l - slip_r) / B.
+  EXPECT_NEAR(dyaw, (slip_l - slip_r) / 0.32, 0.1 * dyaw);
+}
+
 TEST(PhysicsSuspension, BumpKeepsSprungDriveWheelsOnFloorWeakFollowerLifts) {
   platforms::Platform p = LoadShipped("mecanum4_omni3");
   const std::size_t weak = p.wheel_index("follower_left");
