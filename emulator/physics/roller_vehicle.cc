@@ -210,6 +210,31 @@ double RollerVehicle::wheel_speed_command(std::size_t i) const noexcept {
   return i < command_.size() ? command_[i] : 0.0;
 }
 
+bool RollerVehicle::SetWheelFriction(std::size_t i, double scale,
+                                     const std::optional<Friction>& override_friction) noexcept {
+  if (i >= state_.size() || !std::isfinite(scale) || scale < 0) return false;
+  if (override_friction &&
+      !(std::isfinite(override_friction->mu_peak) && std::isfinite(override_friction->mu_slide) &&
+        override_friction->mu_slide >= 0 &&
+        override_friction->mu_slide <= override_friction->mu_peak)) {
+    return false;
+  }
+  state_[i].friction_scale = scale;
+  state_[i].friction_override = override_friction;
+  return true;
+}
+
+bool RollerVehicle::SetWheelDisturbanceTorque(std::size_t i, double torque_nm) noexcept {
+  if (i >= state_.size() || !std::isfinite(torque_nm)) return false;
+  state_[i].disturbance_nm = torque_nm;
+  return true;
+}
+
+double RollerVehicle::wheel_spin_inertia(std::size_t i) const noexcept {
+  if (i >= state_.size() || state_[i].inv_inertia <= 0) return 0.0;
+  return 1.0 / state_[i].inv_inertia;
+}
+
 Eigen::Isometry3d RollerVehicle::pose() const noexcept {
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
   X.linear() = body_truth_.q_WB.toRotationMatrix();
@@ -361,9 +386,11 @@ void RollerVehicle::PreStep(double dt) noexcept {
       const double fn = f.norm();
       f = fn > 1e-9 ? Vector3d(f / fn) : Vector3d(R.col(0));
       const Vector3d l = nrm.cross(f);
-      const double mu = hit.friction.mu_slide +
-                        (hit.friction.mu_peak - hit.friction.mu_slide) *
-                            std::exp(-std::abs(st.last_slip_m_s) / spec_.stribeck_velocity_m_s);
+      const Friction fr = st.friction_override.value_or(hit.friction);
+      const double mu =
+          st.friction_scale *
+          (fr.mu_slide + (fr.mu_peak - fr.mu_slide) *
+                             std::exp(-std::abs(st.last_slip_m_s) / spec_.stribeck_velocity_m_s));
       tr.mu = mu;
       const double lim = mu * n_load * dt;
       const double rr = ws.rolling_resistance * n_load * dt;
@@ -433,6 +460,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
     }
     // Spin rows: motor (driven) or bearing friction (passive), no chassis coupling.
     if (ws.kind == WheelKind::kCaster) continue;
+    // External disturbance torque (fault hook): explicit, like the motor's integral part.
+    omega[i] += st.disturbance_nm * dt * st.inv_inertia;
     if (ws.driven && nrows < kMaxRows) {
       const MotorSpec& m = ws.motor;
       double cmd = command_[i];

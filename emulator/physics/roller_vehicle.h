@@ -20,6 +20,7 @@
 /// Thread-compatible; deterministic (no clocks, no randomness).
 
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <BulletDynamics/Dynamics/btActionInterface.h>
@@ -86,6 +87,20 @@ class RollerVehicle : public btActionInterface {
   bool SetWheelSpeedCommand(std::size_t i, double omega_rad_s) noexcept;
   [[nodiscard]] double wheel_speed_command(std::size_t i) const noexcept;
 
+  /// Fault hooks (scenario faults; deterministic, take effect from the next step):
+  /// wheel i's contact friction becomes `override` (or the floor's when nullopt) with both
+  /// mu_peak and mu_slide multiplied by scale (>= 0; 0: no traction at all). Returns false for a
+  /// bad index, a negative/non-finite scale or an invalid override.
+  bool SetWheelFriction(std::size_t i, double scale,
+                        const std::optional<Friction>& override_friction = std::nullopt) noexcept;
+  /// An external torque (N*m, about the axle, positive spins the wheel forward: +omega) added to
+  /// wheel i's spin every step until changed (0: none), e.g. a brake drag or a kick. The motor
+  /// servo of a driven wheel reacts to it as to any load. Returns false for a bad index or a
+  /// non-finite value.
+  bool SetWheelDisturbanceTorque(std::size_t i, double torque_nm) noexcept;
+  /// Spin inertia of wheel i about its axle (wheel + reflected rotor), kg*m^2; 0 for a bad index.
+  [[nodiscard]] double wheel_spin_inertia(std::size_t i) const noexcept;
+
   /// Called by PhysicsWorld before Bullet integrates the step (pre-tick).
   void PreStep(double dt_s) noexcept;
   /// btActionInterface: called after Bullet integrated the step; records the body truth.
@@ -114,6 +129,9 @@ class RollerVehicle : public btActionInterface {
     double inv_inertia = 0;                             // 1 / (wheel + reflected rotor inertia)
     Eigen::Vector3d axle_B = Eigen::Vector3d::UnitY();  // left of the rolling direction
     double roller_cos = 0, roller_sin = 1;
+    double friction_scale = 1;                  // fault hook: multiplies mu_peak and mu_slide
+    std::optional<Friction> friction_override;  // fault hook: replaces the floor's friction
+    double disturbance_nm = 0;                  // fault hook: external spin torque
   };
   double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
 
