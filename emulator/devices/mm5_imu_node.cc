@@ -30,9 +30,17 @@ Mm5ImuNode::Mm5ImuNode(std::shared_ptr<const bus::DbcDatabase> mm5_dbc, const Gy
 
 bool Mm5ImuNode::Sample(const Eigen::Vector3d& omega_WB_B, double accel_y_B_m_s2,
                         bus::CanFrame& out) {
+  const double rate_rad_s = SampleYawRate(omega_WB_B);
+  return Encode(rate_rad_s, accel_y_B_m_s2, out);
+}
+
+double Mm5ImuNode::SampleYawRate(const Eigen::Vector3d& omega_WB_B) {
   ++samples_;
   next_ns_ = first_ns_ + static_cast<std::int64_t>(samples_) * period_ns_;
-  const double rate_rad_s = gyro_.Sample(omega_WB_B);
+  return gyro_.Sample(omega_WB_B);
+}
+
+bool Mm5ImuNode::Encode(double rate_rad_s, double accel_y_B_m_s2, bus::CanFrame& out) {
   bus::CanFrame f;
   f.id = yaw_msg_->id;
   f.extended = yaw_msg_->extended;

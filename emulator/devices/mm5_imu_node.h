@@ -30,6 +30,11 @@ class Mm5ImuNode {
   /// body-frame lateral acceleration (m/s^2), returns the frame and schedules the next sample.
   /// Returns false when a value had to be saturated (the frame is still built, saturated).
   bool Sample(const Eigen::Vector3d& omega_WB_B, double accel_y_B_m_s2, bus::CanFrame& out);
+  /// The two halves of Sample, for a sensor fault between the model and the frame: samples the
+  /// gyro (rad/s) at next_sample_ns() and schedules the next sample ...
+  double SampleYawRate(const Eigen::Vector3d& omega_WB_B);
+  /// ... and encodes one frame from a yaw rate (rad/s) and lateral acceleration (m/s^2).
+  bool Encode(double yaw_rate_rad_s, double accel_y_B_m_s2, bus::CanFrame& out);
 
   std::uint64_t samples() const { return samples_; }
   std::uint64_t saturated() const { return saturated_; }

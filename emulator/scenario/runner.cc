@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -34,6 +35,11 @@
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
 #include "emulator/devices/mm5_imu_node.h"
+#include "emulator/faults/bus_faults.h"
+#include "emulator/faults/device_faults.h"
+#include "emulator/faults/fault_event.h"
+#include "emulator/faults/frame_faults.h"
+#include "emulator/faults/sensor_faults.h"
 #include "emulator/physics/physics_world.h"
 #include "emulator/scenario/artefacts.h"
 #include "emulator/scenario/metrics.h"
@@ -155,6 +161,15 @@ class Run {
   void AdvanceBus(std::int64_t t_ns);
   void OnWire(const WireFrame& w);
   void EnqueueNodeFrames(int bus_node, std::size_t encoder, std::vector<NodeFrame> frames);
+  // Device output -> device faults -> frame faults -> (bus-off) -> bus model.
+  void SubmitDeviceFrames(int bus_node, std::vector<NodeFrame> frames, bool from_poll);
+  bool EnqueueOnBus(int bus_node, const bus::CanFrame& f, std::int64_t ready_ns);
+  // Builds the fault injectors at the motion start (windows are relative to it).
+  void ArmFaults();
+  // Physical faults (wheel friction, torque disturbance) for the step starting at tm_s.
+  void ApplyPhysicalFaults(double tm_s);
+  void AddBumps(Terrain& terrain);
+  void AppendFaultEvents();
   // Reads frames from the firmware until `done` or the wall-clock timeout; false on timeout.
   bool WaitFirmware(const std::function<bool()>& done, double timeout_s);
   void DrainFirmware(int timeout_ms);
@@ -192,12 +207,27 @@ class Run {
     std::unique_ptr<CanopenEncoderNode> node;
     int bus_node = 0;
     bool silent = false;
+    Cia406NodeConfig config;
+    std::unique_ptr<SensorFaultInjector> sensor_fault;
+    std::unique_ptr<DeviceFaultInjector> device_fault;
     CanopenEncoderNode::NmtState last_state = CanopenEncoderNode::NmtState::kOff;
   };
   std::vector<Encoder> encoders_;
   std::unique_ptr<Mm5ImuNode> imu_;
   std::unique_ptr<Accel4Node> accel4_;
   int bus_accel4_ = -1;
+
+  // Faults (emulator/faults), armed at the motion start.
+  FaultEventLog fault_log_;
+  std::shared_ptr<const bus::DbcDatabase> accel4_dbc_;
+  std::map<int, std::unique_ptr<FrameFaultFilter>> frame_filters_;   // by bus node
+  std::map<int, std::unique_ptr<DeviceFaultInjector>> node_faults_;  // gyro/accel4 by bus node
+  std::unique_ptr<FaultyCanBus> faulty_bus_;
+  std::unique_ptr<SensorFaultInjector> gyro_fault_;
+  std::array<std::unique_ptr<SensorFaultInjector>, 4> accel_fault_;
+  std::vector<char> physical_on_;  // per scenario fault: physical fault active
+  bool library_faults_ = false;
+  std::int64_t motion0_ns_ = 0;
   std::uint64_t enqueued_ = 0, completed_ = 0, silenced_ = 0, enqueue_failures_ = 0;
   std::vector<std::size_t> drive_wheels_;
 
@@ -277,6 +307,7 @@ void Run::BuildWorld() {
                              {"mu_peak", rp.friction.mu_peak}});
     }
   }
+  AddBumps(terrain);
   vehicle_ = &world_->AddVehicle(s_.platform.vehicle, 0.0, 0.0, 0.0);
   drive_wheels_ = s_.platform.drive_wheels;
 }
@@ -310,6 +341,7 @@ void Run::BuildDevices() {
     Cia406NodeConfig nc;
     nc.node_id = static_cast<std::uint8_t>(e.node_id);
     nc.heartbeat_ms = static_cast<std::uint16_t>(s_.sensors.heartbeat_ms);
+    enc.config = nc;
     enc.node = std::make_unique<CanopenEncoderNode>(nc, cia406_, 0);
     enc.bus_node = bus_->AddNode(fmt::format("encoder{}", e.node_id));
     encoders_.push_back(std::move(enc));
@@ -338,6 +370,7 @@ void Run::BuildDevices() {
     }
     auto db = std::make_shared<const bus::DbcDatabase>(
         bus::DbcDatabase::LoadFile(dir + "/wheelhil_accel4.dbc"));
+    accel4_dbc_ = db;
     accel4_ =
         std::make_unique<Accel4Node>(db, params, std::llround(1e9 / s_.sensors.accel4_rate_hz));
     bus_accel4_ = bus_->AddNode("accel4");
@@ -387,23 +420,275 @@ bool Run::WaitForFirmwareConnection(std::string& why) {
 }
 
 void Run::EnqueueNodeFrames(int bus_node, std::size_t encoder, std::vector<NodeFrame> frames) {
-  for (auto& nf : frames) {
-    if (encoder < encoders_.size() && encoders_[encoder].silent) {
-      ++silenced_;
-      continue;
+  if (encoder < encoders_.size() && encoders_[encoder].silent) {
+    silenced_ += frames.size();
+    return;
+  }
+  SubmitDeviceFrames(bus_node, std::move(frames), false);
+}
+
+bool Run::EnqueueOnBus(int bus_node, const bus::CanFrame& f, std::int64_t ready_ns) {
+  const std::uint64_t off0 = faulty_bus_ ? faulty_bus_->dropped_bus_off() : 0;
+  const bool ok = faulty_bus_ ? faulty_bus_->Enqueue(bus_node, f, ready_ns)
+                              : bus_->Enqueue(bus_node, f, ready_ns);
+  if (ok) {
+    ++enqueued_;
+  } else if (!faulty_bus_ || faulty_bus_->dropped_bus_off() == off0) {
+    // A bus-off discard is counted by FaultyCanBus (metrics.faults), not as a bus failure.
+    ++enqueue_failures_;
+  }
+  return ok;
+}
+
+void Run::SubmitDeviceFrames(int bus_node, std::vector<NodeFrame> frames, bool from_poll) {
+  // Device faults of the node (encoders: the Encoder's injector; gyro/accel4: node_faults_).
+  DeviceFaultInjector* dev = nullptr;
+  for (auto& e : encoders_) {
+    if (e.bus_node == bus_node) dev = e.device_fault.get();
+  }
+  if (const auto it = node_faults_.find(bus_node); it != node_faults_.end()) dev = it->second.get();
+  if (dev != nullptr && !frames.empty()) dev->FilterOutputs(frames);
+  if (const auto it = frame_filters_.find(bus_node); it != frame_filters_.end()) {
+    std::int64_t until = bus_->now_ns();
+    if (from_poll) until = std::max(until, t_ns_);
+    for (const auto& f : frames) until = std::max(until, f.due_ns);
+    frames = it->second->Process(frames, until);
+  }
+  for (const auto& nf : frames) {
+    (void)EnqueueOnBus(bus_node, nf.frame, std::max(nf.due_ns, bus_->now_ns()));
+  }
+}
+
+void Run::ArmFaults() {
+  const std::int64_t t0 = t_ns_;  // motion start: the origin of every fault window
+  motion0_ns_ = t0;
+  auto shift = [&](FaultWindow w) {
+    w.t0_ns += t0;
+    if (w.t1_ns != FaultWindow::kForever) w.t1_ns += t0;
+    return w;
+  };
+  auto bus_node_of = [&](const FaultSpec& f) {
+    if (f.node == "gyro") return bus_imu_;
+    if (f.node == "accel4") return bus_accel4_;
+    for (const auto& e : encoders_) {
+      if (e.spec.node_id == f.node_id) return e.bus_node;
     }
-    const std::int64_t ready = std::max(nf.due_ns, bus_->now_ns());
-    if (bus_->Enqueue(bus_node, nf.frame, ready)) {
-      ++enqueued_;
+    return -1;
+  };
+  std::vector<FrameFault> frame;
+  std::vector<BusFault> bus;
+  std::map<int, std::vector<DeviceFault>> device;  // by bus node
+  std::map<std::string, std::vector<SensorFault>> sensor;
+  for (const auto& f : s_.faults) {
+    switch (f.kind) {
+      case FaultSpec::Kind::kFrame: {
+        FrameFault x = f.frame;
+        x.window = shift(x.window);
+        frame.push_back(std::move(x));
+        break;
+      }
+      case FaultSpec::Kind::kBus: {
+        BusFault x = f.bus;
+        x.window = shift(x.window);
+        if (x.kind == BusFaultKind::kBusOff) {
+          x.node = bus_node_of(f);
+          x.node_name = f.node.empty() ? fmt::format("encoder{}", f.node_id) : f.node;
+        }
+        bus.push_back(std::move(x));
+        break;
+      }
+      case FaultSpec::Kind::kDevice: {
+        DeviceFault x = f.device;
+        x.window = shift(x.window);
+        device[bus_node_of(f)].push_back(x);
+        break;
+      }
+      case FaultSpec::Kind::kSensor: {
+        SensorFault x = f.sensor;
+        x.window = shift(x.window);
+        if (f.sensor_name == "accel4" && f.channel == 0) {
+          for (int c = 1; c <= 4; ++c) sensor[fmt::format("accel4.{}", c)].push_back(x);
+        } else if (f.sensor_name == "accel4") {
+          sensor[fmt::format("accel4.{}", f.channel)].push_back(x);
+        } else if (f.sensor_name == "encoder") {
+          sensor["encoder." + f.wheel].push_back(x);
+        } else {
+          sensor[f.sensor_name].push_back(x);
+        }
+        break;
+      }
+      default:
+        break;
+    }
+  }
+  library_faults_ = !(frame.empty() && bus.empty() && device.empty() && sensor.empty());
+  // Seeds: one stream per injector, from the run seed.
+  std::uint64_t k = 0;
+  auto next_seed = [&] { return (seed_ ^ 0xFA017F00D5EEDull) * 6364136223846793005ull + (++k); };
+  if (!frame.empty()) {
+    // Every emulated device's output (not the SYNC producer, not the firmware's frames: those
+    // reach the firmware outside the model).
+    std::vector<int> nodes;
+    for (const auto& e : encoders_) nodes.push_back(e.bus_node);
+    if (bus_imu_ >= 0) nodes.push_back(bus_imu_);
+    if (bus_accel4_ >= 0) nodes.push_back(bus_accel4_);
+    std::shared_ptr<const bus::DbcDatabase> dbc = accel4_dbc_;
+    if (!dbc) {
+      dbc = std::make_shared<const bus::DbcDatabase>(
+          bus::DbcDatabase::LoadFile(o_.dbc_dir + "/wheelhil_accel4.dbc"));
+    }
+    // Each filter sees every window pass (Process runs every step), so the first one alone
+    // records the start/end events: one pair per fault, not one per device.
+    FaultEventLog* log = &fault_log_;
+    for (int n : nodes) {
+      frame_filters_[n] = std::make_unique<FrameFaultFilter>(frame, dbc, next_seed(), log);
+      log = nullptr;
+    }
+  }
+  if (!bus.empty()) {
+    faulty_bus_ = std::make_unique<FaultyCanBus>(*bus_, bus, StuffingMode::kExact, &fault_log_);
+  }
+  for (auto& [node, faults] : device) {
+    bool is_encoder = false;
+    for (auto& e : encoders_) {
+      if (e.bus_node != node) continue;
+      is_encoder = true;
+      e.device_fault = std::make_unique<DeviceFaultInjector>(
+          fmt::format("encoder{}", e.spec.node_id), static_cast<std::uint8_t>(e.spec.node_id),
+          faults, &fault_log_);
+    }
+    if (!is_encoder) {
+      node_faults_[node] = std::make_unique<DeviceFaultInjector>(
+          node == bus_imu_ ? "gyro" : "accel4", 0x7F, faults, &fault_log_);
+    }
+  }
+  for (auto& [name, faults] : sensor) {
+    if (name == "gyro") {
+      const double std =
+          s_.sensors.gyro_noise_density_rad_s_sqrt_hz * std::sqrt(s_.sensors.gyro_rate_hz);
+      gyro_fault_ =
+          std::make_unique<SensorFaultInjector>(name, faults, std, next_seed(), &fault_log_);
+    } else if (name.starts_with("accel4.")) {
+      const int c = name.back() - '1';
+      const double std =
+          s_.sensors.accel4_noise_density_m_s2_sqrt_hz * std::sqrt(s_.sensors.accel4_rate_hz);
+      accel_fault_[static_cast<std::size_t>(c)] =
+          std::make_unique<SensorFaultInjector>(name, faults, std, next_seed(), &fault_log_);
     } else {
-      ++enqueue_failures_;
+      const std::string wheel = name.substr(std::string("encoder.").size());
+      for (auto& e : encoders_) {
+        if (e.spec.wheel != wheel) continue;
+        // The encoder's own noise is its quantisation: 1/sqrt(12) count.
+        e.sensor_fault =
+            std::make_unique<SensorFaultInjector>(fmt::format("encoder {}", wheel), faults,
+                                                  1.0 / std::sqrt(12.0), next_seed(), &fault_log_);
+      }
     }
   }
 }
 
+void Run::ApplyPhysicalFaults(double tm_s) {
+  if (physical_on_.size() != s_.faults.size()) physical_on_.assign(s_.faults.size(), 0);
+  const std::size_t nw = s_.platform.vehicle.wheels.size();
+  std::vector<double> scale(nw, 1.0), torque(nw, 0.0);
+  std::vector<std::optional<Friction>> over(nw);
+  std::vector<char> touched(nw, 0);
+  for (std::size_t i = 0; i < s_.faults.size(); ++i) {
+    const FaultSpec& f = s_.faults[i];
+    if (f.kind != FaultSpec::Kind::kWheelFriction &&
+        f.kind != FaultSpec::Kind::kTorqueDisturbance) {
+      continue;
+    }
+    touched[f.wheel_index] = 1;
+    const bool on = tm_s >= f.start_s && tm_s < f.end_s;
+    if (on) {
+      if (f.kind == FaultSpec::Kind::kWheelFriction) {
+        scale[f.wheel_index] *= f.mu_scale;
+        if (f.mu_override) over[f.wheel_index] = f.mu_override;
+      } else {
+        torque[f.wheel_index] += f.torque_nm;
+      }
+    }
+    if (static_cast<bool>(physical_on_[i]) == on) continue;
+    physical_on_[i] = on;
+    const bool friction = f.kind == FaultSpec::Kind::kWheelFriction;
+    json ev{{"t_s", tm_s},
+            {"event", on ? "fault_start" : "fault_end"},
+            {"category", "physics"},
+            {"fault", friction ? "wheel_friction" : "torque_disturbance"},
+            {"wheel", f.wheel}};
+    if (friction) {
+      ev["mu_scale"] = f.mu_scale;
+      if (f.mu_override) {
+        ev["mu_peak"] = f.mu_override->mu_peak;
+        ev["mu_slide"] = f.mu_override->mu_slide;
+      }
+    } else {
+      ev["torque_nm"] = f.torque_nm;
+    }
+    events_.push_back(ev);
+  }
+  for (std::size_t w = 0; w < nw; ++w) {
+    if (!touched[w]) continue;
+    (void)vehicle_->SetWheelFriction(w, scale[w], over[w]);
+    (void)vehicle_->SetWheelDisturbanceTorque(w, torque[w]);
+  }
+}
+
+void Run::AddBumps(Terrain& terrain) {
+  int n = 0;
+  for (const auto& f : s_.faults) {
+    if (f.kind != FaultSpec::Kind::kBump) continue;
+    // A ridge across x: foot, top start, top end, foot; two rows of vertices at y -/+ width/2.
+    const double xs[4] = {f.x_m, f.x_m + f.ramp_length_m, f.x_m + f.ramp_length_m + f.top_length_m,
+                          f.x_m + 2 * f.ramp_length_m + f.top_length_m};
+    const double zs[4] = {0.0, f.height_m, f.height_m, 0.0};
+    std::vector<Eigen::Vector3d> v;
+    for (int side = 0; side < 2; ++side) {
+      const double y = f.y_m + (side == 0 ? -0.5 : 0.5) * f.width_m;
+      for (int j = 0; j < 4; ++j) v.emplace_back(xs[j], y, zs[j]);
+    }
+    std::vector<std::array<int, 3>> tris;
+    for (int j = 0; j < 3; ++j) {
+      if (j == 1 && f.top_length_m <= 0) continue;
+      tris.push_back({j, j + 1, 4 + j + 1});
+      tris.push_back({j, 4 + j + 1, 4 + j});
+    }
+    terrain.AddTriangles(v, tris, f.bump_friction.value_or(s_.terrain.friction),
+                         fmt::format("bump{}", n));
+    events_.push_back(json{{"t_s", 0.0},
+                           {"event", "fault_applied"},
+                           {"category", "physics"},
+                           {"fault", "bump"},
+                           {"name", fmt::format("bump{}", n)},
+                           {"x_m", f.x_m},
+                           {"y_m", f.y_m},
+                           {"width_m", f.width_m},
+                           {"height_m", f.height_m},
+                           {"ramp_length_m", f.ramp_length_m},
+                           {"top_length_m", f.top_length_m}});
+    ++n;
+  }
+}
+
+void Run::AppendFaultEvents() {
+  for (const auto& e : fault_log_.events()) {
+    events_.push_back(json{{"t_s", static_cast<double>(e.t_ns - motion0_ns_) * 1e-9},
+                           {"event", "fault_" + e.phase},
+                           {"category", e.category},
+                           {"fault", e.kind},
+                           {"target", e.target},
+                           {"detail", e.detail}});
+  }
+  fault_log_.Clear();
+}
+
 void Run::OnWire(const WireFrame& w) {
-  ++completed_;
+  const bool injected = faulty_bus_ && (w.node == faulty_bus_->flood_node() ||
+                                        w.node == faulty_bus_->error_node() || w.frame.error);
+  if (!injected) ++completed_;
   (void)log_->Write(w.complete_ns, iface_, w.frame);
+  if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)
   if (w.node != bus_firmware_) {
     if (can_->Send(w.frame)) ++enqueue_failures_;
     // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
@@ -435,7 +720,7 @@ void Run::AdvanceBus(std::int64_t t_ns) {
   while (bus_->now_ns() < t_ns) {
     const bool busy = enqueued_ > completed_;
     const std::int64_t to = busy ? std::min(t_ns, bus_->now_ns() + kSlice) : t_ns;
-    for (const auto& w : bus_->AdvanceTo(to)) OnWire(w);
+    for (const auto& w : faulty_bus_ ? faulty_bus_->AdvanceTo(to) : bus_->AdvanceTo(to)) OnWire(w);
   }
 }
 
@@ -489,12 +774,16 @@ void Run::Step(bool motion) {
   } else {
     platforms::CommandTwist(*vehicle_, s_.platform, platforms::BodyTwist{});
   }
+  if (motion) ApplyPhysicalFaults(static_cast<double>(t_ns_ - motion0_ns_) * 1e-9);
   world_->Step();
   t_ns_ += step_ns_;
   const double t_now = static_cast<double>(t_ns_) * 1e-9;
 
   // Faults.
   for (const auto& f : s_.faults) {
+    if (f.kind != FaultSpec::Kind::kEncoderEmcy && f.kind != FaultSpec::Kind::kEncoderSilent) {
+      continue;
+    }
     const double t_start = t_motion0_s_ + f.start_s, t_end = t_motion0_s_ + f.end_s;
     if (!motion) continue;
     for (auto& e : encoders_) {
@@ -524,11 +813,23 @@ void Run::Step(bool motion) {
   const auto& wt = vehicle_->wheel_truth();
   for (std::size_t i = 0; i < encoders_.size(); ++i) {
     auto& e = encoders_[i];
-    const std::uint32_t counts = e.model->Sample(wt[e.wheel].angle_rad);
+    std::optional<std::uint32_t> counts = e.model->Sample(wt[e.wheel].angle_rad);
+    if (e.sensor_fault) counts = e.sensor_fault->ApplyCounts(*counts, t_ns_);
     const double speed = wt[e.wheel].omega_rad_s * e.model->counts_per_rev() /
                          (2.0 * std::numbers::pi) * e.spec.direction;
-    e.node->SetMeasurement(counts, speed);
-    EnqueueNodeFrames(e.bus_node, i, e.node->Poll(t_ns_));
+    // A dropped sample (dropout) leaves the node's last measurement in place.
+    if (counts) e.node->SetMeasurement(*counts, speed);
+    if (e.device_fault) {
+      if (e.device_fault->NextActionNs() <= t_ns_) {
+        (void)e.device_fault->ApplyTo(*e.node, e.config, cia406_, t_ns_);
+      }
+      e.device_fault->AdvanceTo(t_ns_);
+    }
+    if (e.silent) {
+      silenced_ += e.node->Poll(t_ns_).size();
+    } else {
+      SubmitDeviceFrames(e.bus_node, e.node->Poll(t_ns_), true);
+    }
     if (e.node->state() != e.last_state) {
       e.last_state = e.node->state();
       events_.push_back(json{{"t_s", t_now - t_motion0_s_},
@@ -543,13 +844,13 @@ void Run::Step(bool motion) {
       const auto& b = vehicle_->body_truth();
       const Eigen::Vector3d w_B = b.q_WB.conjugate() * b.omega_WB_W;
       const Eigen::Vector3d a_B = b.q_WB.conjugate() * b.a_WB_W;
-      bus::CanFrame f;
-      (void)imu_->Sample(w_B, a_B.y(), f);
-      if (bus_->Enqueue(bus_imu_, f, std::max(ts, bus_->now_ns()))) {
-        ++enqueued_;
-      } else {
-        ++enqueue_failures_;
-      }
+      std::optional<double> rate = imu_->SampleYawRate(w_B);
+      if (gyro_fault_) rate = gyro_fault_->Apply(*rate, ts);
+      if (!rate) continue;  // dropout: no frame for this sample
+      NodeFrame nf;
+      nf.due_ns = ts;
+      (void)imu_->Encode(*rate, a_B.y(), nf.frame);
+      SubmitDeviceFrames(bus_imu_, {nf}, true);
     }
   }
   if (accel4_) {
@@ -562,15 +863,26 @@ void Run::Step(bool motion) {
       k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
       k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
       k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
-      bus::CanFrame f;
-      (void)accel4_->Sample(k, f);
-      if (bus_->Enqueue(bus_accel4_, f, std::max(ts, bus_->now_ns()))) {
-        ++enqueued_;
-      } else {
-        ++enqueue_failures_;
+      std::array<double, 4> a = accel4_->SampleSensors(k);
+      bool dropped = false;
+      for (std::size_t c = 0; c < 4; ++c) {
+        if (!accel_fault_[c]) continue;
+        const auto v = accel_fault_[c]->Apply(a[c], ts);
+        if (v) {
+          a[c] = *v;
+        } else {
+          dropped = true;
+        }
       }
+      NodeFrame nf;
+      nf.due_ns = ts;
+      (void)accel4_->EncodeSample(a, nf.frame);  // advances (and counts) even when dropped
+      if (!dropped) SubmitDeviceFrames(bus_accel4_, {nf}, true);
     }
   }
+  // Frames a frame fault delayed (or a duplicate's copy) that are due now; silent windows.
+  for (auto& [node, filter] : frame_filters_) SubmitDeviceFrames(node, {}, true);
+  for (auto& [node, dev] : node_faults_) dev->AdvanceTo(t_ns_);
   if (motion) {
     const auto& wt2 = vehicle_->wheel_truth();
     bool slip = false;
@@ -788,6 +1100,7 @@ RunResult Run::Execute() {
   p0_ = vehicle_->body_truth().p_WB;
   yaw0_ = vehicle_->body_truth().yaw_rad;
   events_.push_back(json{{"t_s", 0.0}, {"event", "motion_start"}});
+  ArmFaults();
   in_motion_ = true;
   truth_.clear();
   truth_pose_.clear();
@@ -883,6 +1196,7 @@ RunResult Run::Execute() {
     (void)log_->Write(w.complete_ns, iface_, w.frame);
   }
   const double wall_s = WallSeconds(wall0_);
+  AppendFaultEvents();
   firmware_.Stop();
   log_.reset();
   if (!failure_.empty()) {
@@ -985,6 +1299,30 @@ json Run::BuildReport(double wall_s) {
            {"silenced_frames", silenced_},
            {"firmware_frames", fw_frames_},
            {"max_queue_delay_s", static_cast<double>(bus_->max_queue_delay_ns()) * 1e-9}};
+  if (library_faults_) {
+    json fj{{"bus_off_dropped", faulty_bus_ ? faulty_bus_->dropped_bus_off() : 0},
+            {"flood_frames", faulty_bus_ ? faulty_bus_->flood_frames() : 0},
+            {"error_frames", faulty_bus_ ? faulty_bus_->error_frames() : 0}};
+    std::uint64_t affected = 0, unapplied = 0, suppressed = 0;
+    std::int64_t missed = 0;
+    const auto frame_faults = static_cast<std::size_t>(
+        std::count_if(s_.faults.begin(), s_.faults.end(),
+                      [](const FaultSpec& f) { return f.kind == FaultSpec::Kind::kFrame; }));
+    for (const auto& [node, filter] : frame_filters_) {
+      for (std::size_t i = 0; i < frame_faults; ++i) affected += filter->affected(i);
+      unapplied += filter->unapplied();
+    }
+    for (const auto& e : encoders_) {
+      if (e.device_fault) suppressed += e.device_fault->suppressed_frames();
+      if (e.sensor_fault) missed += e.sensor_fault->missed_counts();
+    }
+    for (const auto& [node, dev] : node_faults_) suppressed += dev->suppressed_frames();
+    fj["frames_affected"] = affected;
+    fj["frames_unapplied"] = unapplied;
+    fj["device_suppressed_frames"] = suppressed;
+    fj["missed_counts"] = missed;
+    metrics["faults"] = fj;
+  }
   r["metrics"] = metrics;
   r["wall"] = json{{"wall_time_s", wall_s}, {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0}};
   return r;

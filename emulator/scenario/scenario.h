@@ -8,12 +8,17 @@
 /// typos are caught). Value types; thread-compatible.
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "emulator/faults/bus_faults.h"
+#include "emulator/faults/device_faults.h"
+#include "emulator/faults/frame_faults.h"
+#include "emulator/faults/sensor_faults.h"
 #include "emulator/platforms/platform.h"
 #include "emulator/terrain.h"
 
@@ -93,14 +98,52 @@ struct SensorsSpec {
   std::vector<double> accel4_scale_error;  ///< 4 values, empty: none.
 };
 
-/// A fault injected at a time: a node's device fault (EMCY) or a node falling silent.
+/// A fault injected over a window [start_s, end_s) of motion time (end_s infinite: to the end).
+/// The library kinds (frame/bus/sensor/device, emulator/faults/) carry the library's own spec;
+/// its window is set by the runner at the motion start. Physical kinds act on the vehicle or
+/// the floor. See docs/scenarios.md, `faults`.
 struct FaultSpec {
-  enum class Kind { kEncoderEmcy, kEncoderSilent };
+  enum class Kind {
+    kEncoderEmcy,        ///< node_id raises EMCY error_code at start, clears it at end.
+    kEncoderSilent,      ///< node_id's frames dropped.
+    kFrame,              ///< FrameFaultFilter on the emulated devices' frames (`frame`).
+    kBus,                ///< FaultyCanBus around the bus model (`bus`).
+    kSensor,             ///< SensorFaultInjector on one sensor's samples (`sensor`).
+    kDevice,             ///< DeviceFaultInjector on one node (`device`).
+    kWheelFriction,      ///< Per-wheel friction scale / override (RollerVehicle::SetWheelFriction).
+    kTorqueDisturbance,  ///< Per-wheel external spin torque (SetWheelDisturbanceTorque).
+    kBump,               ///< A ramped obstacle on the floor (terrain triangles), whole run.
+  };
   Kind kind = Kind::kEncoderEmcy;
-  int node_id = 0;
+  std::string where;  ///< file:line:column of the entry, for messages.
+  int node_id = 0;    ///< Encoder node (emcy/silent/device/bus_off on an encoder).
+  std::string node;   ///< device/bus_off: "gyro" or "accel4" when not an encoder node.
   double start_s = 0;
-  double end_s = 0;
+  double end_s = std::numeric_limits<double>::infinity();
   std::uint16_t error_code = 0x7305;
+
+  FrameFault frame;    ///< kFrame (window set by the runner).
+  BusFault bus;        ///< kBus (window and bus node set by the runner).
+  SensorFault sensor;  ///< kSensor (window set by the runner).
+  DeviceFault device;  ///< kDevice (window set by the runner).
+  /// kSensor: "gyro" (yaw rate, rad/s), "encoder" (counts, the node of `wheel`), "accel4"
+  /// (m/s^2; channel 1..4, 0 = all four).
+  std::string sensor_name;
+  int channel = 0;
+
+  /// kWheelFriction / kTorqueDisturbance / kSensor encoder: platform wheel name and index.
+  std::string wheel;
+  std::size_t wheel_index = 0;
+  double mu_scale = 1.0;                ///< kWheelFriction: multiplies mu_peak and mu_slide.
+  std::optional<Friction> mu_override;  ///< kWheelFriction: replaces the floor's friction.
+  double torque_nm = 0;                 ///< kTorqueDisturbance.
+
+  /// kBump: a trapezoidal ridge across world x (the vehicle starts at the origin heading +x):
+  /// up-ramp from x_m to x_m + ramp_length_m, flat top of top_length_m at height_m, down-ramp of
+  /// ramp_length_m; width_m across, centred on y_m.
+  double x_m = 0, y_m = 0, width_m = 2.0, height_m = 0.01, ramp_length_m = 0.04,
+         top_length_m = 0.05;
+  std::optional<Friction> bump_friction;  ///< Default: the floor's (terrain.friction).
 };
 
 struct FirmwareSpec {
