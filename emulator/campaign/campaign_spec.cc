@@ -323,8 +323,19 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     L.OnlyKeys(p, field, {"path", "values", "range", "uniform", "normal", "loguniform"});
     ParameterSpec ps;
     ps.line = L.Line(p);
-    ps.path = L.String(p["path"], field + ".path");
-    if (!seen_paths.insert(ps.path).second) L.Fail(p["path"], field + ".path", "varied twice");
+    if (const YAML::Node pp = p["path"]; pp.IsSequence()) {  // linked: one value, several paths
+      if (pp.size() == 0) L.Fail(pp, field + ".path", "needs at least one path");
+      for (std::size_t k = 0; k < pp.size(); ++k) {
+        ps.paths.push_back(L.String(pp[k], fmt::format("{}.path[{}]", field, k)));
+        ps.path += (k == 0 ? "" : " + ") + ps.paths.back();
+      }
+    } else {
+      ps.path = L.String(pp, field + ".path");
+      ps.paths = {ps.path};
+    }
+    for (const auto& one : ps.paths) {
+      if (!seen_paths.insert(one).second) L.Fail(p["path"], field + ".path", "varied twice");
+    }
     int kinds = 0;
     if (const auto v = p["values"]) {
       ++kinds;

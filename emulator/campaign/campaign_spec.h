@@ -25,7 +25,10 @@ namespace wheelhil::emulator::campaign {
 /// holds a list in the base (e.g. `sensors.accel4.bias_m_s2`).
 struct ParameterSpec {
   enum class Kind { kList, kRange, kUniform, kNormal, kLogUniform };
-  std::string path;  ///< dotted path into the base scenario
+  std::string path;  ///< dotted path into the base scenario; linked paths joined by " + "
+  /// Where the value goes: `path: a.b` -> {a.b}; `path: [a.b, c.d]` (linked) sets every path
+  /// to the same value (e.g. one threshold for the x and y axes).
+  std::vector<std::string> paths;
   Kind kind = Kind::kList;
   std::vector<nlohmann::json> values;  ///< kList
   double from = 0, to = 0;             ///< kRange (inclusive), kUniform/kLogUniform bounds

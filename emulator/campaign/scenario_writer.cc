@@ -190,9 +190,11 @@ void CheckParameterPaths(const CampaignSpec& spec) {
   YAML::Node base = LoadBase(spec);
   ApplyOverrides(spec, base);
   for (const auto& p : spec.parameters) {
-    SetAtPath(base, p.path,
-              p.kind == ParameterSpec::Kind::kList ? p.values.front() : nlohmann::json(p.from),
-              fmt::format("{}:{}: path", spec.file, p.line));
+    for (const auto& path : p.paths) {
+      SetAtPath(base, path,
+                p.kind == ParameterSpec::Kind::kList ? p.values.front() : nlohmann::json(p.from),
+                fmt::format("{}:{}: path", spec.file, p.line));
+    }
   }
 }
 
@@ -201,8 +203,10 @@ void WriteRunScenario(const CampaignSpec& spec, const RunSpec& run, const fs::pa
   AbsolutizeRelativePaths(root, spec.base_scenario.parent_path());
   ApplyOverrides(spec, root);
   for (std::size_t i = 0; i < spec.parameters.size(); ++i) {
-    SetAtPath(root, spec.parameters[i].path, ResolveFiles(run.values.at(i), CampaignDir(spec)),
-              fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));
+    for (const auto& path : spec.parameters[i].paths) {
+      SetAtPath(root, path, ResolveFiles(run.values.at(i), CampaignDir(spec)),
+                fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));
+    }
   }
   YAML::Emitter out;
   out << root;

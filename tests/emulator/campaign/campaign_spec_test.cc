@@ -328,6 +328,43 @@ parameters:
               ThrowsMessage<std::invalid_argument>(HasSubstr("scalars only")));
 }
 
+TEST_F(CampaignSpecTest, LinkedPathsGetOneValue) {
+  dir_.Write("axes.yaml", std::string(kBaseScenario) + "axes: {x: {d: 0.1}, y: {d: 0.1}}\n");
+  const auto spec = Parse(R"(base: axes.yaml
+parameters:
+  - path: [axes.x.d, axes.y.d]
+    values: [0.02, 0.5]
+  - path: terrain.friction
+    values: [0.4]
+)");
+  ASSERT_EQ(spec.parameters[0].paths.size(), 2u);
+  EXPECT_EQ(spec.parameters[0].path, "axes.x.d + axes.y.d");
+  EXPECT_EQ(spec.parameters[1].paths, std::vector<std::string>{"terrain.friction"});
+  EXPECT_NO_THROW(CheckParameterPaths(spec));
+  const auto runs = ExpandRuns(spec);
+  ASSERT_EQ(runs.size(), 2u);
+  EXPECT_EQ(runs[1].ParamsJson(spec)["axes.x.d + axes.y.d"], 0.5);
+  const auto out = dir_.path() / "linked.yaml";
+  WriteRunScenario(spec, runs.at(1), out);
+  const YAML::Node n = YAML::LoadFile(out.string());
+  EXPECT_DOUBLE_EQ(n["axes"]["x"]["d"].as<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(n["axes"]["y"]["d"].as<double>(), 0.5);
+  // Every linked path must exist; a path may be varied once only.
+  EXPECT_THAT(
+      [&] {
+        CheckParameterPaths(
+            Parse("base: axes.yaml\nparameters: [{path: [axes.x.d, axes.z.d], values: [1]}]\n"));
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("'axes.z' does not exist")));
+  EXPECT_THAT(
+      [&] {
+        Parse(
+            "base: axes.yaml\nparameters: [{path: [axes.x.d], values: [1]}, {path: axes.x.d, "
+            "values: [2]}]\n");
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("varied twice")));
+}
+
 TEST_F(CampaignSpecTest, ShardsPartitionTheRunList) {
   const auto spec = Parse(R"(base: base.yaml
 parameters:
