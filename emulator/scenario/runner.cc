@@ -246,6 +246,7 @@ class Run {
   std::vector<std::uint8_t> tpdo_len_;  // By encoder; 0: no TPDO1 in the DBC.
   // Lockstep: the cycle whose FW_Status is awaited after the next SYNC (-1: none).
   int pending_status_cycle_ = -1;
+  std::uint64_t syncs_on_wire_ = 0;  // SYNCs the emulator sent that completed on the bus.
   bool CycleCompleteOnBus() const { return tpdos_since_sync_ == all_tpdos_; }
 
   // Recorded data.
@@ -693,7 +694,10 @@ void Run::OnWire(const WireFrame& w) {
     if (can_->Send(w.frame)) ++enqueue_failures_;
     // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
     const std::uint32_t id = w.frame.id;
-    if (!w.frame.extended && id == kSyncId && w.node == bus_emulator_) tpdos_since_sync_ = 0;
+    if (!w.frame.extended && id == kSyncId && w.node == bus_emulator_) {
+      tpdos_since_sync_ = 0;
+      ++syncs_on_wire_;
+    }
     // tpdo_len_ is filled at the motion start; before it no cycle runs.
     for (std::size_t i = 0; i < tpdo_len_.size() && !w.frame.extended; ++i) {
       if (w.node == encoders_[i].bus_node &&
@@ -1143,7 +1147,12 @@ RunResult Run::Execute() {
     // before the physics moves on.
     AdvanceBus(t_ns_ + step_ns_ / 2);
     if (lockstep && pending_status_cycle_ >= 0) {
-      // The previous cycle was incomplete on the bus: this SYNC closed it.
+      // The previous cycle was incomplete on the bus: this SYNC closes it once it is on the
+      // wire (an error burst or a flood can hold it back beyond half a step).
+      for (const std::int64_t until = t_ns_ + period_ns;
+           syncs_on_wire_ < syncs_sent_ && bus_->now_ns() < until;) {
+        AdvanceBus(std::min(until, bus_->now_ns() + step_ns_ / 2));
+      }
       wait_status(std::exchange(pending_status_cycle_, -1), k - 1);
     }
     if (lockstep && k == cycles && failure_.empty()) {

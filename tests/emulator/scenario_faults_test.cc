@@ -383,5 +383,35 @@ TEST_F(ScenarioFaultsRun, SameSeedSameLogWithRandomFaults) {
   }
 }
 
+// A node reboot (the firmware restarts it), then an error burst holding back the SYNC that
+// closes the incomplete cycle, bus-off, missed counts, gyro dropout, EMCY and a wrong DLC: the
+// lockstep run goes to the end and every fault shows in the metrics, can.log and events.
+TEST_F(ScenarioFaultsRun, DeviceAndBusFaultsRunToTheEnd) {
+  const nlohmann::json r = Run(
+      Short("  - {type: device, kind: reboot, node_id: 1, start_s: 0.5, end_s: 0.6}\n"
+            "  - {type: bus, kind: error_burst, error_frames: 5, start_s: 1.0}\n"
+            "  - {type: bus, kind: bus_off, node_id: 2, start_s: 1.2, end_s: 1.6}\n"
+            "  - {type: sensor, sensor: encoder, wheel: right, kind: missed_counts, value: 0.5, "
+            "start_s: 0.3, end_s: 1.0}\n"
+            "  - {type: sensor, sensor: gyro, kind: dropout, start_s: 1.5, end_s: 1.8}\n"
+            "  - {type: device, kind: emcy, node_id: 2, start_s: 1.9, end_s: 2.1}\n"
+            "  - {type: frame, kind: wrong_dlc, id: 0x174, dlc: 3, start_s: 2.0, end_s: 2.2}\n"),
+      "dev");
+  EXPECT_EQ(r["verdict"], "pass");
+  const auto& f = r["metrics"]["faults"];
+  EXPECT_EQ(f["error_frames"].get<int>(), 5);
+  EXPECT_GT(f["bus_off_dropped"].get<int>(), 0);
+  EXPECT_GT(f["missed_counts"].get<int>(), 0);
+  EXPECT_EQ(f["frames_affected"].get<int>(), 20);  // 0x174 at 100 Hz for 0.2 s
+  const std::string log = Slurp(dir_ / "dev" / "can.log");
+  EXPECT_THAT(log, HasSubstr(" 20000088#0000000000000000"));  // error frames (CAN_ERR_FLAG)
+  EXPECT_THAT(log, HasSubstr(" 174#"));
+  const std::string events = Slurp(dir_ / "dev" / "events.jsonl");
+  EXPECT_THAT(events, HasSubstr("\"fault\":\"reboot\""));
+  EXPECT_THAT(events, HasSubstr("\"fault\":\"emcy\""));
+  EXPECT_THAT(events, HasSubstr("\"fault\":\"dropout\""));
+  EXPECT_THAT(events, HasSubstr("\"fault\":\"bus_off\""));
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator::scenario
