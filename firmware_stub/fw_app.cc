@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -140,7 +141,21 @@ void FwApp::HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
   }
 }
 
+void FwApp::OnFrameArrived(const bus::CanFrame& frame, std::int64_t arrival_ns,
+                           std::vector<bus::CanFrame>& out) {
+  const std::int64_t t = std::max(arrival_ns, last_t_ns_);
+  Poll(t, out);
+  OnFrame(frame, t, out);
+}
+
+std::int64_t ArrivalOnMonotonicNs(std::int64_t stamp_real_ns, std::int64_t now_real_ns,
+                                  std::int64_t now_mono_ns, std::int64_t max_age_ns) {
+  const std::int64_t age = now_real_ns - stamp_real_ns;
+  return age >= 0 && age <= max_age_ns ? now_mono_ns - age : now_mono_ns;
+}
+
 void FwApp::Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
+  last_t_ns_ = std::max(last_t_ns_, t_ns);
   HandleMasterPoll(master_.Poll(t_ns), t_ns, out);
   if (auto closed = assembler_.Poll(t_ns)) OnCycle(*closed, out);
   if (StartupStatusDue() && t_ns >= next_startup_status_ns_) {
@@ -164,6 +179,7 @@ std::int64_t FwApp::NextEventNs() const {
 
 void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
                     std::vector<bus::CanFrame>& out) {
+  last_t_ns_ = std::max(last_t_ns_, t_ns);
   ++stats_.frames_in;
   std::uint8_t node = 0;
   const FrameKind kind = protocol_.Classify(frame, node);

@@ -20,6 +20,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -71,6 +72,14 @@ class FwApp {
   void Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
   /// One frame off the bus (never throws on its content).
   void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, std::vector<bus::CanFrame>& out);
+  /// A frame that reached the interface at `arrival_ns` (its receive timestamp on the app's
+  /// clock), handled whenever the program gets to it: first the timed work due before it
+  /// arrived (Poll: a cycle whose deadline passed before the frame came closes without it),
+  /// then the frame. So "in time" means arrived in time, not read in time (a preempted or busy
+  /// program does not turn a late frame into a timely one). `arrival_ns` is clamped to the last
+  /// time the app saw (the app's time never runs backwards).
+  void OnFrameArrived(const bus::CanFrame& frame, std::int64_t arrival_ns,
+                      std::vector<bus::CanFrame>& out);
   /// Timed work (master timers, SYNC production, cycle deadlines).
   void Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
   std::int64_t NextEventNs() const;
@@ -128,7 +137,15 @@ class FwApp {
   std::uint32_t last_faults_ = 0;
   FwState state_ = FwState::kBoot;
   FwAppStats stats_;
+  std::int64_t last_t_ns_ = std::numeric_limits<std::int64_t>::min();  // Latest time seen.
 };
+
+/// A kernel receive timestamp (CLOCK_REALTIME, SO_TIMESTAMPNS) on the monotonic clock the app
+/// runs on: now_mono_ns minus the frame's age (now_real_ns - stamp_real_ns). A stamp from the
+/// future or older than max_age_ns (the wall clock was stepped) gives now_mono_ns.
+std::int64_t ArrivalOnMonotonicNs(std::int64_t stamp_real_ns, std::int64_t now_real_ns,
+                                  std::int64_t now_mono_ns,
+                                  std::int64_t max_age_ns = 1'000'000'000);
 
 /// Master and assembler settings derived from a firmware config (also used by tests).
 CanopenMasterConfig MasterConfigFrom(const FwConfig& config);

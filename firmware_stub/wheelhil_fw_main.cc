@@ -6,6 +6,7 @@
 // message is printed), 2 bad command line, config or DBC files (file:line: field: problem).
 
 #include <fmt/format.h>
+#include <time.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 
@@ -35,6 +36,12 @@ std::int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+std::int64_t RealtimeNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 std::string ExeDir() {
@@ -147,8 +154,11 @@ int main(int argc, char** argv) {
     const std::error_code ec = can->Receive(rx, static_cast<int>((wait_ns + 999'999) / 1'000'000));
     const std::int64_t t = NowNs();
     if (!ec) {
-      if (log) (void)log->Write(t - t0, iface, rx.frame);
-      fwapp->OnFrame(rx.frame, t, out);
+      // Judged by when it arrived (the kernel's receive stamp), not when this loop read it.
+      const std::int64_t arrival =
+          rx.kernel_timestamp ? fw::ArrivalOnMonotonicNs(rx.timestamp_ns, RealtimeNs(), t) : t;
+      if (log) (void)log->Write(arrival - t0, iface, rx.frame);
+      fwapp->OnFrameArrived(rx.frame, arrival, out);
     } else if (ec != std::errc::timed_out && ec != std::errc::resource_unavailable_try_again &&
                ec != std::errc::bad_message && ec != std::errc::interrupted) {
       fmt::print(stderr, "wheelhil-fw: receive on {}: {}\n", iface, ec.message());

@@ -472,6 +472,40 @@ TEST(FwApp, SameInputsGiveTheSameOutputs) {
   EXPECT_EQ(first, run());
 }
 
+// SYNC followed from the bus, 200 ms deadline: the second TPDO1 reaches the interface at
+// `arrival` and the program reads it only at 250 ms (it was busy). Judged by its arrival, a frame
+// that came after the deadline is late (the cycle closed without it) and one that came before
+// it completes the cycle, however late it is read.
+TEST(FwApp, TpdoIsJudgedByItsArrivalNotByWhenItIsRead) {
+  const std::string yaml = std::string(kPaper000).replace(std::string(kPaper000).find("sync: {"), 7,
+                                                          "sync: {produce: false, ");
+  const FwConfig config = ParseFwConfig(yaml, "test.yaml");
+  const FwProtocol protocol = FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0x174, 0);
+  const Devices dev;
+  const bus::CanFrame sync = testing::Frame("080#");
+  for (const std::int64_t arrival : {190 * kMs, 210 * kMs}) {
+    FwApp app(config, protocol);
+    std::vector<bus::CanFrame> out;
+    app.Start(0, out);
+    app.OnFrameArrived(sync, 0, out);
+    app.OnFrameArrived(dev.Tpdo(1, 100), 100 * kMs, out);
+    ASSERT_TRUE(app.assembler().cycle_open());
+    app.OnFrameArrived(dev.Tpdo(2, 100), arrival, out);
+    const bool late = arrival > 200 * kMs;
+    EXPECT_EQ(app.assembler().cycles_closed(), 1u) << arrival;
+    EXPECT_EQ(app.assembler().incomplete_cycles(), late ? 1u : 0u) << arrival;
+    EXPECT_EQ(app.assembler().late_frames(), late ? 1u : 0u) << arrival;
+  }
+}
+
+TEST(FwApp, KernelStampIsMappedOntoTheMonotonicClock) {
+  // 3 ms old at real time 1000.000 s, monotonic now 50 ms.
+  EXPECT_EQ(ArrivalOnMonotonicNs(999'997 * kMs, 1'000'000 * kMs, 50 * kMs), 47 * kMs);
+  // A stamp from the future or older than a second (clock stepped): now.
+  EXPECT_EQ(ArrivalOnMonotonicNs(1'000'001 * kMs, 1'000'000 * kMs, 50 * kMs), 50 * kMs);
+  EXPECT_EQ(ArrivalOnMonotonicNs(990'000 * kMs, 1'000'000 * kMs, 50 * kMs), 50 * kMs);
+}
+
 TEST(FwApp, BadEstimatorParametersNameTheFile) {
   FwConfig c = ParseFwConfig(kPaper002, "p2.yaml");
   c.paper002.angles_rad = {0.0, 0.0, 0.0};  // Singular wheel geometry.
