@@ -247,7 +247,11 @@ class Run {
   // Lockstep: the cycle whose FW_Status is awaited after the next SYNC (-1: none).
   int pending_status_cycle_ = -1;
   std::uint64_t syncs_on_wire_ = 0;  // SYNCs the emulator sent that completed on the bus.
-  bool CycleCompleteOnBus() const { return tpdos_since_sync_ == all_tpdos_; }
+  // The latest SYNC is on the wire (a flood or an error burst can hold it back) and every
+  // encoder answered it.
+  bool CycleCompleteOnBus() const {
+    return syncs_on_wire_ == syncs_sent_ && tpdos_since_sync_ == all_tpdos_;
+  }
 
   // Recorded data.
   double t_motion0_s_ = 0;
@@ -1314,13 +1318,20 @@ json Run::BuildReport(double wall_s) {
             {"error_frames", faulty_bus_ ? faulty_bus_->error_frames() : 0}};
     std::uint64_t affected = 0, unapplied = 0, suppressed = 0;
     std::int64_t missed = 0;
-    const auto frame_faults = static_cast<std::size_t>(
-        std::count_if(s_.faults.begin(), s_.faults.end(),
-                      [](const FaultSpec& f) { return f.kind == FaultSpec::Kind::kFrame; }));
+    // Frame faults in list order (the filters' fault indices), totals per kind.
+    std::vector<FrameFaultKind> frame_kinds;
+    for (const auto& f : s_.faults) {
+      if (f.kind == FaultSpec::Kind::kFrame) frame_kinds.push_back(f.frame.kind);
+    }
+    std::map<std::string, std::uint64_t> by_kind;
     for (const auto& [node, filter] : frame_filters_) {
-      for (std::size_t i = 0; i < frame_faults; ++i) affected += filter->affected(i);
+      for (std::size_t i = 0; i < frame_kinds.size(); ++i) {
+        affected += filter->affected(i);
+        by_kind[std::string(FrameFaultKindName(frame_kinds[i]))] += filter->affected(i);
+      }
       unapplied += filter->unapplied();
     }
+    for (const auto& [kind, n] : by_kind) fj["frames_" + kind] = n;
     for (const auto& e : encoders_) {
       if (e.device_fault) suppressed += e.device_fault->suppressed_frames();
       if (e.sensor_fault) missed += e.sensor_fault->missed_counts();
