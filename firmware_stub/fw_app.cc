@@ -319,6 +319,8 @@ void FwApp::OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out) {
   if (!c.complete()) {
     ++stats_.skipped_steps;
     event_faults_ |= kFaultCycleIncomplete;
+    // Paper 002 keeps its 1-period rhythm through the gap on the accelerometers alone.
+    if (p002_ && have_step_cycle_) Step002Unobserved();
   } else if (!have_step_cycle_) {
     // The first complete cycle primes the counters: the estimators start here, at rest.
     for (std::size_t i = 0; i < nodes_.size(); ++i) last_position_[i] = c.encoders[i].position;
@@ -493,6 +495,15 @@ void FwApp::Step002(const AssembledCycle& c, double /*dt_s*/, std::vector<bus::C
   p002_odometry_[2] += d.omega_rad_s;
   p002_pose_ = AdvancePose(p002_pose_, d.vx_m_s, d.vy_m_s, d.omega_rad_s, HeadingRule::kMidpoint);
   if (!p002_->StepRaw(p002_odometry_, last_accel_m_s2_, {0.0, 0.0, 0.0})) {
+    event_faults_ |= kFaultEstimator;
+  }
+}
+
+void FwApp::Step002Unobserved() {
+  // An encoder is missing: the kinematics needs all three wheels, so no axis is observed. The
+  // counts of the gap arrive with the next complete cycle (absolute counters) and move the
+  // odometry position then; VelocityFusion re-seats its observers there.
+  if (!p002_->StepRawUnobserved(last_accel_m_s2_, {0.0, 0.0, 0.0})) {
     event_faults_ |= kFaultEstimator;
   }
 }

@@ -15,7 +15,10 @@
 /// output depends only on the frames, never on scheduling.
 /// Degrading, not dying: a cycle with an encoder missing skips the estimator step (the next
 /// complete cycle spans the gap: counters are absolute, gyro and accelerometer samples carry
-/// over); a source silent for lost_after_cycles cycles is flagged lost; bad frames are counted.
+/// over); paper 002 instead steps its fusion every cycle of the gap without odometry (the
+/// accelerometers carry the velocity) and re-seats its observers on the catch-up position (see
+/// VelocityFusion); a source silent for lost_after_cycles cycles is flagged lost; bad frames are
+/// counted. Every such cycle sets Status_FaultCycleIncomplete (state Degraded).
 /// Thread-compatible.
 
 #include <array>
@@ -99,6 +102,7 @@ class FwApp {
   void Step000(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step002(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
+  void Step002Unobserved();
   void HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
                         std::vector<bus::CanFrame>& out);
 

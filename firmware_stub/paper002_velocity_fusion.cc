@@ -81,6 +81,13 @@ bool SlidingModeObserver::Step(double x1_u, double f_u_s2, double dt_s) noexcept
   return true;
 }
 
+void SlidingModeObserver::Reseat(double x1_u, double v_u_s) noexcept {
+  if (!std::isfinite(x1_u) || !std::isfinite(v_u_s)) return;
+  started_ = true;
+  xh1_ = position_ = x1_u;
+  xh2_ = velocity_ = v_u_s;
+}
+
 VelocityFusion::VelocityFusion(const VelocityFusionConfig& config) : config_(config) {
   RequirePositive("period_s", config.period_s);
   RequirePositive("accel_mount_radius_m", config.accel_mount_radius_m);
@@ -120,6 +127,7 @@ void VelocityFusion::Reset() noexcept {
   fused_ = {};
   integrated_ = {};
   since_disturbance_s_ = {kLongAgoS, kLongAgoS, kLongAgoS};
+  odometry_gap_ = false;
   out_ = FusionOutput{};
 }
 
@@ -133,10 +141,32 @@ bool VelocityFusion::StepRaw(const std::array<double, 3>& odometry_position,
               DecoupleAccelerometers(accelerometers_m_s2, config_.accel_mount_radius_m), commanded);
 }
 
+bool VelocityFusion::StepRawUnobserved(const std::array<double, 4>& accelerometers_m_s2,
+                                       const std::array<double, 3>& commanded) noexcept {
+  for (double a : accelerometers_m_s2) {
+    if (!std::isfinite(a)) return false;
+  }
+  return StepUnobserved(DecoupleAccelerometers(accelerometers_m_s2, config_.accel_mount_radius_m),
+                        commanded);
+}
+
 bool VelocityFusion::Step(const std::array<double, 3>& odometry_position, const BodyAccel& measured,
                           const std::array<double, 3>& commanded) noexcept {
+  if (!Finite3(odometry_position)) return false;
+  return DoStep(&odometry_position, measured, commanded);
+}
+
+bool VelocityFusion::StepUnobserved(const BodyAccel& measured,
+                                    const std::array<double, 3>& commanded) noexcept {
+  return DoStep(nullptr, measured, commanded);
+}
+
+bool VelocityFusion::DoStep(const std::array<double, 3>* odometry_position,
+                            const BodyAccel& measured,
+                            const std::array<double, 3>& commanded) noexcept {
   const std::array<double, 3> a_B = {measured.ax_m_s2, measured.ay_m_s2, measured.alpha_rad_s2};
-  if (!Finite3(odometry_position) || !Finite3(a_B) || !Finite3(commanded)) return false;
+  if (!Finite3(a_B) || !Finite3(commanded)) return false;
+  const bool observed = odometry_position != nullptr;
   const double dt = config_.period_s;
 
   // d/dt of the body-frame velocity = a_B - omega x v_B, evaluated with each branch's own
@@ -156,16 +186,22 @@ bool VelocityFusion::Step(const std::array<double, 3>& odometry_position, const 
     const FusionAxisConfig& ac = config_.axes[i];
     FusionAxisOutput& o = out_.axes[i];
     const double f = config_.observer_uses_commanded_accel ? commanded[i] : 0.0;
-    (void)observers_[i].Step(odometry_position[i], f, dt);  // Inputs checked above.
+    const double inertial = fused_[i] + rate_fused[i] * dt;
+    if (observed) {
+      // After a gap: restart the observer where the odometry is now, at the velocity the
+      // accelerometers carried through the gap (no catch-up step into xh2).
+      if (odometry_gap_) observers_[i].Reseat((*odometry_position)[i], inertial);
+      (void)observers_[i].Step((*odometry_position)[i], f, dt);  // Inputs checked above.
+    }
 
     o.disturbance_u_s2 = commanded[i] - rate_fused[i];
     o.disturbed = std::abs(o.disturbance_u_s2) > ac.disturbance_threshold_u_s2;
     since_disturbance_s_[i] = o.disturbed ? 0.0 : std::min(since_disturbance_s_[i] + dt, kLongAgoS);
     const double t = since_disturbance_s_[i] / ac.recovery_time_s;
     const double k = 1.0 - (1.0 - config_.k_min) / (1.0 + t * t);
-    const double w = 1.0 - std::pow(1.0 - k, dt / kPaperPeriodS);
+    // No odometry this period: w = 0, the accelerometers alone carry the velocity.
+    const double w = observed ? 1.0 - std::pow(1.0 - k, dt / kPaperPeriodS) : 0.0;
 
-    const double inertial = fused_[i] + rate_fused[i] * dt;
     fused_[i] = w * observers_[i].velocity() + (1.0 - w) * inertial;
     integrated_[i] += rate_integrated[i] * dt;
 
@@ -174,7 +210,9 @@ bool VelocityFusion::Step(const std::array<double, 3>& odometry_position, const 
     o.accel_integrated = integrated_[i];
     o.weight_k = k;
     o.time_since_disturbance_s = since_disturbance_s_[i];
+    o.odometry_observed = observed;
   }
+  odometry_gap_ = !observed;
   return true;
 }
 

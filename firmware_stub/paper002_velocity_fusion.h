@@ -63,6 +63,11 @@ class SlidingModeObserver {
   /// acceleration, or 0) and dt [s]. Returns false, changing nothing, on non-finite input or
   /// dt <= 0.
   [[nodiscard]] bool Step(double x1_u, double f_u_s2, double dt_s) noexcept;
+  /// Restarts the observer at position x1 [u] with velocity v [u/s] (as if it had tracked them
+  /// exactly): the next Step(x1, ...) reports x1 and v. For a measurement that resumes after a
+  /// gap, so the displacement gathered over the gap is not read as one period's motion.
+  /// Ignored on non-finite input.
+  void Reseat(double x1_u, double v_u_s) noexcept;
   void Reset() noexcept {
     started_ = false;
     xh1_ = xh2_ = position_ = velocity_ = 0.0;
@@ -117,6 +122,10 @@ struct FusionAxisOutput {
   double disturbance_u_s2 = 0.0;  ///< commanded - measured acceleration.
   bool disturbed = false;         ///< |disturbance| > d_i in this step.
   double time_since_disturbance_s = 0.0;
+  /// False in a period stepped without odometry (StepUnobserved): the weight applied was 0
+  /// (fused = inertial propagation, whatever weight_k says) and `odometry` is the observer's
+  /// velocity of the last observed period, held.
+  bool odometry_observed = true;
 };
 
 struct FusionOutput {
@@ -129,6 +138,13 @@ struct FusionOutput {
 ///   k_i = 1 - (1 - k_min) / (1 + (t_i/tau_i)^2)          (k_min at t=0, -> 1)
 ///   w_i = 1 - (1 - k_i)^(dt/1 ms)                        (k is the paper's per-1-ms weight)
 ///   v_i = w_i * xh2_i + (1 - w_i) * (v_i + a_i dt)       (odometry vs inertial propagation)
+/// Odometry gap (StepUnobserved, e.g. an encoder missing: the wheel kinematics needs every
+/// wheel): every axis propagates on the accelerometers alone, v_i = v_i + a_i dt (w_i = 0, the
+/// paper's mechanism for disturbed odometry; D_i, t_i, k_i keep running), the observers are
+/// frozen. The first observed Step after a gap re-seats each observer at the odometry position
+/// it is given with the fused velocity propagated to that period (SlidingModeObserver::Reseat),
+/// then fuses as usual: the displacement gathered over the gap moves the position but never
+/// enters the observer as one period's velocity.
 /// Starts at rest (all velocities 0). Thread-compatible; no allocation.
 class VelocityFusion {
  public:
@@ -145,7 +161,16 @@ class VelocityFusion {
                              const std::array<double, 4>& accelerometers_m_s2,
                              const std::array<double, 3>& commanded) noexcept;
 
+  /// One period without odometry (see the class comment); measured and commanded as in Step.
+  /// Returns false, changing nothing, on non-finite input.
+  [[nodiscard]] bool StepUnobserved(const BodyAccel& measured,
+                                    const std::array<double, 3>& commanded) noexcept;
+  [[nodiscard]] bool StepRawUnobserved(const std::array<double, 4>& accelerometers_m_s2,
+                                       const std::array<double, 3>& commanded) noexcept;
+
   const FusionOutput& last() const { return out_; }
+  /// True after StepUnobserved until the next observed Step.
+  bool in_odometry_gap() const { return odometry_gap_; }
   void Reset() noexcept;
 
   const VelocityFusionConfig& config() const { return config_; }
@@ -156,7 +181,12 @@ class VelocityFusion {
   std::array<double, 3> fused_{};
   std::array<double, 3> integrated_{};
   std::array<double, 3> since_disturbance_s_{};
+  bool odometry_gap_ = false;
   FusionOutput out_;
+
+  // The common step; odometry_position == nullptr: a period without odometry.
+  bool DoStep(const std::array<double, 3>* odometry_position, const BodyAccel& measured,
+              const std::array<double, 3>& commanded) noexcept;
 };
 
 }  // namespace wheelhil::fw
