@@ -502,7 +502,7 @@ void FwApp::Step002(const AssembledCycle& c, double /*dt_s*/, std::vector<bus::C
 void FwApp::Step002Unobserved() {
   // An encoder is missing: the kinematics needs all three wheels, so no axis is observed. The
   // counts of the gap arrive with the next complete cycle (absolute counters) and move the
-  // odometry position then; VelocityFusion re-seats its observers there.
+  // odometry position then; VelocityFusion takes that catch-up into its observers' position.
   if (!p002_->StepRawUnobserved(last_accel_m_s2_, {0.0, 0.0, 0.0})) {
     event_faults_ |= kFaultEstimator;
   }

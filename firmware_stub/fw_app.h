@@ -16,9 +16,10 @@
 /// Degrading, not dying: a cycle with an encoder missing skips the estimator step (the next
 /// complete cycle spans the gap: counters are absolute, gyro and accelerometer samples carry
 /// over); paper 002 instead steps its fusion every cycle of the gap without odometry (the
-/// accelerometers carry the velocity) and re-seats its observers on the catch-up position (see
-/// VelocityFusion); a source silent for lost_after_cycles cycles is flagged lost; bad frames are
-/// counted. Every such cycle sets Status_FaultCycleIncomplete (state Degraded).
+/// accelerometers carry the velocity) and takes the catch-up displacement into the observers'
+/// position, not their velocity (see VelocityFusion); a source silent for lost_after_cycles
+/// cycles is flagged lost; bad frames are counted. Every cycle with an input missing sets
+/// Status_FaultCycleIncomplete (state Degraded).
 /// Thread-compatible.
 
 #include <array>

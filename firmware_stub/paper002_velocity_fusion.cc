@@ -81,11 +81,20 @@ bool SlidingModeObserver::Step(double x1_u, double f_u_s2, double dt_s) noexcept
   return true;
 }
 
-void SlidingModeObserver::Reseat(double x1_u, double v_u_s) noexcept {
-  if (!std::isfinite(x1_u) || !std::isfinite(v_u_s)) return;
-  started_ = true;
-  xh1_ = position_ = x1_u;
-  xh2_ = velocity_ = v_u_s;
+bool SlidingModeObserver::Predict(double f_u_s2, double dt_s) noexcept {
+  if (!std::isfinite(f_u_s2) || !std::isfinite(dt_s) || dt_s <= 0.0) return false;
+  if (!started_) return true;
+  position_ = xh1_;
+  velocity_ = xh2_;
+  xh1_ += dt_s * xh2_;
+  xh2_ += dt_s * f_u_s2;
+  return true;
+}
+
+void SlidingModeObserver::LimitInnovation(double x1_u, double max_error_u) noexcept {
+  if (!started_ || !std::isfinite(x1_u) || !std::isfinite(max_error_u)) return;
+  const double m = std::abs(max_error_u);
+  xh1_ = x1_u + std::clamp(xh1_ - x1_u, -m, m);
 }
 
 VelocityFusion::VelocityFusion(const VelocityFusionConfig& config) : config_(config) {
@@ -128,6 +137,7 @@ void VelocityFusion::Reset() noexcept {
   integrated_ = {};
   since_disturbance_s_ = {kLongAgoS, kLongAgoS, kLongAgoS};
   odometry_gap_ = false;
+  odometry_velocity_ = {};
   out_ = FusionOutput{};
 }
 
@@ -188,10 +198,16 @@ bool VelocityFusion::DoStep(const std::array<double, 3>* odometry_position,
     const double f = config_.observer_uses_commanded_accel ? commanded[i] : 0.0;
     const double inertial = fused_[i] + rate_fused[i] * dt;
     if (observed) {
-      // After a gap: restart the observer where the odometry is now, at the velocity the
-      // accelerometers carried through the gap (no catch-up step into xh2).
-      if (odometry_gap_) observers_[i].Reseat((*odometry_position)[i], inertial);
+      if (odometry_gap_) {
+        // The odometry is back with the whole gap's displacement: whatever of it the prediction
+        // did not expect beyond one boundary layer moves the position state, not the velocity.
+        observers_[i].LimitInnovation((*odometry_position)[i],
+                                      observers_[i].gains().boundary_layer_u);
+      }
       (void)observers_[i].Step((*odometry_position)[i], f, dt);  // Inputs checked above.
+      odometry_velocity_[i] = observers_[i].velocity();
+    } else {
+      (void)observers_[i].Predict(rate_fused[i], dt);  // Finite: checked above.
     }
 
     o.disturbance_u_s2 = commanded[i] - rate_fused[i];
@@ -202,11 +218,11 @@ bool VelocityFusion::DoStep(const std::array<double, 3>* odometry_position,
     // No odometry this period: w = 0, the accelerometers alone carry the velocity.
     const double w = observed ? 1.0 - std::pow(1.0 - k, dt / kPaperPeriodS) : 0.0;
 
-    fused_[i] = w * observers_[i].velocity() + (1.0 - w) * inertial;
+    fused_[i] = w * odometry_velocity_[i] + (1.0 - w) * inertial;
     integrated_[i] += rate_integrated[i] * dt;
 
     o.fused = fused_[i];
-    o.odometry = observers_[i].velocity();
+    o.odometry = odometry_velocity_[i];
     o.accel_integrated = integrated_[i];
     o.weight_k = k;
     o.time_since_disturbance_s = since_disturbance_s_[i];

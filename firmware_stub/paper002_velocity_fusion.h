@@ -63,11 +63,16 @@ class SlidingModeObserver {
   /// acceleration, or 0) and dt [s]. Returns false, changing nothing, on non-finite input or
   /// dt <= 0.
   [[nodiscard]] bool Step(double x1_u, double f_u_s2, double dt_s) noexcept;
-  /// Restarts the observer at position x1 [u] with velocity v [u/s] (as if it had tracked them
-  /// exactly): the next Step(x1, ...) reports x1 and v. For a measurement that resumes after a
-  /// gap, so the displacement gathered over the gap is not read as one period's motion.
-  /// Ignored on non-finite input.
-  void Reseat(double x1_u, double v_u_s) noexcept;
+  /// A period without a measurement: the state runs open loop on the model acceleration f
+  /// [u/s^2] (xh1 += dt xh2, xh2 += dt f; position()/velocity() report the state before).
+  /// Nothing before the first Step. Returns false, changing nothing, on non-finite input or
+  /// dt <= 0.
+  [[nodiscard]] bool Predict(double f_u_s2, double dt_s) noexcept;
+  /// Limits the innovation the next Step(x1_u, ...) will see to |xh1 - x1| <= max_error_u by
+  /// shifting the position state xh1 (velocity untouched). For a measurement that resumes
+  /// after a gap: the displacement the prediction did not expect moves the position, it is not
+  /// read as one period's velocity. Ignored on non-finite input or before the first Step.
+  void LimitInnovation(double x1_u, double max_error_u) noexcept;
   void Reset() noexcept {
     started_ = false;
     xh1_ = xh2_ = position_ = velocity_ = 0.0;
@@ -123,8 +128,8 @@ struct FusionAxisOutput {
   bool disturbed = false;         ///< |disturbance| > d_i in this step.
   double time_since_disturbance_s = 0.0;
   /// False in a period stepped without odometry (StepUnobserved): the weight applied was 0
-  /// (fused = inertial propagation, whatever weight_k says) and `odometry` is the observer's
-  /// velocity of the last observed period, held.
+  /// (fused = inertial propagation, whatever weight_k says) and `odometry` is the value of the
+  /// last observed period, held.
   bool odometry_observed = true;
 };
 
@@ -140,11 +145,13 @@ struct FusionOutput {
 ///   v_i = w_i * xh2_i + (1 - w_i) * (v_i + a_i dt)       (odometry vs inertial propagation)
 /// Odometry gap (StepUnobserved, e.g. an encoder missing: the wheel kinematics needs every
 /// wheel): every axis propagates on the accelerometers alone, v_i = v_i + a_i dt (w_i = 0, the
-/// paper's mechanism for disturbed odometry; D_i, t_i, k_i keep running), the observers are
-/// frozen. The first observed Step after a gap re-seats each observer at the odometry position
-/// it is given with the fused velocity propagated to that period (SlidingModeObserver::Reseat),
-/// then fuses as usual: the displacement gathered over the gap moves the position but never
-/// enters the observer as one period's velocity.
+/// paper's mechanism for disturbed odometry; D_i, t_i, k_i keep running), and each observer
+/// predicts open loop with f = a_i (SlidingModeObserver::Predict). The first observed Step
+/// after a gap first shifts each observer's position so that the innovation is at most its
+/// boundary layer phi (SlidingModeObserver::LimitInnovation), then fuses as usual: the
+/// displacement gathered over the gap moves the position but never enters the observer as one
+/// period's velocity, and a gap short enough for the prediction to stay within phi goes
+/// unnoticed.
 /// Starts at rest (all velocities 0). Thread-compatible; no allocation.
 class VelocityFusion {
  public:
@@ -182,6 +189,7 @@ class VelocityFusion {
   std::array<double, 3> integrated_{};
   std::array<double, 3> since_disturbance_s_{};
   bool odometry_gap_ = false;
+  std::array<double, 3> odometry_velocity_{};  // Observer velocity of the last observed period.
   FusionOutput out_;
 
   // The common step; odometry_position == nullptr: a period without odometry.

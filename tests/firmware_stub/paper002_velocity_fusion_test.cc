@@ -240,10 +240,11 @@ TEST(VelocityFusion, OdometryGapNeitherStepsTheVelocityNorLosesTheCatchUp) {
 }
 
 // The same gap with an accelerometer bias b = 0.03 m/s^2 on x: inside the gap the fused velocity
-// drifts by exactly b*t (nothing else can be known), afterwards the observer, re-seated at the
-// drifted velocity, pulls it back (linear part k1 = 100 1/s, k2 = 6600 1/s^2: zeta 0.62, ~8 %
-// undershoot) without ever exceeding the drift it was re-seated with, b * (0.2 s + the period
-// that ends the gap) = 6.03 mm/s.
+// drifts by exactly b*t (nothing else can be known), afterwards the observer (which predicted
+// through the gap on the same accelerometers; its position, b*T^2/2 = 0.6 mm off, is shifted to
+// within the boundary layer of the measurement) pulls it back (linear part k1 = 100 1/s,
+// k2 = 6600 1/s^2: zeta 0.62) without ever exceeding the drift at the end of the gap, plus the
+// period that ends it: b * (0.2 s + 1 ms) = 6.03 mm/s.
 TEST(VelocityFusion, OdometryGapWithBiasedAccelerometersDriftsThenRecovers) {
   VelocityFusion fusion(FusionConfig());
   constexpr double kV = 0.1, kBias = 0.03, kGapS = 0.2;
@@ -269,17 +270,54 @@ TEST(VelocityFusion, OdometryGapWithBiasedAccelerometersDriftsThenRecovers) {
   EXPECT_NEAR(fusion.last().axes[kX].fused, kV, 1e-6);
 }
 
-TEST(SlidingModeObserver, ReseatRestartsAtTheGivenState) {
+// Short gaps (one period in ten without odometry) on quantised positions (77 um, the firmware
+// test's count at 0.1 m/s and 1 ms). A missing period costs its correction, nothing more: the
+// observer predicts through it and, the prediction being within the 0.1 mm boundary layer of
+// the returning measurement, takes that measurement as usual. Bound: 1.5x the error of the
+// uninterrupted run (measured 1.33x; a variant that re-started the observer at the fused
+// velocity, dropping its last velocity correction, gave 1.96x).
+TEST(VelocityFusion, ShortOdometryGapsOnQuantisedPositionsCostOnlyTheirCorrection) {
+  auto run = [](bool gaps) {
+    VelocityFusion fusion(FusionConfig());
+    constexpr double kV = 0.1, kQ = 77e-6;
+    double max_err = 0.0;
+    for (int k = 0; k < 3000; ++k) {
+      const double x = kQ * std::round(kV * k * kDt / kQ);
+      if (gaps && k >= 1000 && k % 10 == 3) {
+        EXPECT_TRUE(fusion.StepUnobserved({0, 0, 0}, {0, 0, 0}));
+      } else {
+        EXPECT_TRUE(fusion.Step({x, 0, 0}, {0, 0, 0}, {0, 0, 0}));
+      }
+      if (k >= 1000) max_err = std::max(max_err, std::abs(fusion.last().axes[kX].fused - kV));
+    }
+    return max_err;
+  };
+  const double clean = run(false), gapped = run(true);
+  std::printf(
+      "77 um counts at 0.1 m/s, 1 period in 10 unobserved: fused max error %.3f mm/s "
+      "(%.3f without gaps)\n",
+      1e3 * gapped, 1e3 * clean);
+  EXPECT_LT(gapped, 1.5 * clean);
+}
+
+TEST(SlidingModeObserver, PredictRunsOpenLoopAndLimitInnovationShiftsOnlyThePosition) {
   SlidingModeObserver o;
+  EXPECT_TRUE(o.Predict(1.0, kDt));  // Before the first Step: nothing to predict.
+  o.LimitInnovation(5.0, 1e-4);
   ASSERT_TRUE(o.Step(0.0, 0.0, kDt));
-  o.Reseat(0.5, 0.1);
-  ASSERT_TRUE(o.Step(0.5, 0.0, kDt));
-  EXPECT_DOUBLE_EQ(o.position(), 0.5);
-  EXPECT_DOUBLE_EQ(o.velocity(), 0.1);
-  ASSERT_TRUE(o.Step(0.5 + 0.1 * kDt, 0.0, kDt));  // On track: nothing to correct.
-  EXPECT_NEAR(o.velocity(), 0.1, 1e-12);
-  o.Reseat(std::nan(""), 0.0);  // Ignored.
-  EXPECT_NEAR(o.velocity(), 0.1, 1e-12);
+  EXPECT_DOUBLE_EQ(o.position(), 0.0);
+  EXPECT_DOUBLE_EQ(o.velocity(), 0.0);
+  ASSERT_TRUE(o.Predict(2.0, kDt));  // xh1 = 0, xh2 = 0 -> xh2 = 2 mm/s.
+  ASSERT_TRUE(o.Predict(0.0, kDt));
+  EXPECT_DOUBLE_EQ(o.velocity(), 2.0 * kDt);
+  EXPECT_FALSE(o.Predict(std::nan(""), kDt));
+  EXPECT_FALSE(o.Predict(0.0, 0.0));
+  // The state now predicts 2 um; the measurement says 1 mm: shifted to 1 mm - 0.1 mm.
+  o.LimitInnovation(1e-3, 1e-4);
+  ASSERT_TRUE(o.Step(1e-3, 0.0, kDt));
+  EXPECT_NEAR(o.position(), 0.9e-3, 1e-15);
+  EXPECT_NEAR(o.velocity(), 2.0 * kDt, 1e-15);
+  o.LimitInnovation(std::nan(""), 1e-4);  // Ignored.
 }
 
 // Body-frame rotation: a robot speeding up while turning. The body-frame velocity has vy = 0;
