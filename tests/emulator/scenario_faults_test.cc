@@ -21,19 +21,16 @@
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
+#include "tests/emulator/scenario_run_support.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using testing::Slurp;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+RunOptions Options(const fs::path& out) { return testing::BuildTreeRunOptions(out); }
 
 const std::string kBasePath = std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml";
 
@@ -167,18 +164,6 @@ TEST(ScenarioFaultsParse, ErrorsNameFileLineColumnAndField) {
 }
 
 // ---- End to end -----------------------------------------------------------------------------
-
-RunOptions Options(const fs::path& out) {
-  RunOptions o;
-  o.out_dir = out.string();
-  o.bin_dir = std::string(WHEELHIL_BINARY_DIR) + "/bin";
-  o.dbc_dir = std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc";
-  o.ucan_child_env = [](const std::string& dir) {
-    return bus::UcanChildEnvironment(std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_ucan.so",
-                                     dir);
-  };
-  return o;
-}
 
 // Paper-000 robot on a uniform floor (no random spots): 0.3 s hold, then 0.5 m with a 0.5 m/s^2
 // trapezoid (accelerating over motion time 0.3..0.8 s), 2.5 s in all, 4 Hz SYNC.

@@ -13,31 +13,16 @@
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
+#include "tests/emulator/scenario_run_support.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using testing::Slurp;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-RunOptions Options(const fs::path& out) {
-  RunOptions o;
-  o.out_dir = out.string();
-  o.bin_dir = std::string(WHEELHIL_BINARY_DIR) + "/bin";
-  o.dbc_dir = std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc";
-  o.ucan_child_env = [](const std::string& dir) {
-    return bus::UcanChildEnvironment(std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_ucan.so",
-                                     dir);
-  };
-  return o;
-}
+RunOptions Options(const fs::path& out) { return testing::BuildTreeRunOptions(out); }
 
 Scenario ShortPaper000() {
   Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");

@@ -1,0 +1,35 @@
+#pragma once
+// Shared by the end-to-end scenario tests: the run options of this build tree (its wheelhil-fw,
+// its DBC files, its libwheelhil_ucan.so for the firmware child) and reading an artefact whole.
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "bus/ucan_runtime_dir.h"
+#include "emulator/scenario/runner.h"
+
+namespace wheelhil::emulator::scenario::testing {
+
+inline std::string Slurp(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// Options for a run into `out` with this build's programs and a private userspace bus.
+inline RunOptions BuildTreeRunOptions(const std::filesystem::path& out) {
+  RunOptions o;
+  o.out_dir = out.string();
+  o.bin_dir = std::string(WHEELHIL_BINARY_DIR) + "/bin";
+  o.dbc_dir = std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc";
+  o.ucan_child_env = [](const std::string& dir) {
+    return bus::UcanChildEnvironment(std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_ucan.so",
+                                     dir);
+  };
+  return o;
+}
+
+}  // namespace wheelhil::emulator::scenario::testing
