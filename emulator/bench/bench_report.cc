@@ -160,6 +160,7 @@ std::vector<std::string> DocumentedMetricKeys() {
                         "rss.bus_mib",
                         "rss.realtime_mib",
                         "rss.lockstep_mib",
+                        "campaign.paper000_runs_per_s",
                         "rss.peak_mib",
                         "machine.cores"}) {
     keys.emplace_back(k);

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -129,6 +130,68 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
     SetPath(report, "rss.lockstep_mib",
             Unavailable(unavailable.empty() ? "no lockstep run completed" : unavailable));
   }
+}
+
+/// Campaign throughput (issue goal: >= 5 runs/s for 10 s paper-000 runs on 2 cores): a
+/// campaign of repeats of scenarios/paper000_slip.yaml cut to 10 s, run by `wheelhil campaign`
+/// with one job per core, each run on its own private bus with the reference firmware.
+/// runs_per_s = runs that left a report.json / wall time of the whole campaign command.
+void RunCampaignThroughput(const BenchOptions& o, const std::string& self_exe,
+                           const std::string& unavailable, nlohmann::json& report) {
+  const std::string key = "campaign.paper000_runs_per_s";
+  if (!unavailable.empty()) {
+    SetPath(report, key, Unavailable(unavailable));
+    return;
+  }
+  const std::string base = o.source_dir + "/scenarios/paper000_slip.yaml";
+  if (!std::filesystem::is_regular_file(base)) {
+    SetPath(report, key, Unavailable("no scenarios/paper000_slip.yaml"));
+    return;
+  }
+  std::string dir;
+  try {
+    dir = bus::CreateTempUcanRuntimeDir("wheelhil-bench-campaign-");
+  } catch (const std::exception& e) {
+    SetPath(report, key, Unavailable(e.what()));
+    return;
+  }
+  const int runs = o.quick ? 4 : 20;
+  const int jobs = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const double run_sim_s = 10.0;
+  {
+    std::ofstream f(dir + "/campaign.yaml");
+    f << "campaign: bench_paper000_throughput\n"
+      << "base: " << nlohmann::json(base).dump() << "\n"
+      << "sampling: grid\nseed: 1\n"
+      << "repeats: " << runs << "\ntimeout_s: 300\n"
+      << "set:\n  timing.duration_s: " << run_sim_s << "\n"
+      << "parameters:\n  - path: terrain.friction.mu_slide\n    values: [0.7]\n";
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const WorkerOutcome w =
+      RunWorkerProcess({self_exe, "campaign", dir + "/campaign.yaml", "--jobs",
+                        std::to_string(jobs), "--out", dir + "/out", "--quiet", "--no-html"},
+                       {}, /*expect_json=*/false);
+  const double wall_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  int finished = 0;
+  std::error_code ec;
+  for (auto it = std::filesystem::recursive_directory_iterator(dir + "/out", ec);
+       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec)) {
+    if (it->path().filename() == "report.json") ++finished;
+  }
+  if (finished == runs && wall_s > 0) {
+    SetPath(report, key, finished / wall_s);
+    SetPath(report, "campaign.paper000_runs", finished);
+    SetPath(report, "campaign.paper000_jobs", jobs);
+    SetPath(report, "campaign.paper000_run_sim_s", run_sim_s);
+  } else {
+    // A campaign whose runs fail their expectations still counts; runs without a report do not.
+    SetPath(report, key,
+            Unavailable(fmt::format("{} of {} campaign runs left a report.json ({})", finished,
+                                    runs, w.problem.empty() ? "no problem reported" : w.problem)));
+  }
+  std::filesystem::remove_all(dir, ec);
 }
 
 }  // namespace
@@ -332,6 +395,7 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
        "realtime.loaded_missed_deadlines"});
 
   RunLockstep(o, self_exe, lockstep_unavailable, report, peak_mib);
+  RunCampaignThroughput(o, self_exe, lockstep_unavailable, report);
   for (const char* k : {"rss.physics_mib", "rss.bus_mib", "rss.realtime_mib"}) {
     const nlohmann::json* r = GetPath(report, k);
     if (r && r->is_number() && !std::isfinite(r->get<double>())) {
