@@ -172,13 +172,107 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
   return t;
 }
 
-std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n, std::size_t wheels) {
+// Nominal planar pose (start frame: x forward, y left at the motion start) after `motion`, by
+// integrating its commanded body twist at 1 ms with the midpoint heading. Segments of direct
+// wheel speeds have no known path: returns false.
+bool NominalPoseAfter(const std::vector<MotionSegment>& motion, Eigen::Vector3d* pose) {
+  Eigen::Vector3d q = Eigen::Vector3d::Zero();
+  for (const auto& m : motion) {
+    if (m.kind == MotionSegment::Kind::kWheels) return false;
+    if (m.kind == MotionSegment::Kind::kHold) continue;
+    const std::vector<MotionSegment> one = {m};
+    const int steps = std::max(1, static_cast<int>(std::ceil(m.duration_s / 1e-3)));
+    const double dt = m.duration_s / steps;
+    for (int k = 0; k < steps; ++k) {
+      const platforms::BodyTwist v = TwistAt(one, (k + 0.5) * dt);
+      const double mid = q.z() + 0.5 * v.wz_rad_s * dt;
+      q.x() += (std::cos(mid) * v.vx_m_s - std::sin(mid) * v.vy_m_s) * dt;
+      q.y() += (std::sin(mid) * v.vx_m_s + std::cos(mid) * v.vy_m_s) * dt;
+      q.z() += v.wz_rad_s * dt;
+    }
+  }
+  *pose = q;
+  return true;
+}
+
+// A `waypoints` entry as trapezoid segments from the nominal pose after `before`: on a
+// holonomic platform one straight segment per point (heading kept), on a differential drive a
+// turn in place to face the point, then the straight.
+void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
+                     const platforms::Platform& platform, std::vector<MotionSegment>& out) {
+  r.CheckKeys(s, f,
+              {"type", "points_m", "speed", "accel", "turn_speed_rad_s", "turn_accel_rad_s2"});
+  const double speed = r.Number(s, "speed", f, 1e-6, 50, std::nullopt);
+  const double accel = r.Number(s, "accel", f, 1e-6, 1e3, std::nullopt);
+  const double turn_speed = r.Number(s, "turn_speed_rad_s", f, 1e-6, 50, 0.5);
+  const double turn_accel = r.Number(s, "turn_accel_rad_s2", f, 1e-6, 1e3, 1.0);
+  const YAML::Node pts = s["points_m"];
+  if (!pts.IsSequence() || pts.size() == 0) {
+    r.Fail(pts.IsDefined() ? pts : s, f + ".points_m", "must be a non-empty list of [x, y]");
+  }
+  Eigen::Vector3d pose;
+  if (!NominalPoseAfter(out, &pose)) {
+    r.Fail(s, f, "cannot follow a `wheels` segment (its path is not known in advance)");
+  }
+  const bool holonomic = platform.kinematics != platforms::KinematicsKind::kDiffDrive;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const YAML::Node pt = pts[i];
+    const std::string pf = fmt::format("{}.points_m[{}]", f, i);
+    Eigen::Vector2d target = Eigen::Vector2d::Zero();
+    try {
+      if (!pt.IsSequence() || pt.size() != 2) throw YAML::Exception(pt.Mark(), "");
+      target = {pt[0].as<double>(), pt[1].as<double>()};
+    } catch (const YAML::Exception&) {
+      r.Fail(pt, pf, "must be [x, y] in metres (start frame: x forward, y left)");
+    }
+    if (!target.allFinite()) r.Fail(pt, pf, "must be finite");
+    const Eigen::Vector2d d_W = target - pose.head<2>();
+    const double dist = d_W.norm();
+    if (dist < 1e-9) continue;  // already there
+    MotionSegment m;
+    m.kind = MotionSegment::Kind::kTrapezoid;
+    if (holonomic) {
+      const double c = std::cos(pose.z()), sn = std::sin(pose.z());
+      m.direction = Eigen::Vector3d(c * d_W.x() + sn * d_W.y(), -sn * d_W.x() + c * d_W.y(), 0);
+    } else {
+      const double turn =
+          std::remainder(std::atan2(d_W.y(), d_W.x()) - pose.z(), 2.0 * 3.14159265358979323846);
+      if (std::abs(turn) > 1e-9) {
+        MotionSegment t;
+        t.kind = MotionSegment::Kind::kTrapezoid;
+        t.direction = Eigen::Vector3d(0, 0, turn > 0 ? 1.0 : -1.0);
+        t.distance = std::abs(turn);
+        t.speed = turn_speed;
+        t.accel = turn_accel;
+        t.duration_s = TrapezoidDuration(t.distance, t.speed, t.accel);
+        out.push_back(t);
+        pose.z() += turn;
+      }
+      m.direction = Eigen::Vector3d::UnitX();
+    }
+    m.direction.normalize();
+    m.distance = dist;
+    m.speed = speed;
+    m.accel = accel;
+    m.duration_s = TrapezoidDuration(m.distance, m.speed, m.accel);
+    out.push_back(m);
+    pose.head<2>() = target;
+  }
+}
+
+std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
+                                      const platforms::Platform& platform) {
   if (!n.IsSequence() || n.size() == 0) r.Fail(n, "motion", "must be a non-empty list of segments");
   std::vector<MotionSegment> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node s = n[i];
     const std::string f = fmt::format("motion[{}]", i);
     const std::string type = r.String(s, "type", f, std::nullopt);
+    if (type == "waypoints") {
+      AppendWaypoints(r, s, f, platform, out);
+      continue;
+    }
+    const std::size_t wheels = platform.vehicle.wheels.size();
     MotionSegment m;
     if (type == "twist") {
       r.CheckKeys(s, f, {"type", "duration_s", "vx_m_s", "vy_m_s", "wz_rad_s"});
@@ -217,7 +311,7 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n, std:
       for (const auto& x : w) m.wheel_speeds_rad_s.push_back(x.as<double>());
     } else {
       r.Fail(s["type"], f + ".type",
-             fmt::format("'{}' is not one of twist, trapezoid, hold, wheels", type));
+             fmt::format("'{}' is not one of twist, trapezoid, hold, wheels, waypoints", type));
     }
     out.push_back(std::move(m));
   }
@@ -768,7 +862,7 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
     }
   }
   s.terrain = ReadTerrain(r, root["terrain"]);
-  s.motion = ReadMotion(r, root["motion"], s.platform.vehicle.wheels.size());
+  s.motion = ReadMotion(r, root["motion"], s.platform);
   s.sensors = ReadSensors(r, root["sensors"], s.platform);
   s.faults = ReadFaults(r, root["faults"], s.sensors, s.platform);
   s.firmware = ReadFirmware(r, root["firmware"]);

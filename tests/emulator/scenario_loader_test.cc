@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -154,6 +155,96 @@ TEST(ScenarioLoader, PlatformOverridesAreMergedIntoThePlatformFile) {
   EXPECT_THAT(
       [&] { (void)ParseScenario(scalar, kFile); },
       ThrowsMessage<std::invalid_argument>(HasSubstr("platform.overrides: must be a mapping")));
+}
+
+// The commanded path of `motion`, integrated here independently of the loader (0.1 ms, midpoint
+// heading): final (x, y, heading) in the start frame.
+Eigen::Vector3d IntegrateCommandedPath(const std::vector<MotionSegment>& motion) {
+  Eigen::Vector3d q = Eigen::Vector3d::Zero();
+  const double dt = 1e-4, total = MotionDuration(motion);
+  for (double t = 0; t < total; t += dt) {
+    const platforms::BodyTwist v = TwistAt(motion, t + dt / 2);
+    const double mid = q.z() + 0.5 * v.wz_rad_s * dt;
+    q.x() += (std::cos(mid) * v.vx_m_s - std::sin(mid) * v.vy_m_s) * dt;
+    q.y() += (std::sin(mid) * v.vx_m_s + std::cos(mid) * v.vy_m_s) * dt;
+    q.z() += v.wz_rad_s * dt;
+  }
+  return q;
+}
+
+std::string WithMotion(std::string text, const std::string& motion_lines) {
+  const std::string old = "  - {type: twist, duration_s: 1, vx_m_s: 0.2}\n";
+  text.replace(text.find(old), old.size(), motion_lines);
+  return text;
+}
+
+TEST(ScenarioLoader, WaypointsOnADiffDriveTurnInPlaceThenDriveStraight) {
+  const Scenario s = ParseScenario(
+      WithMotion(Minimal(),
+                 "  - {type: waypoints, points_m: [[1, 0], [1, 1], [0, 1], [0, 0]], speed: 0.2,\n"
+                 "     accel: 0.5, turn_speed_rad_s: 0.8, turn_accel_rad_s2: 2}\n"),
+      kFile);
+  // straight, then (turn +90 deg, straight) x 3
+  ASSERT_EQ(s.motion.size(), 7u);
+  for (std::size_t i = 0; i < 7; ++i) {
+    ASSERT_EQ(s.motion[i].kind, MotionSegment::Kind::kTrapezoid) << i;
+    if (i % 2 == 0) {
+      EXPECT_TRUE(s.motion[i].direction.isApprox(Eigen::Vector3d::UnitX())) << i;
+      EXPECT_NEAR(s.motion[i].distance, 1.0, 1e-12) << i;
+      EXPECT_DOUBLE_EQ(s.motion[i].speed, 0.2);
+    } else {
+      EXPECT_TRUE(s.motion[i].direction.isApprox(Eigen::Vector3d::UnitZ())) << i;  // left turn
+      EXPECT_NEAR(s.motion[i].distance, M_PI / 2, 1e-9) << i;
+      EXPECT_DOUBLE_EQ(s.motion[i].speed, 0.8);
+    }
+  }
+  const Eigen::Vector3d end = IntegrateCommandedPath(s.motion);
+  EXPECT_NEAR(end.x(), 0.0, 1e-3);
+  EXPECT_NEAR(end.y(), 0.0, 1e-3);
+  EXPECT_NEAR(end.z(), 3 * M_PI / 2, 1e-3);
+}
+
+TEST(ScenarioLoader, WaypointsOnAHolonomicPlatformKeepTheHeadingAfterEarlierSegments) {
+  const std::string text =
+      "name: t\n"
+      "platform: platforms/mecanum4_omni3.yaml\n"
+      "motion:\n"
+      "  - {type: twist, duration_s: 1, wz_rad_s: 1.5707963267948966}\n"  // faces +y
+      "  - {type: waypoints, points_m: [[0, 1], [-1, 1]], speed: 0.2, accel: 0.5}\n"
+      "sensors:\n"
+      "  encoders:\n"
+      "    nodes:\n"
+      "      - {wheel: follower_front, node_id: 1}\n";
+  const Scenario s = ParseScenario(text, kFile);
+  ASSERT_EQ(s.motion.size(), 3u);
+  // after the quarter turn to the left, world +y is body forward and world -x body left
+  EXPECT_TRUE(s.motion[1].direction.isApprox(Eigen::Vector3d::UnitX(), 1e-6));
+  EXPECT_TRUE(s.motion[2].direction.isApprox(Eigen::Vector3d::UnitY(), 1e-6));
+  const Eigen::Vector3d end = IntegrateCommandedPath(s.motion);
+  EXPECT_NEAR(end.x(), -1.0, 1e-3);
+  EXPECT_NEAR(end.y(), 1.0, 1e-3);
+  EXPECT_NEAR(end.z(), M_PI / 2, 1e-3);
+}
+
+TEST(ScenarioLoader, WaypointErrorsNameTheField) {
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(WithMotion(Minimal(),
+                                       "  - {type: waypoints, points_m: [[1, 0], [2]],"
+                                       " speed: 0.2, accel: 0.5}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("motion[0].points_m[1]: must be [x, y]")));
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(
+            WithMotion(Minimal(),
+                       "  - {type: wheels, duration_s: 1, omega_rad_s: [1, 1, 0, 0]}\n"
+                       "  - {type: waypoints, points_m: [[1, 0]], speed: 0.2, accel: 0.5}\n"),
+            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(
+          AllOf(HasSubstr(":5:5: motion[1]"), HasSubstr("cannot follow a `wheels` segment"))));
 }
 
 TEST(MotionProfile, TrapezoidCoversTheDistance) {
