@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 
@@ -245,6 +246,22 @@ TEST(ScenarioLoader, WaypointErrorsNameTheField) {
       },
       ThrowsMessage<std::invalid_argument>(
           AllOf(HasSubstr(":5:5: motion[1]"), HasSubstr("cannot follow a `wheels` segment"))));
+}
+
+TEST(ScenarioLoader, EveryShippedScenarioLoads) {
+  // scenarios/*.yaml and scenarios/smoke/*.yaml (platforms/, firmware/ and campaigns/ hold
+  // other file kinds).
+  int loaded = 0;
+  for (const char* dir : {"/scenarios", "/scenarios/smoke"}) {
+    for (const auto& e :
+         std::filesystem::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) + dir)) {
+      if (e.path().extension() != ".yaml") continue;
+      SCOPED_TRACE(e.path().string());
+      EXPECT_NO_THROW((void)LoadScenarioFile(e.path().string()));
+      ++loaded;
+    }
+  }
+  EXPECT_GE(loaded, 20);
 }
 
 TEST(MotionProfile, TrapezoidCoversTheDistance) {

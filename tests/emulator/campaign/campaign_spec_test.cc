@@ -5,6 +5,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <filesystem>
 #include <set>
 
 #include "emulator/campaign/scenario_writer.h"
@@ -26,6 +27,21 @@ class CampaignSpecTest : public ::testing::Test {
   }
   TempDir dir_;
 };
+
+TEST(ShippedCampaigns, EveryCampaignLoadsAndExpands) {
+  int loaded = 0;
+  for (const auto& e : std::filesystem::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) +
+                                                           "/scenarios/campaigns")) {
+    if (e.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(e.path().string());
+    CampaignSpec spec;
+    ASSERT_NO_THROW(spec = LoadCampaignFile(e.path()));
+    EXPECT_FALSE(ExpandRuns(spec).empty());
+    EXPECT_TRUE(std::filesystem::is_regular_file(spec.base_scenario)) << spec.base_scenario;
+    ++loaded;
+  }
+  EXPECT_GE(loaded, 4);  // paper 000, 001, 002 and the bus-fault campaign
+}
 
 TEST_F(CampaignSpecTest, GridIsTheProductOfListsAndRangesTimesRepeats) {
   const auto spec = Parse(R"(campaign: grid
