@@ -414,22 +414,27 @@ paper000: {track_width_m: 0.5, wheel_radius_m: 0.075, counts_per_rev: 2000,
   EXPECT_EQ(b.app().last_faults() & kFaultNodeLost, kFaultNodeLost);
 }
 
+// Encoder positions of kPaper002's three wheels after k cycles (1 ms) at vx = 0.1 m/s forward:
+// wheel j at angle beta_j rolls along (-sin b, cos b), rim speed -sin(b) * vx, so it moves
+// -sin(b) * 0.1 mm per cycle; 4096 counts per revolution of a 0.05 m wheel.
+std::map<int, std::uint32_t> Paper002ForwardCounts(int k) {
+  const double cpr = 4096, r = 0.05;
+  std::map<int, std::uint32_t> pos;
+  for (int j = 0; j < 3; ++j) {
+    const double beta = j * 2.0 * M_PI / 3.0;
+    const double rim_m = -std::sin(beta) * 0.1 * k * 1e-3;
+    pos[j + 1] = static_cast<std::uint32_t>(
+        static_cast<std::int64_t>(std::llround(rim_m / (2 * M_PI * r) * cpr)));
+  }
+  return pos;
+}
+
 TEST(FwApp, Paper002ConstantVelocityFusesToTheOdometry) {
   Bench b(kPaper002);
   b.StartUp();
-  // vx = 0.1 m/s forward: wheel j at angle beta_j rolls along (-sin b, cos b): rim speed
-  // -sin(b) * vx. Per 1 ms: -sin(b) * 0.1 mm.
-  const double cpr = 4096, r = 0.05;
   std::vector<bus::CanFrame> frames;
   for (int k = 0; k < 600; ++k) {
-    std::map<int, std::uint32_t> pos;
-    for (int j = 0; j < 3; ++j) {
-      const double beta = j * 2.0 * M_PI / 3.0;
-      const double rim_m = -std::sin(beta) * 0.1 * k * 1e-3;
-      pos[j + 1] = static_cast<std::uint32_t>(
-          static_cast<std::int64_t>(std::llround(rim_m / (2 * M_PI * r) * cpr)));
-    }
-    frames = b.Cycle(pos, 0.0, {0, 0, 0, 0});
+    frames = b.Cycle(Paper002ForwardCounts(k), 0.0, {0, 0, 0, 0});
   }
   ASSERT_EQ(frames.size(), 5u);
   const OutValues fused = b.Out(frames, OutMessage::kVelocity);
@@ -452,19 +457,12 @@ TEST(FwApp, Paper002EncoderDropoutNeitherSpikesTheVelocityNorLosesTravel) {
   auto run = [](bool dropout) {
     Bench b(kPaper002);
     b.StartUp();
-    const double cpr = 4096, r = 0.05;
     std::vector<bus::CanFrame> frames;
     double max_fused_err = 0.0, max_odom_err = 0.0;
     int incomplete = 0, degraded = 0;
     constexpr int kGapStart = 300, kGapEnd = 500, kCycles = 900;
     for (int k = 0; k < kCycles; ++k) {
-      std::map<int, std::uint32_t> pos;
-      for (int j = 0; j < 3; ++j) {
-        const double beta = j * 2.0 * M_PI / 3.0;
-        const double rim_m = -std::sin(beta) * 0.1 * k * 1e-3;
-        pos[j + 1] = static_cast<std::uint32_t>(
-            static_cast<std::int64_t>(std::llround(rim_m / (2 * M_PI * r) * cpr)));
-      }
+      const std::map<int, std::uint32_t> pos = Paper002ForwardCounts(k);
       const bool silent = dropout && k >= kGapStart && k < kGapEnd;
       if (silent) b.drop_next_tpdo_[1] = true;
       frames = b.Cycle(pos, 0.0, {0, 0, 0, 0});
