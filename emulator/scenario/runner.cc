@@ -129,6 +129,23 @@ class Firmware {
   int exit_status_ = 0;
 };
 
+// CAN receivers the kernel has registered on `iface` (one per filter of every bound CAN socket),
+// from /proc/net/can/rcvlist_*; -1 when none of those lists can be read.
+int CountKernelCanReceivers(const std::string& iface) {
+  int count = -1;
+  for (const char* list : {"all", "fil", "inv", "sff", "eff", "err"}) {
+    std::ifstream in(std::string("/proc/net/can/rcvlist_") + list);
+    if (!in) continue;
+    count = std::max(count, 0);
+    std::string line, first;
+    while (std::getline(in, line)) {
+      std::istringstream words(line);
+      if (words >> first && first == iface) ++count;
+    }
+  }
+  return count;
+}
+
 std::string Substitute(std::string s, const std::string& key, const std::string& value) {
   for (std::size_t pos = s.find(key); pos != std::string::npos; pos = s.find(key, pos)) {
     s.replace(pos, key.size(), value);
@@ -237,6 +254,7 @@ class Run {
   int last_status_cycle_ = -1;
   std::uint64_t status_frames_ = 0;
   std::set<int> awaiting_nodes_;  // Nodes whose boot-up/SDO answer the firmware must react to.
+  int kernel_receivers_before_fw_ = -1;  // Kernel bus: CountKernelCanReceivers before the firmware.
   int last_fw_state_ = -1;
   std::uint64_t fw_frames_ = 0;
   // Which encoders' TPDO1 (their COB-ID and DBC length, as the firmware accepts it) went out
@@ -404,8 +422,27 @@ void Run::OpenBus() {
 
 bool Run::WaitForFirmwareConnection(std::string& why) {
   if (!broker_) {
-    // A kernel bus gives no way to see the other side: give it a moment to bind.
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    // A kernel bus has no broker to see the other side, but the kernel's receive lists show a
+    // socket bound to the interface: wait (up to the timeout) for one more receiver than before
+    // the firmware started, else (lists unreadable) give it 300 ms. Frames sent before it binds
+    // are lost to it (a boot-up in the user-mode-linux guest was). A firmware command that never
+    // binds here (a real board's flasher, exit status 0) only costs the wait.
+    if (kernel_receivers_before_fw_ < 0) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      return true;
+    }
+    const auto t0 = Clock::now();
+    while (WallSeconds(t0) < s_.timing.timeout_s &&
+           CountKernelCanReceivers(iface_) <= kernel_receivers_before_fw_) {
+      if (auto code = firmware_.Exited(); code && *code != 0) {
+        why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
+                          *code, iface_);
+        return false;
+      } else if (code) {
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
     return true;
   }
   const auto t0 = Clock::now();
@@ -1057,6 +1094,7 @@ RunResult Run::Execute() {
     std::vector<std::pair<std::string, std::string>> env;
     if (broker_ && o_.ucan_child_env) env = o_.ucan_child_env(runtime_dir_);
     env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
+    if (!broker_) kernel_receivers_before_fw_ = CountKernelCanReceivers(iface_);
     firmware_.Start(cmd, env, out_ + "/firmware.log");
     std::string why;
     if (!WaitForFirmwareConnection(why)) failure_ = why;
