@@ -1,11 +1,8 @@
 #include "emulator/bench/bench_workloads.h"
 
 #include <linux/can.h>
-#include <net/if.h>
-#include <poll.h>
 #include <pthread.h>
 #include <sched.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -24,6 +21,7 @@
 #include "bus/socketcan_transport.h"
 #include "bus/ucan_broker.h"
 #include "emulator/bench/bench_report.h"
+#include "emulator/bench/fan_out_readers.h"
 #include "emulator/physics/physics_world.h"
 #include "emulator/platforms/platform.h"
 #include "emulator/realtime/paper002_device_set.h"
@@ -68,19 +66,6 @@ double MeasureWorld(const std::string& source_dir, const std::string& platform, 
 
 // ---------------------------------------------------------------- bus
 
-int OpenCan(const char* name) {
-  const int fd = ::socket(PF_CAN, SOCK_RAW, CAN_RAW);
-  if (fd < 0) return -1;
-  sockaddr_can addr{};
-  addr.can_family = AF_CAN;
-  addr.can_ifindex = static_cast<int>(::if_nametoindex(name));
-  if (addr.can_ifindex == 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
-
 struct FanOutResult {
   double frames_per_s = 0;
   std::uint64_t lost = 0;
@@ -90,9 +75,9 @@ struct FanOutResult {
 /// One writer, `readers` readers, flow-controlled by `window` frames in flight.
 FanOutResult MeasureFanOut(const char* iface, int readers, double wall_s, std::uint64_t window) {
   FanOutResult result;
-  const int tx = OpenCan(iface);
+  const int tx = OpenRawCan(iface);
   std::vector<int> rx;
-  for (int i = 0; i < readers; ++i) rx.push_back(OpenCan(iface));
+  for (int i = 0; i < readers; ++i) rx.push_back(OpenRawCan(iface));
   if (tx < 0 || std::count(rx.begin(), rx.end(), -1) > 0) {
     result.problem = fmt::format("cannot open {}: {}", iface, std::strerror(errno));
     if (tx >= 0) ::close(tx);
@@ -101,43 +86,18 @@ FanOutResult MeasureFanOut(const char* iface, int readers, double wall_s, std::u
     }
     return result;
   }
-  std::vector<std::atomic<std::uint64_t>> received(static_cast<std::size_t>(readers));
-  std::atomic<bool> writer_done{false};
-  std::vector<std::thread> threads;
-  for (int i = 0; i < readers; ++i) {
-    threads.emplace_back([&, i] {
-      can_frame f{};
-      pollfd p{rx[i], POLLIN, 0};
-      while (true) {
-        const int n = ::poll(&p, 1, 200);
-        if (n > 0) {
-          if (::read(rx[i], &f, sizeof(f)) != sizeof(f)) return;
-          received[i].fetch_add(1, std::memory_order_release);
-        } else if (n == 0 && writer_done.load(std::memory_order_acquire)) {
-          return;  // nothing for 200 ms after the last frame: the rest was dropped
-        } else if (n < 0 && errno != EINTR) {
-          return;
-        }
-      }
-    });
-  }
-  auto slowest = [&] {
-    std::uint64_t m = UINT64_MAX;
-    for (auto& r : received) m = std::min(m, r.load(std::memory_order_acquire));
-    return m;
-  };
+  FanOutReaders reader_threads(rx);
   can_frame f{};
   f.can_id = 0x123;
   f.can_dlc = 8;
   std::uint64_t sent = 0;
   const Clock::time_point t0 = Clock::now();
+  // A reader that stalls for 2 s past the measuring time no longer holds the writer back.
+  const Clock::time_point give_up =
+      t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(wall_s + 2.0));
   while (SecondsSince(t0) < wall_s) {
     for (int burst = 0; burst < 256; ++burst) {
-      int spins = 0;
-      while (sent - slowest() >= window) {
-        if (++spins > 1000 && SecondsSince(t0) > wall_s + 2.0) break;  // a reader stalled
-        std::this_thread::sleep_for(std::chrono::microseconds(20));
-      }
+      reader_threads.WaitForWindow(sent, window, give_up);
       std::memcpy(f.data, &sent, sizeof(sent));
       if (::write(tx, &f, sizeof(f)) != sizeof(f)) {
         if (errno == ENOBUFS || errno == EAGAIN) {
@@ -152,16 +112,12 @@ FanOutResult MeasureFanOut(const char* iface, int readers, double wall_s, std::u
     if (!result.problem.empty()) break;
   }
   // Wait for the readers to catch up (bounded: frames the bus dropped never arrive).
-  const Clock::time_point drain0 = Clock::now();
-  while (slowest() < sent && SecondsSince(drain0) < 2.0) {
-    std::this_thread::sleep_for(std::chrono::microseconds(50));
-  }
+  reader_threads.WaitForAll(sent, 2.0);
   const double elapsed = SecondsSince(t0);
-  writer_done = true;
-  for (auto& t : threads) t.join();
+  reader_threads.Stop();
   ::close(tx);
   for (int fd : rx) ::close(fd);
-  const std::uint64_t delivered = slowest();
+  const std::uint64_t delivered = reader_threads.Slowest();
   result.lost = sent - delivered;
   result.frames_per_s = static_cast<double>(delivered) / elapsed;
   return result;

@@ -5,37 +5,27 @@
 //   build-*/bin/ucan_bench --benchmark_min_time=2
 
 #include <linux/can.h>
-#include <net/if.h>
 #include <stdlib.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <benchmark/benchmark.h>
 
-#include <atomic>
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "bus/ucan_broker.h"
+#include "emulator/bench/fan_out_readers.h"
 
 namespace {
 
-constexpr std::uint64_t kWindow = 2048;
+using wheelhil::emulator::bench::FanOutReaders;
+using wheelhil::emulator::bench::OpenRawCan;
 
-int OpenCan(const char* name) {
-  const int fd = ::socket(PF_CAN, SOCK_RAW, CAN_RAW);
-  sockaddr_can addr{};
-  addr.can_family = AF_CAN;
-  addr.can_ifindex = static_cast<int>(::if_nametoindex(name));
-  if (fd < 0 || addr.can_ifindex == 0 ||
-      ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-    return -1;
-  }
-  return fd;
-}
+constexpr std::uint64_t kWindow = 2048;
 
 void BM_UcanFanOut(benchmark::State& state) {
   const int readers = static_cast<int>(state.range(0));
@@ -47,39 +37,24 @@ void BM_UcanFanOut(benchmark::State& state) {
     options.runtime_dir = dir;
     wheelhil::bus::UcanBroker broker(options);
     broker.AddBus("ucan0");
-    const int tx = OpenCan("ucan0");
+    const int tx = OpenRawCan("ucan0");
     std::vector<int> rx;
-    for (int i = 0; i < readers; ++i) rx.push_back(OpenCan("ucan0"));
-    if (tx < 0) state.SkipWithError("cannot open ucan0");
-
-    std::vector<std::atomic<std::uint64_t>> received(static_cast<std::size_t>(readers));
-    std::atomic<bool> stop{false};
-    std::vector<std::thread> threads;
-    for (int i = 0; i < readers; ++i) {
-      threads.emplace_back([&, i] {
-        can_frame f{};
-        while (!stop.load(std::memory_order_relaxed)) {
-          if (::read(rx[i], &f, sizeof(f)) == sizeof(f)) {
-            received[i].fetch_add(1, std::memory_order_release);
-          } else {
-            return;
-          }
-        }
-      });
+    for (int i = 0; i < readers; ++i) rx.push_back(OpenRawCan("ucan0"));
+    if (tx < 0 || std::count(rx.begin(), rx.end(), -1) > 0) {
+      state.SkipWithError("cannot open ucan0");
     }
-    auto slowest = [&] {
-      std::uint64_t m = UINT64_MAX;
-      for (auto& r : received) m = std::min(m, r.load(std::memory_order_acquire));
-      return m;
-    };
 
+    FanOutReaders reader_threads(rx);
     can_frame f{};
     f.can_id = 0x123;
     f.can_dlc = 8;
     std::uint64_t sent = 0;
     for (auto _ : state) {
-      while (sent - slowest() >= kWindow) {
-        std::this_thread::sleep_for(std::chrono::microseconds(50));  // no CPU stolen
+      // The writer sleeps while the window is full: no CPU taken from the readers.
+      if (!reader_threads.WaitForWindow(sent, kWindow,
+                                        FanOutReaders::Clock::now() + std::chrono::seconds(10))) {
+        state.SkipWithError("a reader stalled for 10 s");
+        break;
       }
       std::memcpy(f.data, &sent, sizeof(sent));
       if (::write(tx, &f, sizeof(f)) != sizeof(f)) {
@@ -88,13 +63,13 @@ void BM_UcanFanOut(benchmark::State& state) {
       }
       ++sent;
     }
-    while (slowest() < sent) std::this_thread::sleep_for(std::chrono::microseconds(50));
+    if (!reader_threads.WaitForAll(sent, 10.0)) state.SkipWithError("frames never arrived");
     if (broker.Stats().at(0).drops != 0) state.SkipWithError("frames were dropped");
-    stop = true;
+    reader_threads.Stop();
     ::close(tx);
-    broker.RemoveBus("ucan0");  // unblocks the readers (EOF)
-    for (auto& t : threads) t.join();
-    for (int fd : rx) ::close(fd);
+    for (int fd : rx) {
+      if (fd >= 0) ::close(fd);
+    }
     state.SetItemsProcessed(static_cast<std::int64_t>(sent));
     state.counters["deliveries_per_s"] =
         benchmark::Counter(static_cast<double>(sent) * readers, benchmark::Counter::kIsRate);
