@@ -42,6 +42,10 @@ std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::stri
   argv.push_back(std::to_string(o.fifo_priority));
   argv.push_back("--cpu");
   argv.push_back(std::to_string(o.cpu));
+  argv.push_back("--bus-cpu");
+  argv.push_back(std::to_string(o.bus_cpu));
+  argv.push_back("--spin-us");
+  argv.push_back(fmt::format("{}", o.spin_us));
   argv.push_back("--load-threads");
   argv.push_back(std::to_string(o.load_threads));
   return argv;
@@ -289,6 +293,9 @@ nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
     r.sched_fifo = o.sched_fifo;
     r.fifo_priority = o.fifo_priority;
     r.cpu = o.cpu;
+    r.pipeline_cpu = o.bus_cpu;
+    r.spin_us = o.spin_us;
+    r.bare_timer_s = o.quick ? 0.2 : 1.0;
     if (name == "realtime-loaded") {
       r.prefix = "realtime.loaded_";
       r.load_threads = o.load_threads >= 0
@@ -385,10 +392,19 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
     SetPath(report, "bus.ucan_vs_vcan_ratio", Unavailable("needs both bus rates"));
   }
 
-  const std::vector<std::string> rt_keys = {"realtime.p50_us",         "realtime.p99_us",
-                                            "realtime.max_us",         "realtime.missed_deadlines",
-                                            "realtime.frames",         "realtime.duration_s",
-                                            "realtime.arrival_p99_us", "realtime.scheduling"};
+  const std::vector<std::string> rt_keys = {"realtime.p50_us",
+                                            "realtime.p99_us",
+                                            "realtime.max_us",
+                                            "realtime.missed_deadlines",
+                                            "realtime.frames",
+                                            "realtime.duration_s",
+                                            "realtime.arrival_p99_us",
+                                            "realtime.scheduling",
+                                            "realtime.spin_us",
+                                            "realtime.bare_timer_p99_us",
+                                            "realtime.bare_timer_max_us",
+                                            "realtime.bare_spin_p99_us",
+                                            "realtime.bare_spin_max_us"};
   SetPath(report, "rss.realtime_mib", run("realtime", true, rt_keys));
   run("realtime-loaded", true,
       {"realtime.loaded_p50_us", "realtime.loaded_p99_us", "realtime.loaded_max_us",

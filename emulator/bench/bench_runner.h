@@ -19,9 +19,11 @@ struct BenchOptions {
   std::string source_dir;  ///< Repository root (platforms, meshes, DBC files).
   bool sched_fifo = true;  ///< Real-time row: ask for SCHED_FIFO + mlockall.
   int fifo_priority = 80;
-  int cpu = -1;           ///< Real-time row: pin the pacer; -1 = no pinning.
-  int load_threads = -1;  ///< Busy threads of the loaded real-time run; -1 = one per core.
-  bool uml = false;       ///< Measure the kernel vcan inside the user-mode-linux test kernel.
+  int cpu = -1;            ///< Real-time row: pin the pacer; -1 = no pinning.
+  int bus_cpu = -1;        ///< Real-time row: pin broker, producer, writer, reader; -1 = no.
+  double spin_us = 100.0;  ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
+  int load_threads = -1;   ///< Busy threads of the loaded real-time run; -1 = one per core.
+  bool uml = false;        ///< Measure the kernel vcan inside the user-mode-linux test kernel.
 };
 
 /// Environment entries a child needs to reach the userspace buses of `runtime_dir` (LD_PRELOAD

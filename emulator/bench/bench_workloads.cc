@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -222,7 +223,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       SetPath(report, px + k, Unavailable(reason));
     }
     if (main_run) {
-      for (const char* k : {"frames", "duration_s", "arrival_p99_us"}) {
+      for (const char* k :
+           {"frames", "duration_s", "arrival_p99_us", "spin_us", "bare_timer_p99_us",
+            "bare_timer_max_us", "bare_spin_p99_us", "bare_spin_max_us"}) {
         SetPath(report, px + k, Unavailable(reason));
       }
       SetPath(report, "realtime.scheduling", Unavailable(reason));
@@ -257,6 +260,19 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       po.lock_memory = false;
       po.fifo_priority = std::max(1, options.fifo_priority - 1);
       pipeline = ApplyRealtimeSettings(po);
+    }
+    // Threads inherit the CPU mask of the thread that starts them: with pipeline_cpu the
+    // broker, producer, writer and reader start pinned, the pacer and the load threads with this
+    // thread's original mask (restored below).
+    cpu_set_t original_mask;
+    const bool have_mask =
+        ::pthread_getaffinity_np(::pthread_self(), sizeof(original_mask), &original_mask) == 0;
+    bool pipeline_pinned = false;
+    if (options.pipeline_cpu >= 0 && options.pipeline_cpu < CPU_SETSIZE && have_mask) {
+      cpu_set_t set;
+      CPU_ZERO(&set);
+      CPU_SET(options.pipeline_cpu, &set);
+      pipeline_pinned = ::pthread_setaffinity_np(::pthread_self(), sizeof(set), &set) == 0;
     }
     bus::UcanBrokerOptions bo;
     bo.runtime_dir = dir;
@@ -325,6 +341,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
         }
       }
     });
+    if (pipeline_pinned) {
+      ::pthread_setaffinity_np(::pthread_self(), sizeof(original_mask), &original_mask);
+    }
     std::vector<std::thread> load;
     for (int i = 0; i < options.load_threads; ++i) {
       load.emplace_back([&] {
@@ -336,7 +355,10 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     }
 
     TransportSink sink(tx);
-    const std::int64_t start_ns = MonotonicNowNs() + 50'000'000;
+    const std::int64_t spin_ns = std::llround(std::max(0.0, options.spin_us) * 1e3);
+    const int bare_count = main_run ? static_cast<int>(options.bare_timer_s * 1000.0) : 0;
+    std::vector<std::int64_t> bare_timer_ns, bare_spin_ns;
+    std::int64_t start_ns = 0;
     RealtimeStatus rt;
     PacerStats stats;
     std::thread pacer([&] {
@@ -346,7 +368,11 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       ro.fifo_priority = options.fifo_priority;
       ro.cpu = options.cpu;
       rt = ApplyRealtimeSettings(ro);
-      FramePacer p(input, records, sink);
+      // What the timer alone does on this thread, with the same settings, in the same run.
+      bare_timer_ns = MeasureWakeErrorsNs(1'000'000, bare_count, 0);
+      if (spin_ns > 0) bare_spin_ns = MeasureWakeErrorsNs(1'000'000, bare_count, spin_ns);
+      start_ns = MonotonicNowNs() + 20'000'000;
+      FramePacer p(input, records, sink, spin_ns);
       stats = p.Run(start_ns, producer_done, stop);
       pacer_done.store(true, std::memory_order_release);
     });
@@ -363,9 +389,10 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     reader_stop = true;
     reader.join();
 
-    std::vector<double> error_us, wake_us;
+    std::vector<double> error_us, wake_us, send_us;
     error_us.reserve(log.size());
     wake_us.reserve(log.size());
+    send_us.reserve(log.size());
     std::uint64_t missed = 0;
     int first_error = 0;
     for (const SendRecord& r : log) {
@@ -373,6 +400,7 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       const double e = static_cast<double>(r.sent_ns - r.nominal_ns) * 1e-3;
       error_us.push_back(e);
       wake_us.push_back(static_cast<double>(r.woke_ns - r.nominal_ns) * 1e-3);
+      send_us.push_back(static_cast<double>(r.sent_ns - r.woke_ns) * 1e-3);
       if (e > options.miss_threshold_us || r.error != 0) ++missed;
     }
     if (error_us.empty()) return fail("no frame was sent");
@@ -381,6 +409,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     SetPath(report, px + "max_us", Percentile(error_us, 100));
     SetPath(report, px + "missed_deadlines", missed);
     SetPath(report, px + "wake_p99_us", Percentile(wake_us, 99));
+    SetPath(report, px + "wake_max_us", Percentile(wake_us, 100));
+    SetPath(report, px + "send_p99_us", Percentile(send_us, 99));
+    SetPath(report, px + "send_max_us", Percentile(send_us, 100));
     if (main_run) {
       std::vector<double> arrival_us;
       const std::size_t n = std::min(arrivals_ns.size(), log.size());
@@ -401,15 +432,36 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       SetPath(report, "realtime.records_dropped", stats.records_dropped);
       SetPath(report, "realtime.device_problems", devices.problems());
       SetPath(report, "realtime.miss_threshold_us", options.miss_threshold_us);
-      std::string sched =
-          fmt::format("{}, {}{}",
-                      rt.sched_fifo ? fmt::format("SCHED_FIFO {}", options.fifo_priority)
-                                    : std::string("SCHED_OTHER"),
-                      rt.memory_locked ? "memory locked" : "memory not locked",
-                      rt.pinned_cpu >= 0 ? fmt::format(", pinned to CPU {}", rt.pinned_cpu) : "");
+      SetPath(report, "realtime.spin_us", spin_ns * 1e-3);
+      auto bare = [&](const std::string& name, const std::vector<std::int64_t>& ns) {
+        std::vector<double> us;
+        for (const std::int64_t e : ns) us.push_back(static_cast<double>(e) * 1e-3);
+        const std::string why = bare_count == 0 ? "no bare-timer loop in this run"
+                                                : "spin margin 0: the pacer only sleeps";
+        for (const auto& [k, p] :
+             {std::pair{"p50_us", 50.0}, std::pair{"p99_us", 99.0}, std::pair{"max_us", 100.0}}) {
+          SetPath(
+              report, fmt::format("realtime.{}_{}", name, k),
+              us.empty() ? nlohmann::json(Unavailable(why)) : nlohmann::json(Percentile(us, p)));
+        }
+      };
+      bare("bare_timer", bare_timer_ns);
+      bare("bare_spin", bare_spin_ns);
+      std::string sched = fmt::format(
+          "{}, {}, timer slack {} ns, {}{}",
+          rt.sched_fifo ? fmt::format("SCHED_FIFO {}", options.fifo_priority)
+                        : std::string("SCHED_OTHER"),
+          rt.memory_locked ? "memory locked" : "memory not locked", rt.timer_slack_ns,
+          spin_ns > 0 ? fmt::format("hybrid wait (sleep, then spin the last {} us)", spin_ns / 1000)
+                      : std::string("clock_nanosleep only"),
+          rt.pinned_cpu >= 0 ? fmt::format(", pinned to CPU {}", rt.pinned_cpu) : "");
       if (pipeline.sched_fifo) {
         sched += fmt::format("; bus broker, producer and reader SCHED_FIFO {}",
                              std::max(1, options.fifo_priority - 1));
+      }
+      if (pipeline_pinned) {
+        sched += fmt::format("; broker, producer, writer, reader pinned to CPU {}",
+                             options.pipeline_cpu);
       }
       if (!rt.notes.empty()) sched += " (" + JoinNotes(rt.notes) + ")";
       if (!options.sched_fifo) sched += " (--no-rt)";

@@ -29,7 +29,16 @@ struct RealtimeWorkloadOptions {
   double duration_s = 10.0;  ///< Paced stream length.
   bool sched_fifo = true;    ///< Ask for SCHED_FIFO (and mlockall).
   int fifo_priority = 80;
-  int cpu = -1;                       ///< Pin the pacer; -1 = no pinning.
+  int cpu = -1;  ///< Pin the pacer; -1 = no pinning.
+  /// Pin the ucan broker, producer, writer and reader threads (they inherit it from the thread
+  /// that starts them); -1 = no pinning.
+  int pipeline_cpu = -1;
+  /// Margin of the pacer's hybrid wait (clock_nanosleep to deadline - spin, then spin), µs;
+  /// 0 = clock_nanosleep only.
+  double spin_us = 100.0;
+  /// Length of each bare-timer loop (1 kHz, on the pacer's thread, before the stream), s;
+  /// 0 = none.
+  double bare_timer_s = 1.0;
   int load_threads = 0;               ///< Busy threads competing for the CPUs during the run.
   double miss_threshold_us = 1000.0;  ///< A frame later than this missed its deadline.
   std::string prefix = "realtime.";   ///< Key prefix: "realtime." or "realtime.loaded_".
@@ -38,7 +47,8 @@ struct RealtimeWorkloadOptions {
 /// a private ucan bus (broker on $WHEELHIL_UCAN_DIR, libwheelhil_ucan.so preloaded), a reader
 /// on the bus recording each frame's arrival. Sets <prefix>p50_us, p99_us, max_us (send time
 /// minus nominal instant, after the send returned), missed_deadlines, and for the unloaded run
-/// frames, duration_s, arrival_p99_us, scheduling.
+/// frames, duration_s, arrival_p99_us, scheduling, spin_us and the bare timer's wake-up error
+/// (bare_timer_*: clock_nanosleep alone; bare_spin_*: the hybrid wait alone).
 nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options);
 
 }  // namespace wheelhil::emulator::bench

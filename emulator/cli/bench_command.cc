@@ -61,6 +61,14 @@ BenchCommand::BenchCommand(CLI::App& app) : app_(&app) {
                    "has no vcan0");
   bench_->add_flag("--no-rt", no_rt_, "Real-time row without SCHED_FIFO and mlockall");
   bench_->add_option("--cpu", options_.cpu, "Pin the real-time pacer to this CPU (-1: no pinning)");
+  bench_->add_option("--bus-cpu", options_.bus_cpu,
+                     "Pin the real-time row's bus broker, producer, writer and reader to this CPU "
+                     "(-1: no pinning)");
+  bench_
+      ->add_option("--spin-us", options_.spin_us,
+                   "Real-time pacer: sleep to the deadline minus this margin, then spin (µs; "
+                   "0: clock_nanosleep only)")
+      ->check(CLI::Range(0.0, 1000.0));
   bench_->add_option("--fifo-priority", options_.fifo_priority, "SCHED_FIFO priority (1..99)")
       ->check(CLI::Range(1, 99));
   bench_->add_option("--load-threads", options_.load_threads,

@@ -3,6 +3,7 @@
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 
 #include <cerrno>
 #include <cstring>
@@ -25,6 +26,44 @@ int SleepUntilNs(std::int64_t t_ns) noexcept {
     rc = ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
   } while (rc == EINTR);
   return rc;
+}
+
+namespace {
+inline void CpuRelax() noexcept {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#elif defined(__aarch64__)
+  asm volatile("yield");
+#endif
+}
+}  // namespace
+
+std::int64_t WaitUntilNs(std::int64_t t_ns, std::int64_t spin_ns) noexcept {
+  if (spin_ns <= 0) {
+    SleepUntilNs(t_ns);
+  } else if (const std::int64_t wake_ns = t_ns - spin_ns; wake_ns > MonotonicNowNs()) {
+    SleepUntilNs(wake_ns);
+  }
+  // Also after a plain sleep: a failed or interrupted sleep must not let the frame go early.
+  std::int64_t now = MonotonicNowNs();
+  while (now < t_ns) {
+    CpuRelax();
+    now = MonotonicNowNs();
+  }
+  return now;
+}
+
+std::vector<std::int64_t> MeasureWakeErrorsNs(std::int64_t period_ns, int count,
+                                              std::int64_t spin_ns) {
+  std::vector<std::int64_t> errors;
+  if (count <= 0 || period_ns <= 0) return errors;
+  errors.reserve(static_cast<std::size_t>(count));
+  const std::int64_t start_ns = MonotonicNowNs() + period_ns;
+  for (int k = 0; k < count; ++k) {
+    const std::int64_t deadline_ns = PeriodicDeadlineNs(start_ns, period_ns, k);
+    errors.push_back(WaitUntilNs(deadline_ns, spin_ns) - deadline_ns);
+  }
+  return errors;
 }
 
 RealtimeStatus ApplyRealtimeSettings(const RealtimeOptions& options) {
@@ -53,6 +92,16 @@ RealtimeStatus ApplyRealtimeSettings(const RealtimeOptions& options) {
           "real-time runtime (cpu.rt_runtime_us)",
           options.fifo_priority, std::strerror(rc), options.fifo_priority));
     }
+  }
+  if (options.timer_slack_ns > 0 &&
+      ::prctl(PR_SET_TIMERSLACK, static_cast<unsigned long>(options.timer_slack_ns), 0, 0, 0) !=
+          0) {
+    const int e = errno;
+    status.notes.push_back(fmt::format("timer slack {} ns refused ({}): sleeps may end late",
+                                       options.timer_slack_ns, std::strerror(e)));
+  }
+  if (const int slack = ::prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0); slack >= 0) {
+    status.timer_slack_ns = slack;
   }
   if (options.cpu >= 0) {
     cpu_set_t set;
@@ -88,8 +137,7 @@ PacerStats FramePacer::Run(std::int64_t start_ns, const std::atomic<bool>& produ
         continue;
       }
     }
-    SleepUntilNs(start_ns + next.nominal_ns);
-    const std::int64_t woke_ns = MonotonicNowNs() - start_ns;
+    const std::int64_t woke_ns = WaitUntilNs(start_ns + next.nominal_ns, spin_ns_) - start_ns;
     const std::error_code ec = sink_.Send(next.frame);
     const std::int64_t sent_ns = MonotonicNowNs() - start_ns;
     if (ec) {

@@ -7,9 +7,15 @@
 /// the send path. Frames come in through another SPSC ring from a producer thread (the device
 /// models), which may run ahead by the ring's capacity.
 ///
-/// ApplyRealtimeSettings() asks for SCHED_FIFO, mlockall(MCL_CURRENT | MCL_FUTURE) and CPU
-/// pinning for the calling thread; what the system refuses is reported in notes (with the
-/// reason and how to allow it), never fatal.
+/// With a spin margin the pacer waits in two steps (WaitUntilNs): clock_nanosleep to the
+/// deadline minus the margin, then a spin on clock_gettime up to the deadline. On hosts whose
+/// timer wakes late (a virtual machine's timer: tens to hundreds of µs) this takes the timer's
+/// wake-up error out of the send instant as long as the error stays under the margin; it costs
+/// the margin in CPU time per frame.
+///
+/// ApplyRealtimeSettings() asks for SCHED_FIFO, mlockall(MCL_CURRENT | MCL_FUTURE), a 1 ns
+/// timer slack and CPU pinning for the calling thread; what the system refuses is reported in
+/// notes (with the reason and how to allow it), never fatal.
 
 #include <time.h>
 
@@ -59,12 +65,26 @@ std::int64_t MonotonicNowNs() noexcept;
 /// Sleeps until the absolute CLOCK_MONOTONIC instant t_ns (returns at once when it has passed);
 /// resumes after signals. Returns 0 or an errno value (EINVAL for a negative instant).
 int SleepUntilNs(std::int64_t t_ns) noexcept;
+/// Hybrid wait for the absolute CLOCK_MONOTONIC instant t_ns: SleepUntilNs(t_ns - spin_ns) when
+/// that instant is still ahead, then spins on clock_gettime until t_ns. spin_ns <= 0 is a plain
+/// SleepUntilNs(t_ns). Never returns before t_ns (also when t_ns is negative or the sleep
+/// failed). Returns the CLOCK_MONOTONIC instant, ns, read when it returned (>= t_ns).
+std::int64_t WaitUntilNs(std::int64_t t_ns, std::int64_t spin_ns) noexcept;
 
+/// Wake-up error of the bare timer: `count` periodic absolute waits (WaitUntilNs with spin_ns)
+/// of period_ns on the calling thread, each (return instant - deadline) in ns, >= 0. A
+/// measurement for the bench (it allocates the result up front), not for the send path.
+std::vector<std::int64_t> MeasureWakeErrorsNs(std::int64_t period_ns, int count,
+                                              std::int64_t spin_ns);
 struct RealtimeOptions {
   bool sched_fifo = true;   ///< Ask for SCHED_FIFO at fifo_priority.
   int fifo_priority = 80;   ///< 1..99.
   bool lock_memory = true;  ///< mlockall(MCL_CURRENT | MCL_FUTURE) for the whole process.
   int cpu = -1;             ///< Pin the calling thread to this CPU; -1 = no pinning.
+  /// prctl(PR_SET_TIMERSLACK) for the calling thread, ns (a SCHED_OTHER thread's default is
+  /// 50 µs, added to every sleep; SCHED_FIFO threads get none). 0 = leave it (the kernel would
+  /// read 0 as "back to the default"), so the smallest request is 1.
+  long timer_slack_ns = 1;
 };
 
 /// What was granted; notes say what was refused, why, and how to allow it.
@@ -72,6 +92,7 @@ struct RealtimeStatus {
   bool sched_fifo = false;
   bool memory_locked = false;
   int pinned_cpu = -1;
+  long timer_slack_ns = -1;  ///< The calling thread's slack afterwards (PR_GET_TIMERSLACK).
   std::vector<std::string> notes;
 };
 
@@ -114,11 +135,18 @@ struct PacerStats {
 /// (the consumer of `input` and the producer of `records`).
 class FramePacer {
  public:
-  FramePacer(SpscRing<PacedFrame>& input, SpscRing<SendRecord>& records, FrameSink& sink) noexcept
-      : input_(input), records_(records), sink_(sink) {}
+  /// spin_ns: margin of the hybrid wait (WaitUntilNs); 0 = clock_nanosleep only. The pacer's
+  /// thread is busy for up to spin_ns per frame: keep frames/s * (spin + send time) well under
+  /// the CPU, or a SCHED_FIFO pacer runs into the kernel's RT throttling
+  /// (sched_rt_runtime_us, typically 50 ms stalled per second).
+  FramePacer(SpscRing<PacedFrame>& input, SpscRing<SendRecord>& records, FrameSink& sink,
+             std::int64_t spin_ns = 0) noexcept
+      : input_(input), records_(records), sink_(sink), spin_ns_(spin_ns) {}
 
-  /// Paces until `input` is empty after producer_done was set, or until stop is set. Frames
-  /// whose deadline has passed are sent at once (and show up late in their records). An empty
+  /// Paces until `input` is empty after producer_done was set, or until stop is set. Each frame
+  /// waits with WaitUntilNs(start_ns + nominal_ns, spin_ns), so it never leaves before its
+  /// deadline. Frames whose deadline has passed are sent at once (and show up late in their
+  /// records). An empty
   /// input while the producer runs is an underrun: the pacer sleeps underrun_wait_ns and looks
   /// again. No allocation, no locks, no I/O other than sink.Send.
   PacerStats Run(std::int64_t start_ns, const std::atomic<bool>& producer_done,
@@ -128,6 +156,7 @@ class FramePacer {
   SpscRing<PacedFrame>& input_;
   SpscRing<SendRecord>& records_;
   FrameSink& sink_;
+  std::int64_t spin_ns_ = 0;
 };
 
 }  // namespace wheelhil::emulator::realtime

@@ -4,6 +4,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sys/prctl.h>
 
 #include <atomic>
 #include <cmath>
@@ -131,6 +132,66 @@ TEST(Deadlines, SleepUntilPastInstantReturnsAtOnceAndRejectsNegative) {
   EXPECT_GE(realtime::MonotonicNowNs(), now + 1000);  // never returns early
 }
 
+TEST(Deadlines, HybridWaitNeverReturnsBeforeTheDeadline) {
+  // Margins from none to longer than the wait itself; deadlines past, present and ahead.
+  for (const std::int64_t spin_ns : {std::int64_t{0}, std::int64_t{1}, std::int64_t{20'000},
+                                     std::int64_t{200'000}, std::int64_t{5'000'000}}) {
+    for (const std::int64_t ahead_ns :
+         {std::int64_t{-1'000'000}, std::int64_t{0}, std::int64_t{30'000}, std::int64_t{300'000}}) {
+      const std::int64_t deadline = realtime::MonotonicNowNs() + ahead_ns;
+      const std::int64_t returned = realtime::WaitUntilNs(deadline, spin_ns);
+      EXPECT_GE(returned, deadline) << spin_ns << " " << ahead_ns;
+      EXPECT_GE(realtime::MonotonicNowNs(), returned);  // the returned instant was read, not made
+    }
+  }
+  // A negative instant (the sleep would fail with EINVAL) returns at once, still not early.
+  EXPECT_GE(realtime::WaitUntilNs(-5, 0), -5);
+  EXPECT_GE(realtime::WaitUntilNs(-5, 100), -5);
+}
+
+TEST(Deadlines, BareTimerMeasurementHasOneNonNegativeErrorPerWait) {
+  for (const std::int64_t spin_ns : {std::int64_t{0}, std::int64_t{50'000}}) {
+    const std::vector<std::int64_t> errors = realtime::MeasureWakeErrorsNs(100'000, 20, spin_ns);
+    ASSERT_EQ(errors.size(), 20u);
+    for (const std::int64_t e : errors) EXPECT_GE(e, 0);
+  }
+  EXPECT_THAT(realtime::MeasureWakeErrorsNs(100'000, 0, 0), IsEmpty());
+  EXPECT_THAT(realtime::MeasureWakeErrorsNs(0, 5, 0), IsEmpty());
+}
+
+TEST(RealtimeSettings, TimerSlackIsSetToOneNanosecondAndReported) {
+  // On a thread of its own: the settings stay with that thread. No SCHED_FIFO, no mlockall, no
+  // pinning: only the slack is asked for, which any thread may set.
+  realtime::RealtimeStatus status;
+  std::thread t([&] {
+    realtime::RealtimeOptions o;
+    o.sched_fifo = false;
+    o.lock_memory = false;
+    o.timer_slack_ns = 1;
+    status = realtime::ApplyRealtimeSettings(o);
+  });
+  t.join();
+  EXPECT_EQ(status.timer_slack_ns, 1);
+  EXPECT_THAT(status.notes, IsEmpty());
+  EXPECT_FALSE(status.sched_fifo);
+  EXPECT_FALSE(status.memory_locked);
+  EXPECT_EQ(status.pinned_cpu, -1);
+  // timer_slack_ns = 0 leaves the thread's slack alone (the default of a new thread: 50 µs
+  // unless the process was started with another).
+  realtime::RealtimeStatus untouched;
+  long before = -2;
+  std::thread u([&] {
+    before = ::prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0);
+    realtime::RealtimeOptions o;
+    o.sched_fifo = false;
+    o.lock_memory = false;
+    o.timer_slack_ns = 0;
+    untouched = realtime::ApplyRealtimeSettings(o);
+  });
+  u.join();
+  EXPECT_EQ(untouched.timer_slack_ns, before);
+}
+
 class RecordingSink final : public realtime::FrameSink {
  public:
   std::error_code Send(const bus::CanFrame& frame) noexcept override {
@@ -170,6 +231,31 @@ TEST(FramePacer, SendsEveryFrameInOrderAndRecordsEach) {
   }
   EXPECT_EQ(got[3].error, ENOBUFS);
   EXPECT_EQ(got[4].error, 0);
+}
+
+TEST(FramePacer, HybridWaitSendsNoFrameBeforeItsDeadline) {
+  SpscRing<PacedFrame> input(16);
+  SpscRing<SendRecord> records(16);
+  RecordingSink sink;
+  sink.ids.reserve(16);
+  for (std::uint32_t i = 0; i < 6; ++i) {
+    PacedFrame f;
+    f.frame.id = 0x200 + i;
+    f.nominal_ns = i * 150'000;  // spaced wider than the margin: each wait sleeps, then spins
+    ASSERT_TRUE(input.TryPush(f));
+  }
+  std::atomic<bool> done{true}, stop{false};
+  realtime::FramePacer pacer(input, records, sink, /*spin_ns=*/100'000);
+  const realtime::PacerStats stats = pacer.Run(realtime::MonotonicNowNs(), done, stop);
+  EXPECT_EQ(stats.sent, 6u);
+  SendRecord r;
+  int n = 0;
+  while (records.TryPop(r)) {
+    EXPECT_GE(r.woke_ns, r.nominal_ns) << n;
+    EXPECT_GE(r.sent_ns, r.woke_ns) << n;
+    ++n;
+  }
+  EXPECT_EQ(n, 6);
 }
 
 TEST(FramePacer, CountsRecordsTheWriterCouldNotTake) {
