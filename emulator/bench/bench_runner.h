@@ -19,8 +19,11 @@ struct BenchOptions {
   std::string source_dir;  ///< Repository root (platforms, meshes, DBC files).
   bool sched_fifo = true;  ///< Real-time row: ask for SCHED_FIFO + mlockall.
   int fifo_priority = 80;
-  int cpu = -1;            ///< Real-time row: pin the pacer; -1 = no pinning.
-  int bus_cpu = -1;        ///< Real-time row: pin broker, producer, writer, reader; -1 = no.
+  /// Real-time row: pin the pacer to this CPU; -1 = no pinning, -2 = the last online CPU.
+  int cpu = -2;
+  /// Real-time row: pin broker, producer, writer, reader; -1 = no pinning, -2 = the pacer's
+  /// CPU (a send then wakes the broker on its own CPU instead of across CPUs).
+  int bus_cpu = -2;
   double spin_us = 100.0;  ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
   int load_threads = -1;   ///< Busy threads of the loaded real-time run; -1 = one per core.
   bool uml = false;        ///< Measure the kernel vcan inside the user-mode-linux test kernel.

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -134,6 +135,21 @@ class TransportSink final : public realtime::FrameSink {
  private:
   bus::SocketCanTransport& t_;
 };
+
+/// Steal time of all CPUs so far (the "steal" column of /proc/stat's "cpu" line: time the
+/// hypervisor ran something else while this machine's virtual CPUs had work), ms; -1 when
+/// unreadable.
+double StealMs() {
+  std::FILE* f = std::fopen("/proc/stat", "r");
+  if (!f) return -1;
+  unsigned long long v[8] = {};
+  const int n = std::fscanf(f, "cpu %llu %llu %llu %llu %llu %llu %llu %llu", &v[0], &v[1], &v[2],
+                            &v[3], &v[4], &v[5], &v[6], &v[7]);
+  std::fclose(f);
+  const long hz = ::sysconf(_SC_CLK_TCK);
+  if (n != 8 || hz <= 0) return -1;
+  return static_cast<double>(v[7]) * 1000.0 / static_cast<double>(hz);
+}
 
 std::string JoinNotes(const std::vector<std::string>& notes) {
   std::string s;
@@ -359,6 +375,7 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     const int bare_count = main_run ? static_cast<int>(options.bare_timer_s * 1000.0) : 0;
     std::vector<std::int64_t> bare_timer_ns, bare_spin_ns;
     std::int64_t start_ns = 0;
+    double steal_before_ms = -1, steal_after_ms = -1;
     RealtimeStatus rt;
     PacerStats stats;
     std::thread pacer([&] {
@@ -373,7 +390,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       if (spin_ns > 0) bare_spin_ns = MeasureWakeErrorsNs(1'000'000, bare_count, spin_ns);
       start_ns = MonotonicNowNs() + 20'000'000;
       FramePacer p(input, records, sink, spin_ns);
+      steal_before_ms = StealMs();
       stats = p.Run(start_ns, producer_done, stop);
+      steal_after_ms = StealMs();
       pacer_done.store(true, std::memory_order_release);
     });
     pacer.join();
@@ -412,6 +431,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     SetPath(report, px + "wake_max_us", Percentile(wake_us, 100));
     SetPath(report, px + "send_p99_us", Percentile(send_us, 99));
     SetPath(report, px + "send_max_us", Percentile(send_us, 100));
+    if (steal_before_ms >= 0 && steal_after_ms >= 0) {
+      SetPath(report, px + "steal_ms", steal_after_ms - steal_before_ms);
+    }
     if (main_run) {
       std::vector<double> arrival_us;
       const std::size_t n = std::min(arrivals_ns.size(), log.size());

@@ -60,10 +60,12 @@ BenchCommand::BenchCommand(CLI::App& app) : app_(&app) {
                    "Measure the kernel vcan inside the user-mode-linux test kernel when the host "
                    "has no vcan0");
   bench_->add_flag("--no-rt", no_rt_, "Real-time row without SCHED_FIFO and mlockall");
-  bench_->add_option("--cpu", options_.cpu, "Pin the real-time pacer to this CPU (-1: no pinning)");
+  bench_->add_option("--cpu", options_.cpu,
+                     "Pin the real-time pacer to this CPU (-1: no pinning; default -2: the last "
+                     "online CPU)");
   bench_->add_option("--bus-cpu", options_.bus_cpu,
                      "Pin the real-time row's bus broker, producer, writer and reader to this CPU "
-                     "(-1: no pinning)");
+                     "(-1: no pinning; default -2: the pacer's CPU)");
   bench_
       ->add_option("--spin-us", options_.spin_us,
                    "Real-time pacer: sleep to the deadline minus this margin, then spin (µs; "
