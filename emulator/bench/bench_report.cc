@@ -174,8 +174,9 @@ std::vector<std::string> DocumentedMetricKeys() {
 }
 
 std::vector<std::string> DocumentedTextKeys() {
-  return {"machine.cpu_model", "machine.build_type",  "machine.kernel",
-          "machine.date_utc",  "realtime.scheduling", "bus.vcan_environment"};
+  return {"machine.cpu_model",        "machine.build_type",  "machine.kernel",
+          "machine.date_utc",         "realtime.scheduling", "bus.vcan_environment",
+          "lockstep.vcan_environment"};
 }
 
 std::vector<std::string> CheckReport(const nlohmann::json& report) {

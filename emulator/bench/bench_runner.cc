@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +21,8 @@
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/bench/bench_report.h"
 #include "emulator/bench/bench_workloads.h"
+#include "emulator/campaign/campaign_spec.h"
+#include "emulator/campaign/scenario_writer.h"
 
 extern char** environ;
 
@@ -51,13 +54,14 @@ std::vector<std::string> CommonWorkerArgs(const BenchOptions& o, const std::stri
   return argv;
 }
 
-/// The paper's reference scenario (paper000_slip.yaml, paper001_forward_T10.yaml) when it
-/// exists, else scenarios/<name>*.yaml, the first in name order; empty when there is none.
+/// The paper's reference scenario (paper000_slip.yaml, paper001_forward_T10.yaml,
+/// paper002_velocity.yaml) when it exists, else scenarios/<name>*.yaml, the first in name order;
+/// empty when there is none.
 std::string FindScenarioFile(const std::string& source_dir, const std::string& name) {
   const std::vector<std::pair<std::string, std::string>> preferred = {
       {"paper000", "paper000_slip.yaml"},
       {"paper001", "paper001_forward_T10.yaml"},
-      {"paper002", "paper002_straight.yaml"}};
+      {"paper002", "paper002_velocity.yaml"}};
   for (const auto& [paper, file] : preferred) {
     const std::string path = source_dir + "/scenarios/" + file;
     if (paper == name && std::filesystem::is_regular_file(path)) return path;
@@ -74,17 +78,95 @@ std::string FindScenarioFile(const std::string& source_dir, const std::string& n
   return found.empty() ? std::string() : found.front();
 }
 
+/// Motion phase of every lockstep run with --quick (timing.duration_s of a cut copy), s.
+constexpr double kQuickLockstepSimS = 1.0;
+
+std::string SelfExePath() {
+  std::error_code ec;
+  const std::filesystem::path p = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string("wheelhil") : p.string();
+}
+
+/// One lockstep run.
+struct LockstepRun {
+  nlohmann::json rtf;  ///< wall.real_time_factor of its report.json, or "unavailable: <why>".
+  nlohmann::json sim_s;
+  double max_rss_mib = 0.0;
+};
+
+/// `<self_exe> run <file> --out <tmp> --quiet [--can <iface>]`: the scenario with its reference
+/// firmware in the loop, on `iface` (a kernel interface) or, when empty, on the run's private
+/// userspace bus. With --quick the run is a copy of the scenario whose motion phase is cut to
+/// kQuickLockstepSimS (written like a campaign run's). A run that reports a failure (e.g. the
+/// firmware never answered) gives that failure as the reason, never a number.
+LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_exe,
+                                const std::string& file, const std::string& iface) {
+  LockstepRun out;
+  const std::string what =
+      fmt::format("`wheelhil run {}{}`", std::filesystem::path(file).filename().string(),
+                  iface.empty() ? "" : " --can " + iface);
+  std::string dir;
+  try {
+    dir = bus::CreateTempUcanRuntimeDir("wheelhil-bench-run-");
+  } catch (const std::exception& e) {
+    out.rtf = Unavailable(e.what());
+    return out;
+  }
+  std::string scenario = file;
+  if (o.quick) {
+    try {
+      campaign::CampaignSpec spec;
+      spec.file = file;
+      spec.name = "bench_quick_lockstep";
+      spec.base_scenario = std::filesystem::absolute(file);
+      spec.overrides.push_back({"timing.duration_s", kQuickLockstepSimS, 0});
+      scenario = dir + "/scenario.yaml";
+      campaign::WriteRunScenario(spec, campaign::RunSpec{}, scenario);
+    } catch (const std::exception& e) {
+      out.rtf = Unavailable(fmt::format("cannot cut {} for --quick: {}", file, e.what()));
+      scenario.clear();
+    }
+  }
+  if (!scenario.empty()) {
+    std::vector<std::string> argv = {self_exe, "run", scenario, "--out", dir + "/run", "--quiet"};
+    if (!iface.empty()) {
+      argv.push_back("--can");
+      argv.push_back(iface);
+    }
+    const WorkerOutcome w = RunWorkerProcess(argv, {}, /*expect_json=*/false);
+    nlohmann::json run_report;
+    std::ifstream in(dir + "/run/report.json");
+    try {
+      if (in) run_report = nlohmann::json::parse(in);
+    } catch (const std::exception&) {
+      run_report = nlohmann::json();
+    }
+    const nlohmann::json* rtf = GetPath(run_report, "wall.real_time_factor");
+    const nlohmann::json* failure = GetPath(run_report, "failure");
+    if (failure && failure->is_string()) {
+      out.rtf = Unavailable(fmt::format("{} failed: {}", what, failure->get<std::string>()));
+    } else if (rtf && rtf->is_number() && rtf->get<double>() > 0) {
+      out.rtf = rtf->get<double>();
+      const nlohmann::json* sim = GetPath(run_report, "sim_time_s");
+      if (sim && sim->is_number()) out.sim_s = *sim;
+      out.max_rss_mib = w.max_rss_mib;
+    } else {
+      out.rtf = Unavailable(fmt::format("{} gave no real_time_factor ({})", what,
+                                        w.problem.empty() ? "no report.json" : w.problem));
+    }
+  }
+  std::error_code ec;
+  std::filesystem::remove_all(dir, ec);
+  return out;
+}
+
+/// The lockstep rows over the private userspace bus: lockstep.<paper>.rtf (and .scenario,
+/// .sim_s) and rss.lockstep_mib.
 void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::string& unavailable,
                  nlohmann::json& report, double& peak_mib) {
   double lockstep_mib = 0.0;
-  const std::string vcan_reason =
-      std::filesystem::exists("/sys/class/net/vcan0")
-          ? "lockstep over a kernel vcan is not driven by the bench yet"
-          : "no kernel vcan0 on this machine (the lockstep runs over the userspace bus)";
   for (const auto& s : BenchScenarios()) {
     const std::string key = fmt::format("lockstep.{}.rtf", s);
-    SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s),
-            Unavailable(unavailable.empty() ? vcan_reason : unavailable));
     if (!unavailable.empty()) {
       SetPath(report, key, Unavailable(unavailable));
       continue;
@@ -94,38 +176,14 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
       SetPath(report, key, Unavailable(fmt::format("no scenario file scenarios/{}*.yaml yet", s)));
       continue;
     }
-    std::string out_dir;
-    try {
-      out_dir = bus::CreateTempUcanRuntimeDir("wheelhil-bench-run-");
-    } catch (const std::exception& e) {
-      SetPath(report, key, Unavailable(e.what()));
-      continue;
-    }
-    const WorkerOutcome w =
-        RunWorkerProcess({self_exe, "run", file, "--out", out_dir, "--quiet"}, {},
-                         /*expect_json=*/false);
-    nlohmann::json run_report;
-    std::ifstream in(out_dir + "/report.json");
-    try {
-      if (in) run_report = nlohmann::json::parse(in);
-    } catch (const std::exception&) {
-      run_report = nlohmann::json();
-    }
-    const nlohmann::json* rtf = GetPath(run_report, "wall.real_time_factor");
-    if (rtf && rtf->is_number() && rtf->get<double>() > 0) {
-      SetPath(report, key, rtf->get<double>());
+    const LockstepRun r = RunLockstepScenario(o, self_exe, file, "");
+    SetPath(report, key, r.rtf);
+    if (r.rtf.is_number()) {
       SetPath(report, fmt::format("lockstep.{}.scenario", s),
               std::filesystem::path(file).filename().string());
-      const nlohmann::json* sim = GetPath(run_report, "sim_time_s");
-      if (sim && sim->is_number()) SetPath(report, fmt::format("lockstep.{}.sim_s", s), *sim);
-      lockstep_mib = std::max(lockstep_mib, w.max_rss_mib);
-    } else {
-      SetPath(report, key,
-              Unavailable(fmt::format("`wheelhil run {}` gave no real_time_factor ({})", file,
-                                      w.problem.empty() ? "no report.json" : w.problem)));
+      if (r.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.sim_s", s), r.sim_s);
+      lockstep_mib = std::max(lockstep_mib, r.max_rss_mib);
     }
-    std::error_code ec;
-    std::filesystem::remove_all(out_dir, ec);
   }
   if (lockstep_mib > 0) {
     SetPath(report, "rss.lockstep_mib", lockstep_mib);
@@ -133,6 +191,79 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
   } else {
     SetPath(report, "rss.lockstep_mib",
             Unavailable(unavailable.empty() ? "no lockstep run completed" : unavailable));
+  }
+}
+
+/// The lockstep rows on the kernel interface `iface`: lockstep.<paper>.vcan_rtf (.vcan_sim_s)
+/// and, with also_ucan, lockstep.<paper>.uml_ucan_rtf: the same run on the private userspace
+/// bus in the same kernel (inside the user-mode-linux guest, the figure to compare with).
+nlohmann::json LockstepOnKernelBus(const BenchOptions& o, const std::string& self_exe,
+                                   const std::string& iface, bool also_ucan) {
+  nlohmann::json report = nlohmann::json::object();
+  for (const auto& s : BenchScenarios()) {
+    const std::string file = FindScenarioFile(o.source_dir, s);
+    if (file.empty()) {
+      const std::string why = fmt::format("no scenario file scenarios/{}*.yaml yet", s);
+      SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), Unavailable(why));
+      if (also_ucan) SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s), Unavailable(why));
+      continue;
+    }
+    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface);
+    SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), k.rtf);
+    if (k.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.vcan_sim_s", s), k.sim_s);
+    if (also_ucan) {
+      SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s),
+              RunLockstepScenario(o, self_exe, file, "").rtf);
+    }
+  }
+  return report;
+}
+
+/// lockstep.<paper>.vcan_rtf and lockstep.vcan_environment: on the host's vcan0 when it has
+/// one, else with --uml inside one user-mode-linux guest for all three runs (`bench --worker
+/// lockstep-kernel` run by tests/vcan/uml_run.sh), else unavailable with the reason.
+void RunLockstepVcan(const BenchOptions& o, const std::string& self_exe,
+                     const std::string& unavailable, nlohmann::json& report) {
+  auto all_unavailable = [&](const std::string& why) {
+    for (const auto& s : BenchScenarios()) {
+      SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), Unavailable(why));
+    }
+    SetPath(report, "lockstep.vcan_environment", "none");
+  };
+  if (!unavailable.empty()) {
+    all_unavailable(unavailable);
+  } else if (std::filesystem::exists("/sys/class/net/vcan0")) {
+    report.merge_patch(LockstepOnKernelBus(o, self_exe, "vcan0", /*also_ucan=*/false));
+    SetPath(report, "lockstep.vcan_environment", "host kernel vcan0");
+  } else if (!o.uml) {
+    all_unavailable(
+        "no kernel vcan0 on this machine; `wheelhil bench --uml` runs these inside the "
+        "user-mode-linux test kernel");
+  } else {
+    std::vector<std::string> argv = {o.source_dir + "/tests/vcan/uml_run.sh",
+                                     "--timeout",
+                                     o.quick ? "300" : "1200",
+                                     "--",
+                                     self_exe,
+                                     "bench",
+                                     "--worker",
+                                     "lockstep-kernel",
+                                     "--source-dir",
+                                     o.source_dir};
+    if (o.quick) argv.push_back("--quick");
+    const WorkerOutcome w = RunWorkerProcess(argv, {});
+    for (const auto& s : BenchScenarios()) {
+      const std::string key = fmt::format("lockstep.{}.vcan_rtf", s);
+      if (!GetPath(w.report, key)) {
+        SetPath(report, key,
+                Unavailable("user-mode-linux: " + (w.problem.empty() ? "no figure" : w.problem)));
+      }
+    }
+    report.merge_patch(w.report);
+    SetPath(report, "lockstep.vcan_environment",
+            "vcan0 inside the user-mode-linux test kernel (tests/vcan/uml_run.sh, one guest for "
+            "the three runs): UML traps every system call, so compare with "
+            "lockstep.<paper>.uml_ucan_rtf, the userspace bus in the same guest");
   }
 }
 
@@ -273,8 +404,17 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
   }
   const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
   if (!ok && out.problem.empty()) {
-    out.problem = fmt::format("worker {} failed ({})", argv.size() > 3 ? argv[3] : argv[0],
-                              WorkerStatus(status));
+    // tests/vcan/uml_run.sh says why it cannot boot the guest on a "SKIP: <reason>" line.
+    const std::size_t skip = text.rfind("SKIP: ");
+    const auto worker = std::find(argv.begin(), argv.end(), "--worker");
+    if (skip != std::string::npos && (skip == 0 || text[skip - 1] == '\n')) {
+      out.problem = text.substr(skip, text.find('\n', skip) - skip);
+    } else {
+      out.problem =
+          fmt::format("worker {} failed ({})",
+                      worker != argv.end() && worker + 1 != argv.end() ? *(worker + 1) : argv[0],
+                      WorkerStatus(status));
+    }
   } else if (ok && expect_json && out.report.empty() && out.problem.empty()) {
     out.problem = "worker printed no JSON";
   }
@@ -304,6 +444,18 @@ nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
                            : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     }
     return RunRealtimeWorkload(r);
+  }
+  if (name == "lockstep-kernel") {
+    // In the user-mode-linux guest (uml_run.sh sets WHEELHIL_VCAN, WHEELHIL_UML) or on a host
+    // kernel with vcan0.
+    const char* iface = std::getenv("WHEELHIL_VCAN");
+    return LockstepOnKernelBus(o, SelfExePath(), iface && *iface ? iface : "vcan0",
+                               /*also_ucan=*/std::getenv("WHEELHIL_UML") != nullptr);
+  }
+  if (name == "lockstep-vcan") {
+    nlohmann::json report = nlohmann::json::object();
+    RunLockstepVcan(o, SelfExePath(), "", report);
+    return report;
   }
   throw std::invalid_argument(fmt::format("unknown bench worker '{}'", name));
 }
@@ -412,6 +564,7 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
        "realtime.loaded_missed_deadlines"});
 
   RunLockstep(o, self_exe, lockstep_unavailable, report, peak_mib);
+  RunLockstepVcan(o, self_exe, lockstep_unavailable, report);
   RunCampaignThroughput(o, self_exe, lockstep_unavailable, report);
   for (const char* k : {"rss.physics_mib", "rss.bus_mib", "rss.realtime_mib"}) {
     const nlohmann::json* r = GetPath(report, k);

@@ -49,14 +49,19 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
                                bool expect_json = true);
 
 /// The full bench. self_exe: path of the wheelhil executable. The lockstep rows run
-/// `<self_exe> run scenarios/<paperNNN>*.yaml` (the first such file) in a child process and read
-/// wall.real_time_factor from its report.json; lockstep_unavailable non-empty: why they cannot
-/// run at all (e.g. no `run` command in this build).
+/// `<self_exe> run scenarios/<paperNNN>*.yaml` (the paper's reference scenario, else the first
+/// such file; with --quick a copy cut to 1 s of motion) in a child process and read
+/// wall.real_time_factor from its report.json: over a private userspace bus, and (vcan_rtf) with
+/// `--can vcan0` on the host's vcan0 or, with `uml`, inside one user-mode-linux guest;
+/// lockstep_unavailable non-empty: why they cannot run at all (e.g. no `run` command in this
+/// build).
 nlohmann::json RunBench(const BenchOptions& options, const std::string& self_exe,
                         const UcanEnvironmentFn& ucan_env, const std::string& lockstep_unavailable);
 
 /// The worker side: runs workload `name` (physics, bus-ucan, bus-vcan, realtime,
-/// realtime-loaded) and returns its partial report.
+/// realtime-loaded; lockstep-kernel: the lockstep runs on $WHEELHIL_VCAN or vcan0, plus over the
+/// userspace bus when $WHEELHIL_UML is set, i.e. inside the guest; lockstep-vcan: the vcan
+/// lockstep rows as the full bench measures them) and returns its partial report.
 nlohmann::json RunWorker(const std::string& name, const BenchOptions& options);
 
 }  // namespace wheelhil::emulator::bench
