@@ -24,7 +24,7 @@ struct BenchOptions {
   /// Real-time row: pin broker, producer, writer, reader; -1 = no pinning, -2 = the pacer's
   /// CPU (a send then wakes the broker on its own CPU instead of across CPUs).
   int bus_cpu = -2;
-  double spin_us = 100.0;  ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
+  double spin_us = 50.0;   ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
   int load_threads = -1;   ///< Busy threads of the loaded real-time run; -1 = one per core.
   bool uml = false;        ///< Measure the kernel vcan inside the user-mode-linux test kernel.
 };
@@ -59,9 +59,10 @@ nlohmann::json RunBench(const BenchOptions& options, const std::string& self_exe
                         const UcanEnvironmentFn& ucan_env, const std::string& lockstep_unavailable);
 
 /// The worker side: runs workload `name` (physics, bus-ucan, bus-vcan, realtime,
-/// realtime-loaded; lockstep-kernel: the lockstep runs on $WHEELHIL_VCAN or vcan0, plus over the
-/// userspace bus when $WHEELHIL_UML is set, i.e. inside the guest; lockstep-vcan: the vcan
-/// lockstep rows as the full bench measures them) and returns its partial report.
+/// realtime-loaded; lockstep-kernel: the lockstep runs on $WHEELHIL_VCAN or vcan0, plus (not
+/// with --quick) over the userspace bus when $WHEELHIL_UML is set, i.e. inside the guest;
+/// lockstep-vcan: the vcan lockstep rows as the full bench measures them) and returns its
+/// partial report.
 nlohmann::json RunWorker(const std::string& name, const BenchOptions& options);
 
 }  // namespace wheelhil::emulator::bench
