@@ -24,9 +24,9 @@ struct BenchOptions {
   /// Real-time row: pin broker, producer, writer, reader; -1 = no pinning, -2 = the pacer's
   /// CPU (a send then wakes the broker on its own CPU instead of across CPUs).
   int bus_cpu = -2;
-  double spin_us = 50.0;   ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
-  int load_threads = -1;   ///< Busy threads of the loaded real-time run; -1 = one per core.
-  bool uml = false;        ///< Measure the kernel vcan inside the user-mode-linux test kernel.
+  double spin_us = 50.0;  ///< Real-time row: spin margin of the pacer's wait, µs (0 = sleep).
+  int load_threads = -1;  ///< Busy threads of the loaded real-time run; -1 = one per core.
+  bool uml = false;       ///< Measure the kernel vcan inside the user-mode-linux test kernel.
 };
 
 /// Environment entries a child needs to reach the userspace buses of `runtime_dir` (LD_PRELOAD

@@ -35,7 +35,7 @@ struct RealtimeWorkloadOptions {
   int pipeline_cpu = -1;
   /// Margin of the pacer's hybrid wait (clock_nanosleep to deadline - spin, then spin), µs;
   /// 0 = clock_nanosleep only.
-  double spin_us = 100.0;
+  double spin_us = 50.0;
   /// Length of each bare-timer loop (1 kHz, on the pacer's thread, before the stream), s;
   /// 0 = none.
   double bare_timer_s = 1.0;
