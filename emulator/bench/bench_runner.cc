@@ -432,9 +432,8 @@ nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
     r.duration_s = o.quick ? 1.0 : 10.0;
     r.sched_fifo = o.sched_fifo;
     r.fifo_priority = o.fifo_priority;
-    const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-    r.cpu = o.cpu == -2 ? cores - 1 : o.cpu;
-    r.pipeline_cpu = o.bus_cpu == -2 ? r.cpu : o.bus_cpu;
+    r.cpu = o.cpu;
+    r.pipeline_cpu = o.bus_cpu;
     r.spin_us = o.spin_us;
     r.bare_timer_s = o.quick ? 0.2 : 1.0;
     if (name == "realtime-loaded") {

@@ -19,7 +19,8 @@ struct BenchOptions {
   std::string source_dir;  ///< Repository root (platforms, meshes, DBC files).
   bool sched_fifo = true;  ///< Real-time row: ask for SCHED_FIFO + mlockall.
   int fifo_priority = 80;
-  /// Real-time row: pin the pacer to this CPU; -1 = no pinning, -2 = the last online CPU.
+  /// Real-time row: pin the pacer to this CPU; -1 = no pinning, -2 = the last online CPU when
+  /// SCHED_FIFO is granted, else no pinning.
   int cpu = -2;
   /// Real-time row: pin broker, producer, writer, reader; -1 = no pinning, -2 = the pacer's
   /// CPU (a send then wakes the broker on its own CPU instead of across CPUs).

@@ -277,6 +277,9 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       po.fifo_priority = std::max(1, options.fifo_priority - 1);
       pipeline = ApplyRealtimeSettings(po);
     }
+    const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    const int pacer_cpu = options.cpu == -2 ? (pipeline.sched_fifo ? cores - 1 : -1) : options.cpu;
+    const int pipeline_cpu = options.pipeline_cpu == -2 ? pacer_cpu : options.pipeline_cpu;
     // Threads inherit the CPU mask of the thread that starts them: with pipeline_cpu the
     // broker, producer, writer and reader start pinned, the pacer and the load threads with this
     // thread's original mask (restored below).
@@ -284,10 +287,10 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     const bool have_mask =
         ::pthread_getaffinity_np(::pthread_self(), sizeof(original_mask), &original_mask) == 0;
     bool pipeline_pinned = false;
-    if (options.pipeline_cpu >= 0 && options.pipeline_cpu < CPU_SETSIZE && have_mask) {
+    if (pipeline_cpu >= 0 && pipeline_cpu < CPU_SETSIZE && have_mask) {
       cpu_set_t set;
       CPU_ZERO(&set);
-      CPU_SET(options.pipeline_cpu, &set);
+      CPU_SET(pipeline_cpu, &set);
       pipeline_pinned = ::pthread_setaffinity_np(::pthread_self(), sizeof(set), &set) == 0;
     }
     bus::UcanBrokerOptions bo;
@@ -383,7 +386,7 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       ro.sched_fifo = options.sched_fifo;
       ro.lock_memory = options.sched_fifo;
       ro.fifo_priority = options.fifo_priority;
-      ro.cpu = options.cpu;
+      ro.cpu = pacer_cpu;
       rt = ApplyRealtimeSettings(ro);
       // What the timer alone does on this thread, with the same settings, in the same run.
       bare_timer_ns = MeasureWakeErrorsNs(1'000'000, bare_count, 0);
@@ -482,8 +485,7 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
                              std::max(1, options.fifo_priority - 1));
       }
       if (pipeline_pinned) {
-        sched += fmt::format("; broker, producer, writer, reader pinned to CPU {}",
-                             options.pipeline_cpu);
+        sched += fmt::format("; broker, producer, writer, reader pinned to CPU {}", pipeline_cpu);
       }
       if (!rt.notes.empty()) sched += " (" + JoinNotes(rt.notes) + ")";
       if (!options.sched_fifo) sched += " (--no-rt)";

@@ -29,9 +29,12 @@ struct RealtimeWorkloadOptions {
   double duration_s = 10.0;  ///< Paced stream length.
   bool sched_fifo = true;    ///< Ask for SCHED_FIFO (and mlockall).
   int fifo_priority = 80;
-  int cpu = -1;  ///< Pin the pacer; -1 = no pinning.
+  /// Pin the pacer; -1 = no pinning; -2 = the last online CPU when SCHED_FIFO was granted, else
+  /// none (a SCHED_OTHER pacer pinned to one CPU with the pipeline competes with everything else
+  /// there: measured 4x the missed deadlines of an unpinned one).
+  int cpu = -1;
   /// Pin the ucan broker, producer, writer and reader threads (they inherit it from the thread
-  /// that starts them); -1 = no pinning.
+  /// that starts them); -1 = no pinning; -2 = the pacer's CPU.
   int pipeline_cpu = -1;
   /// Margin of the pacer's hybrid wait (clock_nanosleep to deadline - spin, then spin), µs;
   /// 0 = clock_nanosleep only.

@@ -62,7 +62,7 @@ BenchCommand::BenchCommand(CLI::App& app) : app_(&app) {
   bench_->add_flag("--no-rt", no_rt_, "Real-time row without SCHED_FIFO and mlockall");
   bench_->add_option("--cpu", options_.cpu,
                      "Pin the real-time pacer to this CPU (-1: no pinning; default -2: the last "
-                     "online CPU)");
+                     "online CPU when SCHED_FIFO is granted, else none)");
   bench_->add_option("--bus-cpu", options_.bus_cpu,
                      "Pin the real-time row's bus broker, producer, writer and reader to this CPU "
                      "(-1: no pinning; default -2: the pacer's CPU)");
