@@ -1,5 +1,6 @@
 #include "emulator/terrain.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -272,12 +273,31 @@ void Terrain::AddPatch(const FrictionPatch& patch) {
     if (!v.allFinite()) throw std::invalid_argument(where + ": polygon: vertex is not finite");
   }
   ValidateFriction(patch.friction, where);
+  PatchBox box{1e300, -1e300, 1e300, -1e300};
+  double extent = 0;
+  for (const auto& v : patch.polygon_W) {
+    box.x_lo = std::min(box.x_lo, v.x());
+    box.x_hi = std::max(box.x_hi, v.x());
+    box.y_lo = std::min(box.y_lo, v.y());
+    box.y_hi = std::max(box.y_hi, v.y());
+    extent = std::max({extent, std::abs(v.x()), std::abs(v.y())});
+  }
+  // The crossing abscissa is off by a few ulps of the coordinates at most; 1e-9 relative is far
+  // above that and far below any patch size that matters.
+  const double margin = 1e-9 * (1.0 + extent);
+  box.x_lo -= margin;
+  box.x_hi += margin;
   patches_.push_back(patch);
+  patch_boxes_.push_back(box);
 }
 
 Friction Terrain::FrictionAt(const Eigen::Vector3d& p, const Friction& base) const noexcept {
-  for (auto it = patches_.rbegin(); it != patches_.rend(); ++it) {
-    if (InsidePolygon(it->polygon_W, p.x(), p.y())) return it->friction;
+  const double x = p.x(), y = p.y();
+  for (std::size_t k = patches_.size(); k-- > 0;) {
+    const PatchBox& b = patch_boxes_[k];
+    // Outside the box: no crossing toggles (y) or all or none of an even number do (x).
+    if (!(y >= b.y_lo && y < b.y_hi && x >= b.x_lo && x <= b.x_hi)) continue;
+    if (InsidePolygon(patches_[k].polygon_W, x, y)) return patches_[k].friction;
   }
   return base;
 }

@@ -110,6 +110,13 @@ class Terrain {
   std::vector<Plane> planes_;
   std::vector<Mesh> meshes_;
   std::vector<FrictionPatch> patches_;
+  // Per patch (same order): a box around the polygon, checked before the polygon test. Outside
+  // [y_lo, y_hi) no edge straddles the point's y (exact); x_lo/x_hi carry a margin above the
+  // rounding of the edge-crossing abscissa, so a skipped patch is one the polygon test rejects.
+  struct PatchBox {
+    double x_lo, x_hi, y_lo, y_hi;
+  };
+  std::vector<PatchBox> patch_boxes_;
   std::size_t triangle_count_ = 0;
   std::unique_ptr<btCollisionConfiguration> config_;
   std::unique_ptr<btDispatcher> dispatcher_;

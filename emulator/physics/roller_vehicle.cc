@@ -54,6 +54,18 @@ struct Row {
   double lateral_scale;  // ellipse: lateral bound = radius * scale
 };
 
+// std::hypot(a, b) >= limit, with the hypot call only near the boundary: the squared norm
+// decides when it is more than 1e-9 (relative) away from limit^2, far above its rounding.
+bool Saturated(double a, double b, double limit) noexcept {
+  if (limit > 1e-100 && limit < 1e100) {
+    const double s2 = a * a + b * b;
+    const double l2 = limit * limit;
+    if (s2 < l2 * (1 - 1e-9)) return false;
+    if (s2 > l2 * (1 + 1e-9)) return true;
+  }
+  return std::hypot(a, b) >= limit;
+}
+
 }  // namespace
 
 void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
@@ -149,10 +161,13 @@ RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
   const Eigen::Quaterniond q(X_WB.rotation());
   T.setRotation(btQuaternion(static_cast<btScalar>(q.x()), static_cast<btScalar>(q.y()),
                              static_cast<btScalar>(q.z()), static_cast<btScalar>(q.w())));
-  motion_state_ = std::make_unique<btDefaultMotionState>(T);
-  btRigidBody::btRigidBodyConstructionInfo info(static_cast<btScalar>(spec_.mass_kg),
-                                                motion_state_.get(), shape_.get(),
-                                                ToBt(spec_.inertia_kg_m2));
+  // No motion state on the body (nobody reads one; Bullet would interpolate and copy it every
+  // step). The start transform is the one a btDefaultMotionState(T) would hand to the body.
+  btTransform start;
+  btDefaultMotionState(T).getWorldTransform(start);
+  btRigidBody::btRigidBodyConstructionInfo info(static_cast<btScalar>(spec_.mass_kg), nullptr,
+                                                shape_.get(), ToBt(spec_.inertia_kg_m2));
+  info.m_startWorldTransform = start;
   info.m_linearDamping = 0;
   info.m_angularDamping = 0;
   info.m_friction = 0;
@@ -387,10 +402,12 @@ void RollerVehicle::PreStep(double dt) noexcept {
       f = fn > 1e-9 ? Vector3d(f / fn) : Vector3d(R.col(0));
       const Vector3d l = nrm.cross(f);
       const Friction fr = st.friction_override.value_or(hit.friction);
-      const double mu =
-          st.friction_scale *
-          (fr.mu_slide + (fr.mu_peak - fr.mu_slide) *
-                             std::exp(-std::abs(st.last_slip_m_s) / spec_.stribeck_velocity_m_s));
+      // exp(-0) is exactly 1: no call for a contact that did not slip (e.g. every caster).
+      const double decay =
+          st.last_slip_m_s == 0
+              ? 1.0
+              : std::exp(-std::abs(st.last_slip_m_s) / spec_.stribeck_velocity_m_s);
+      const double mu = st.friction_scale * (fr.mu_slide + (fr.mu_peak - fr.mu_slide) * decay);
       tr.mu = mu;
       const double lim = mu * n_load * dt;
       const double rr = ws.rolling_resistance * n_load * dt;
@@ -556,10 +573,13 @@ void RollerVehicle::PreStep(double dt) noexcept {
         double lb = lb0 + (lat.target - row_velocity(lat)) * lat.inv_k;
         const double ex = la / std::max(row.radius, 1e-300);
         const double ey = lb / std::max(row.radius * row.lateral_scale, 1e-300);
-        const double e = std::hypot(ex, ey);
-        if (e > 1.0) {
-          la /= e;
-          lb /= e;
+        // Inside the ellipse with a wide margin: hypot (< 1 ulp error) cannot exceed 1.
+        if (!(ex * ex + ey * ey <= 0.999)) {
+          const double e = std::hypot(ex, ey);
+          if (e > 1.0) {
+            la /= e;
+            lb /= e;
+          }
         }
         *row.lambda = la;
         *lat.lambda = lb;
@@ -613,8 +633,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
       const double sb = vc.dot(ct.l);
       tr.slip_velocity_m_s = Eigen::Vector2d(sa, sb);
       ground_speed = vc.dot(ct.f);
-      const bool sat = std::hypot(st.lambda_a, st.lambda_b / ws.lateral_mu_scale) >=
-                       0.999 * tr.mu * tr.normal_load_n * dt;
+      const bool sat = Saturated(st.lambda_a, st.lambda_b / ws.lateral_mu_scale,
+                                 0.999 * tr.mu * tr.normal_load_n * dt);
       st.anchor_a_m = sat ? 0.0 : st.anchor_a_m + sa * dt;
       st.anchor_b_m = sat ? 0.0 : st.anchor_b_m + sb * dt;
     } else if (ws.kind == WheelKind::kCaster) {

@@ -32,7 +32,6 @@
 
 class btRigidBody;
 class btCollisionShape;
-struct btDefaultMotionState;
 
 namespace wheelhil::emulator::physics {
 
@@ -139,7 +138,6 @@ class RollerVehicle : public btActionInterface {
   const Terrain* terrain_;
   Eigen::Vector3d gravity_W_;
   std::unique_ptr<btCollisionShape> shape_;
-  std::unique_ptr<btDefaultMotionState> motion_state_;
   std::unique_ptr<btRigidBody> body_;
   std::vector<WheelState> state_;
   std::vector<WheelTruth> truth_;
