@@ -289,11 +289,58 @@ void Terrain::AddPatch(const FrictionPatch& patch) {
   box.x_hi += margin;
   patches_.push_back(patch);
   patch_boxes_.push_back(box);
+  RebuildPatchGrid();
+}
+
+void Terrain::RebuildPatchGrid() {
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  for (const PatchBox& b : patch_boxes_) {
+    x0 = std::min(x0, b.x_lo);
+    x1 = std::max(x1, b.x_hi);
+    y0 = std::min(y0, b.y_lo);
+    y1 = std::max(y1, b.y_hi);
+  }
+  const double cell = std::max({(x1 - x0) / 64, (y1 - y0) / 64, 1e-6});
+  patch_x0_ = x0;
+  patch_y0_ = y0;
+  patch_inv_cell_ = 1.0 / cell;
+  const auto index = [&](double v, double v0) {
+    return static_cast<int>(std::floor((v - v0) * patch_inv_cell_));
+  };
+  patch_nx_ = index(x1, x0) + 1;
+  patch_ny_ = index(y1, y0) + 1;
+  const std::size_t ncell =
+      static_cast<std::size_t>(patch_nx_) * static_cast<std::size_t>(patch_ny_);
+  std::vector<std::vector<std::uint32_t>> cells(ncell);
+  for (std::size_t k = patch_boxes_.size(); k-- > 0;) {  // newest first
+    const PatchBox& b = patch_boxes_[k];
+    for (int j = index(b.y_lo, y0); j <= index(b.y_hi, y0); ++j) {
+      for (int i = index(b.x_lo, x0); i <= index(b.x_hi, x0); ++i) {
+        cells[static_cast<std::size_t>(j) * static_cast<std::size_t>(patch_nx_) +
+              static_cast<std::size_t>(i)]
+            .push_back(static_cast<std::uint32_t>(k));
+      }
+    }
+  }
+  patch_cell_start_.assign(1, 0);
+  patch_cell_list_.clear();
+  for (const auto& c : cells) {
+    patch_cell_list_.insert(patch_cell_list_.end(), c.begin(), c.end());
+    patch_cell_start_.push_back(static_cast<std::uint32_t>(patch_cell_list_.size()));
+  }
 }
 
 Friction Terrain::FrictionAt(const Eigen::Vector3d& p, const Friction& base) const noexcept {
+  if (patches_.empty()) return base;
   const double x = p.x(), y = p.y();
-  for (std::size_t k = patches_.size(); k-- > 0;) {
+  const double fi = std::floor((x - patch_x0_) * patch_inv_cell_);
+  const double fj = std::floor((y - patch_y0_) * patch_inv_cell_);
+  // Outside the grid (or not finite): outside every box.
+  if (!(fi >= 0 && fi < patch_nx_ && fj >= 0 && fj < patch_ny_)) return base;
+  const std::size_t c = static_cast<std::size_t>(fj) * static_cast<std::size_t>(patch_nx_) +
+                        static_cast<std::size_t>(fi);
+  for (std::uint32_t n = patch_cell_start_[c]; n < patch_cell_start_[c + 1]; ++n) {
+    const std::uint32_t k = patch_cell_list_[n];
     const PatchBox& b = patch_boxes_[k];
     // Outside the box: no crossing toggles (y) or all or none of an even number do (x).
     if (!(y >= b.y_lo && y < b.y_hi && x >= b.x_lo && x <= b.x_hi)) continue;

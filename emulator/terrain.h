@@ -117,6 +117,14 @@ class Terrain {
     double x_lo, x_hi, y_lo, y_hi;
   };
   std::vector<PatchBox> patch_boxes_;
+  // Uniform x-y grid over all boxes (at most 64 x 64 cells): per cell the patches whose box
+  // touches it, newest first. Cell indices are monotone in x and y, so a point inside a box is
+  // always in a cell that lists the patch.
+  void RebuildPatchGrid();
+  double patch_x0_ = 0, patch_y0_ = 0, patch_inv_cell_ = 1;
+  int patch_nx_ = 0, patch_ny_ = 0;
+  std::vector<std::uint32_t> patch_cell_start_;  // patch_nx_ * patch_ny_ + 1
+  std::vector<std::uint32_t> patch_cell_list_;
   std::size_t triangle_count_ = 0;
   std::unique_ptr<btCollisionConfiguration> config_;
   std::unique_ptr<btDispatcher> dispatcher_;

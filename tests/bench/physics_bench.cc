@@ -55,7 +55,36 @@ void BM_ManyPlatformsFlat(benchmark::State& state) {
   RunWorld(state, "mecanum4_omni3", false, static_cast<int>(state.range(0)));
 }
 
+// Terrain::FrictionAt over N oil spots laid out like paper000_slip's random patches (two tracks
+// along 9 m), queried at points along the tracks; reports ns per query.
+void BM_FrictionPatchLookup(benchmark::State& state) {
+  wheelhil::emulator::Terrain terrain;
+  const int n = static_cast<int>(state.range(0));
+  for (int k = 0; k < n; ++k) {
+    const double x = 0.5 + 9.0 * (k + 0.5) / n, y = (k % 2 == 0) ? 0.16 : -0.16;
+    wheelhil::emulator::FrictionPatch patch;
+    patch.name = "spot";
+    patch.polygon_W = {
+        {x - 0.1, y - 0.06}, {x + 0.1, y - 0.06}, {x + 0.1, y + 0.06}, {x - 0.1, y + 0.06}};
+    patch.friction = Friction{0.006, 0.0045};
+    terrain.AddPatch(patch);
+  }
+  const Friction base{0.8, 0.7};
+  double x = 0;
+  double sum = 0;
+  for (auto _ : state) {
+    x = x > 10.0 ? 0.0 : x + 0.0013;
+    sum += terrain.FrictionAt(Eigen::Vector3d(x, 0.16, 0), base).mu_peak;
+    sum += terrain.FrictionAt(Eigen::Vector3d(x, -0.16, 0), base).mu_peak;
+    sum += terrain.FrictionAt(Eigen::Vector3d(x, 0.0, 0), base).mu_peak;
+    sum += terrain.FrictionAt(Eigen::Vector3d(x, 0.3, 0), base).mu_peak;
+  }
+  benchmark::DoNotOptimize(sum);
+  state.SetItemsProcessed(state.iterations() * 4);
+}
+
 BENCHMARK(BM_PlatformFlat)->DenseRange(0, 2);
+BENCHMARK(BM_FrictionPatchLookup)->Arg(16)->Arg(256);
 BENCHMARK(BM_PlatformMesh)->DenseRange(0, 2);
 BENCHMARK(BM_ManyPlatformsFlat)->Arg(1)->Arg(4)->Arg(16);
 
