@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -111,6 +112,63 @@ TEST(TerrainMesh, PatchOverridesFriction) {
   EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.05);
   ASSERT_TRUE(t.Raycast(Eigen::Vector3d(1.5, 0.5, 1), -Eigen::Vector3d::UnitZ(), 2, &hit));
   EXPECT_DOUBLE_EQ(hit.friction.mu_peak, 0.8);
+}
+
+// FrictionAt's grid and per-patch boxes must answer exactly like testing every polygon, newest
+// first: overlapping, concave and thin patches, points on vertices, edges and box borders.
+TEST(TerrainMesh, PatchLookupMatchesTestingEveryPolygon) {
+  std::vector<FrictionPatch> patches = {
+      {"square", {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, Friction{0.1, 0.1}},
+      {"overlap", {{0.5, 0.5}, {2, 0.5}, {2, 2}, {0.5, 2}}, Friction{0.2, 0.2}},
+      {"concave", {{3, 0}, {5, 0}, {5, 2}, {4, 0.5}, {3, 2}}, Friction{0.3, 0.3}},
+      {"thin", {{-1, -0.001}, {6, -0.001}, {6, 0.001}, {-1, 0.001}}, Friction{0.4, 0.4}},
+      {"triangle", {{0.3, 1.7}, {1.1, -0.4}, {1.9, 1.7}}, Friction{0.5, 0.5}},
+      {"far", {{100, 100}, {100.1, 100}, {100.1, 100.1}}, Friction{0.6, 0.6}},
+  };
+  Terrain t;
+  for (const auto& p : patches) t.AddPatch(p);
+  const auto reference = [&](double x, double y) {
+    for (auto it = patches.rbegin(); it != patches.rend(); ++it) {
+      bool inside = false;
+      const auto& poly = it->polygon_W;
+      for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+        const auto& a = poly[i];
+        const auto& b = poly[j];
+        if ((a.y() > y) != (b.y() > y) &&
+            x < (b.x() - a.x()) * (y - a.y()) / (b.y() - a.y()) + a.x()) {
+          inside = !inside;
+        }
+      }
+      if (inside) return it->friction.mu_peak;
+    }
+    return 0.8;
+  };
+  std::vector<double> xs, ys;
+  for (const auto& p : patches) {
+    for (const auto& v : p.polygon_W) {
+      for (double d : {-1e-12, 0.0, 1e-12}) {
+        xs.push_back(v.x() + d);
+        ys.push_back(v.y() + d);
+      }
+    }
+  }
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> ux(-2, 7), uy(-1, 3);
+  for (int k = 0; k < 200; ++k) {
+    xs.push_back(ux(rng));
+    ys.push_back(uy(rng));
+  }
+  int inside = 0;
+  for (double x : xs) {
+    for (double y : ys) {
+      const double want = reference(x, y);
+      inside += want != 0.8;
+      ASSERT_EQ(t.FrictionAt(Eigen::Vector3d(x, y, 0), Friction{0.8, 0.7}).mu_peak, want)
+          << "at (" << x << ", " << y << ")";
+    }
+  }
+  EXPECT_GT(inside, 1000);  // the points do land in patches
+  EXPECT_EQ(t.FrictionAt(Eigen::Vector3d(100.05, 100.01, 0), Friction{}).mu_peak, 0.6);
 }
 
 TEST(TerrainMesh, ErrorsNameFileAndField) {
