@@ -25,6 +25,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "bus/internal/socketcan_convert.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
 
@@ -157,6 +158,7 @@ struct Client {
   bool dead = false;
   bool dirty = false;
   bool want_out = false;
+  bool local = false;  // an in-process port (OpenLocalPort): no fd, the owner pops `queue`
   Bus* bus = nullptr;
   RawOptions options;
   std::vector<Filter> filters;
@@ -283,6 +285,8 @@ struct UcanBroker::Impl {
   std::uint64_t orphan_bad_messages = 0;
 
   std::thread thread;
+  bool handover_requested = false;  // UseCallerThread(): the thread leaves its loop
+  std::vector<epoll_event> pump_events;
 
   explicit Impl(UcanBrokerOptions opts) : options(std::move(opts)) {
     dir = options.runtime_dir.empty() ? ResolveUcanRuntimeDir() : options.runtime_dir;
@@ -405,7 +409,7 @@ struct UcanBroker::Impl {
   void Kill(Client* c) {
     if (c->dead) return;
     c->dead = true;
-    ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
+    if (!c->local) ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
   }
 
   void ReapDead() {
@@ -799,7 +803,7 @@ struct UcanBroker::Impl {
     for (std::size_t i = 0; i < dirty.size(); ++i) {
       Client* c = dirty[i];
       c->dirty = false;
-      if (!c->want_out) Flush(c);  // a blocked reader is flushed on EPOLLOUT
+      if (!c->want_out && !c->local) Flush(c);  // a blocked reader is flushed on EPOLLOUT
     }
     dirty.clear();
   }
@@ -829,58 +833,71 @@ struct UcanBroker::Impl {
   /// ready connection up to its first frame stamped >= T0; route the frames stamped < T0 in
   /// stamp order. A write that returned before T0 is then either routed already or read in this
   /// pass, so a frame is never routed before one whose write() returned before it was sent.
-  void Loop() {
-    std::vector<epoll_event> events(kBatch);
-    for (;;) {
-      bool more_pending = false;
-      {
-        std::lock_guard lk(mu);
-        more_pending = !pending.empty();
-      }
-      int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()),
-                           more_pending ? 0 : -1);
-      if (n < 0 && errno != EINTR) break;
+  /// Waits up to `timeout_ms` (-1: forever) for traffic first. False once the broker must stop.
+  bool Pass(std::vector<epoll_event>& events, int timeout_ms) {
+    bool more_pending = false;
+    {
       std::lock_guard lk(mu);
-      if (stop_requested) break;
-      pass_start_ns = MonotonicNs();
-      // The wait above may predate T0; the level-triggered set is taken again after it.
-      events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
-      n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
-      if (n < 0) n = 0;
-      for (int i = 0; i < n; ++i) {
-        const std::uint64_t tag = events[i].data.u64;
-        if (tag == kListenTag) {
-          AcceptAll();
-          continue;
-        }
-        if (tag == kWakeTag) {
-          std::uint64_t v = 0;
-          [[maybe_unused]] ssize_t r = ::read(wake_fd.get(), &v, sizeof(v));
-          continue;
-        }
-        Client* c = Find(static_cast<std::uint32_t>(tag));
-        if (c == nullptr) continue;
-        if (events[i].events & EPOLLOUT) Flush(c);
-        if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
-          if (c->data) {
-            ReadData(c, kReadBatchesPerPass, pass_start_ns);
-          } else {
-            HandleRequest(c);
-          }
+      if (stop_requested) return false;
+      more_pending = !pending.empty();
+    }
+    events.resize(std::max<std::size_t>(events.size(), kBatch));
+    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()),
+                         more_pending ? 0 : timeout_ms);
+    if (n < 0 && errno != EINTR) return false;
+    std::lock_guard lk(mu);
+    if (stop_requested) return false;
+    pass_start_ns = MonotonicNs();
+    // The wait above may predate T0; the level-triggered set is taken again after it.
+    events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
+    n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
+    if (n < 0) n = 0;
+    for (int i = 0; i < n; ++i) {
+      const std::uint64_t tag = events[i].data.u64;
+      if (tag == kListenTag) {
+        AcceptAll();
+        continue;
+      }
+      if (tag == kWakeTag) {
+        std::uint64_t v = 0;
+        [[maybe_unused]] ssize_t r = ::read(wake_fd.get(), &v, sizeof(v));
+        continue;
+      }
+      Client* c = Find(static_cast<std::uint32_t>(tag));
+      if (c == nullptr) continue;
+      if (events[i].events & EPOLLOUT) Flush(c);
+      if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
+        if (c->data) {
+          ReadData(c, kReadBatchesPerPass, pass_start_ns);
+        } else {
+          HandleRequest(c);
         }
       }
-      Dispatch(pass_start_ns);
-      ApplyDeferredOptions();
-      FlushDirty();
-      ReapDead();
-      if (stop_requested) break;
     }
+    Dispatch(pass_start_ns);
+    ApplyDeferredOptions();
+    FlushDirty();
+    ReapDead();
+    return !stop_requested;
+  }
+
+  /// After the last pass: every client disconnected, Wait() released.
+  void Finish() {
     std::lock_guard lk(mu);
     stop_requested = true;
     stopped = true;
     for (auto& [id, c] : clients) Kill(c.get());
     ReapDead();
     stopped_cv.notify_all();
+  }
+
+  void Loop() {
+    std::vector<epoll_event> events(kBatch);
+    while (Pass(events, -1)) {
+      std::lock_guard lk(mu);
+      if (handover_requested) return;  // the owner pumps from now on; clients stay connected
+    }
+    Finish();
   }
 
   std::vector<UcanBusStats> StatsLocked() const {
@@ -930,6 +947,83 @@ void UcanBroker::Wait() {
 }
 
 void UcanBroker::Stop() { impl_->RequestStop(); }
+
+void UcanBroker::UseCallerThread() {
+  if (!impl_->thread.joinable()) return;
+  {
+    std::lock_guard lk(impl_->mu);
+    impl_->handover_requested = true;
+  }
+  impl_->Wake();
+  impl_->thread.join();
+}
+
+int UcanBroker::OpenLocalPort(const std::string& bus_name) {
+  std::lock_guard lk(impl_->mu);
+  auto it = impl_->buses.find(bus_name);
+  if (it == impl_->buses.end()) {
+    throw std::invalid_argument("ucan: no bus '" + bus_name + "' for a local port");
+  }
+  auto c = std::make_unique<Client>();
+  c->local = true;
+  c->data = true;
+  c->id = impl_->next_id++;
+  c->pid = ::getpid();
+  c->filters.push_back(Normalize(can_filter{0, 0}));  // a new socket receives everything
+  c->bus = it->second.get();
+  c->bus->members.push_back(c.get());
+  const int id = static_cast<int>(c->id);
+  impl_->clients[c->id] = std::move(c);
+  return id;
+}
+
+bool UcanBroker::SendLocal(int port, const CanFrame& frame) {
+  canfd_frame buf;
+  const std::size_t frame_len = internal::EncodeFrame(frame, buf);
+  if (frame_len == 0) return false;
+  std::lock_guard lk(impl_->mu);
+  Client* c = impl_->Find(static_cast<std::uint32_t>(port));
+  if (c == nullptr || !c->local || c->bus == nullptr) return false;
+  if (frame_len == ucan::kCanFdMtu && !c->options.fd_frames) return false;
+  Pending& f = impl_->pending.emplace_back();
+  f.stamp_ns = MonotonicNs();  // as a socket's TxStamp: its place in the bus order
+  f.bus = c->bus;
+  f.sender_id = c->id;
+  f.sender_pid = c->pid;
+  f.loopback = c->options.loopback != 0;
+  f.recv_own = c->options.recv_own != 0;
+  f.can_id = buf.can_id;
+  f.frame_len = static_cast<std::uint8_t>(frame_len);
+  std::memcpy(f.frame.data(), &buf, frame_len);
+  return true;
+}
+
+bool UcanBroker::ReceiveLocal(int port, CanFrame* frame) {
+  std::lock_guard lk(impl_->mu);
+  Client* c = impl_->Find(static_cast<std::uint32_t>(port));
+  if (c == nullptr || !c->local) return false;
+  while (!c->queue.empty()) {
+    const Msg& m = c->queue.At(0);
+    const std::size_t frame_len = m.len - sizeof(RxTrailer);
+    const bool ok = !internal::DecodeFrame(m.bytes.data(), frame_len, *frame);
+    c->queue.PopFront(1);
+    if (ok) return true;
+  }
+  return false;
+}
+
+bool UcanBroker::Pump(int timeout_ms) {
+  if (impl_->thread.joinable()) {
+    throw std::logic_error("UcanBroker::Pump: the broker thread still runs (UseCallerThread)");
+  }
+  {
+    std::lock_guard lk(impl_->mu);
+    if (impl_->stopped) return false;
+  }
+  if (impl_->Pass(impl_->pump_events, timeout_ms)) return true;
+  impl_->Finish();
+  return false;
+}
 
 const std::string& UcanBroker::runtime_dir() const noexcept { return impl_->dir; }
 

@@ -14,7 +14,8 @@
 /// Interface indexes are stable per runtime directory: "ucanN" -> 1000 + N, other names 2000 +
 /// order of first creation (a removed and re-added bus keeps its index).
 ///
-/// Thread-safety: all public methods may be called from any thread.
+/// Thread-safety: all public methods may be called from any thread, except Pump() (the thread
+/// that called UseCallerThread()).
 
 #include <cstddef>
 #include <cstdint>
@@ -22,6 +23,8 @@
 #include <string>
 #include <system_error>
 #include <vector>
+
+#include "bus/can_frame.h"
 
 namespace wheelhil::bus {
 
@@ -67,6 +70,28 @@ class UcanBroker {
   /// Blocks until the broker stops (a kShutdown request, exit_when_empty, or Stop()).
   void Wait();
   void Stop();
+
+  /// Ends the broker thread and leaves the routing to the caller, who from then on moves frames
+  /// with Pump() (clients stay connected; nothing moves between two Pump() calls). For a
+  /// lockstep owner that both sends and waits: one thread instead of two saves a context switch
+  /// per hop. Idempotent; call from one thread only, not concurrently with Pump().
+  void UseCallerThread();
+  /// One broker pass on the calling thread, after UseCallerThread(): waits up to `timeout_ms`
+  /// (0: not at all, -1: forever) for traffic, then accepts, reads and routes everything ready.
+  /// False once the broker has stopped. Throws std::logic_error while the thread still runs.
+  bool Pump(int timeout_ms);
+
+  /// An in-process socket on `bus` for the owner that pumps: a CAN_RAW socket with a new
+  /// socket's options (every frame, loopback on, its own frames not received) but no kernel
+  /// socket, so a frame costs no system call on the owner's side. Frames sent are stamped at
+  /// SendLocal() (their place in the bus order) and routed by the next Pump(); frames routed to
+  /// the port wait for ReceiveLocal() (its queue is bounded like a client's: overflow counted
+  /// as drops). Returns the port; throws std::invalid_argument for an unknown bus.
+  int OpenLocalPort(const std::string& bus);
+  /// False for an invalid frame (or an FD frame) or a closed port.
+  bool SendLocal(int port, const CanFrame& frame);
+  /// Takes the next frame routed to the port; false when none is there.
+  bool ReceiveLocal(int port, CanFrame* frame);
 
   const std::string& runtime_dir() const noexcept;
   std::string socket_path() const;

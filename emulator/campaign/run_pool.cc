@@ -2,11 +2,13 @@
 
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -24,6 +26,7 @@ using Clock = std::chrono::steady_clock;
 
 struct Running {
   pid_t pid = -1;
+  int slot = 0;  // 0 .. jobs-1, free again when the run ends
   PoolJob job;
   Clock::time_point start;
   bool timed_out = false;
@@ -175,6 +178,12 @@ std::vector<RunRecord> RunPool(
     finished.push_back(std::move(rec));
   };
 
+  std::vector<int> cpus;  // the CPUs this process may use
+  if (cpu_set_t allowed; ::sched_getaffinity(0, sizeof(allowed), &allowed) == 0) {
+    for (int c = 0; c < CPU_SETSIZE; ++c) {
+      if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    }
+  }
   while (!queue.empty() || !running.empty()) {
     while (!queue.empty() && static_cast<int>(running.size()) < options.jobs) {
       Running r;
@@ -195,6 +204,18 @@ std::vector<RunRecord> RunPool(
                                          "--seed",
                                          std::to_string(r.job.record.seed)};
         argv.insert(argv.end(), options.extra_args.begin(), options.extra_args.end());
+        for (int slot = 0;; ++slot) {
+          if (std::none_of(running.begin(), running.end(),
+                           [&](const Running& o) { return o.slot == slot; })) {
+            r.slot = slot;
+            break;
+          }
+        }
+        if (options.spread_cpus && !cpus.empty() &&
+            std::find(argv.begin(), argv.end(), "--cpu") == argv.end()) {
+          argv.push_back("--cpu");
+          argv.push_back(std::to_string(cpus[static_cast<std::size_t>(r.slot) % cpus.size()]));
+        }
         r.pid = Spawn(argv, run_dir / "runner.log");
         if (r.pid < 0) {
           throw std::runtime_error(

@@ -30,6 +30,10 @@ struct PoolOptions {
   std::string runner_exe;               ///< see ThisExecutable()
   std::vector<std::string> extra_args;  ///< appended after --seed N
   int jobs = 1;
+  /// Give each concurrent run its own CPU (`--cpu`, round robin over the CPUs this process may
+  /// use by job slot): lockstep runs confine themselves to one CPU, and two left to pick the
+  /// one they start on can land on the same.
+  bool spread_cpus = true;
   std::string label = "campaign";  ///< progress prefix
   bool progress = true;            ///< print progress to stderr (bar on a TTY, lines otherwise)
 };

@@ -92,6 +92,9 @@ RunCommand::RunCommand(CLI::App& app) {
                    "SocketCAN interface (vcan0, can0); default: a private userspace bus");
   run_->add_flag("--realtime", realtime_, "Pace virtual time to the wall clock");
   run_->add_flag("--quiet", quiet_, "No progress line and no summary");
+  run_->add_option("--cpu", cpu_,
+                   "Lockstep: run emulator, bus and firmware on this CPU (default: the CPU the "
+                   "run starts on; -1: no pinning)");
 }
 
 std::optional<int> RunCommand::Run() {
@@ -108,6 +111,7 @@ std::optional<int> RunCommand::Run() {
   o.seed = seed_;
   o.can_iface = can_;
   o.realtime = realtime_;
+  o.cpu = cpu_;
   o.progress = !quiet_ && ::isatty(2);
   o.bin_dir = ExeDir();
   o.dbc_dir = FindDbcDir();

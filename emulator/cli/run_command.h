@@ -25,6 +25,7 @@ class RunCommand {
   std::optional<std::uint64_t> seed_;
   std::string can_;
   bool realtime_ = false;
+  std::optional<int> cpu_;
   bool quiet_ = false;
 };
 

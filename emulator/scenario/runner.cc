@@ -1,6 +1,7 @@
 #include "emulator/scenario/runner.h"
 
 #include <fcntl.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -169,7 +170,10 @@ class Run {
  private:
   void BuildWorld();
   void BuildDevices();
-  void OpenBus();
+  void OpenBus(bool lockstep);
+  // Lockstep: this thread (and so the broker and the firmware, created later) on one CPU at
+  // SCHED_BATCH (RunOptions::cpu). Throws std::invalid_argument for a CPU not allowed here.
+  void ConfineToOneCpu();
   bool WaitForFirmwareConnection(std::string& why);
   // One physics step plus the devices and the bus up to the end of the step.
   void Step(bool motion);
@@ -190,6 +194,8 @@ class Run {
   // Reads frames from the firmware until `done` or the wall-clock timeout; false on timeout.
   bool WaitFirmware(const std::function<bool()>& done, double timeout_s);
   void DrainFirmware(int timeout_ms);
+  // One pass of the pumped broker (see pumped_).
+  void PumpBroker(int timeout_ms);
   void OnFirmwareFrame(const bus::CanFrame& f);
   void RecordTruth(bool force);
   void Progress(bool final);
@@ -203,6 +209,15 @@ class Run {
   std::string iface_;
   std::string runtime_dir_;
   std::unique_ptr<bus::UcanBroker> broker_;
+  // Lockstep on the private bus: the run's own thread routes the bus (UcanBroker::Pump) when it
+  // waits for the firmware, so a cycle costs two context switches (to the firmware and back)
+  // instead of one per hop through a broker thread.
+  bool pumped_ = false;
+  int cpu_ = -1;  // ConfineToOneCpu(): the CPU, -1 none
+  static constexpr int kMaxUnpumpedFrames = 32;
+  int unpumped_frames_ = 0;
+  int local_port_ = -1;  // the emulator's port on the pumped bus
+  Clock::time_point last_exit_check_{};
   std::optional<bus::SocketCanTransport> can_;
   Firmware firmware_;
   std::unique_ptr<bus::CandumpWriter> log_;
@@ -400,7 +415,7 @@ void Run::BuildDevices() {
   }
 }
 
-void Run::OpenBus() {
+void Run::OpenBus(bool lockstep) {
   bus::CanTransportOptions opt;
   opt.receive_own = false;
   if (o_.can_iface.empty()) {
@@ -415,9 +430,38 @@ void Run::OpenBus() {
   } else {
     iface_ = o_.can_iface;
   }
-  can_.emplace(bus::SocketCanTransport::Open(iface_, opt));
+  if (broker_ && lockstep) {
+    broker_->UseCallerThread();
+    local_port_ = broker_->OpenLocalPort(iface_);
+    pumped_ = true;
+  } else {
+    can_.emplace(bus::SocketCanTransport::Open(iface_, opt));
+  }
   log_ = std::make_unique<bus::CandumpWriter>(out_ + "/can.log",
                                               bus::CandumpWriter::FlushPolicy::kBuffered);
+}
+
+void Run::ConfineToOneCpu() {
+  if (o_.cpu && *o_.cpu == -1) return;
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  if (::sched_getaffinity(0, sizeof(allowed), &allowed) != 0) return;
+  const int cpu = o_.cpu ? *o_.cpu : ::sched_getcpu();
+  if (cpu < 0 || cpu >= CPU_SETSIZE || !CPU_ISSET(cpu, &allowed)) {
+    if (o_.cpu) {
+      throw std::invalid_argument(fmt::format(
+          "--cpu {}: not a CPU this process may run on (see `taskset -p $$`; -1: no pinning)",
+          cpu));
+    }
+    return;
+  }
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(cpu, &one);
+  if (::sched_setaffinity(0, sizeof(one), &one) == 0) cpu_ = cpu;
+  // Refused only under a real-time policy; then the run keeps it.
+  sched_param none{};
+  (void)::sched_setscheduler(0, SCHED_BATCH, &none);
 }
 
 bool Run::WaitForFirmwareConnection(std::string& why) {
@@ -455,7 +499,11 @@ bool Run::WaitForFirmwareConnection(std::string& why) {
                         *code, iface_);
       return false;
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    if (pumped_) {
+      broker_->Pump(2);  // its connection and its requests need a broker pass
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
   }
   why = fmt::format("the firmware did not open {} within {} s", iface_, s_.timing.timeout_s);
   return false;
@@ -732,7 +780,14 @@ void Run::OnWire(const WireFrame& w) {
   (void)log_->Write(w.complete_ns, iface_, w.frame);
   if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)
   if (w.node != bus_firmware_) {
-    if (can_->Send(w.frame)) ++enqueue_failures_;
+    if (pumped_) {
+      if (!broker_->SendLocal(local_port_, w.frame)) ++enqueue_failures_;
+      // A pumped broker moves nothing on its own: hand the firmware what piled up between
+      // two waits for it before its socket fills.
+      if (++unpumped_frames_ >= kMaxUnpumpedFrames) PumpBroker(0);
+    } else if (can_->Send(w.frame)) {
+      ++enqueue_failures_;
+    }
     // Boot-ups and SDO answers: the firmware reacts to each; lockstep waits for it.
     const std::uint32_t id = w.frame.id;
     if (!w.frame.extended && id == kSyncId && w.node == bus_emulator_) {
@@ -1017,7 +1072,18 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   }
 }
 
+void Run::PumpBroker(int timeout_ms) {
+  unpumped_frames_ = 0;
+  if (!broker_->Pump(timeout_ms) && failure_.empty()) failure_ = "the userspace bus stopped";
+}
+
 void Run::DrainFirmware(int timeout_ms) {
+  if (pumped_) {
+    PumpBroker(timeout_ms);
+    bus::CanFrame f;
+    while (broker_->ReceiveLocal(local_port_, &f)) OnFirmwareFrame(f);
+    return;
+  }
   bus::ReceivedFrame rx;
   int wait = timeout_ms;
   while (!can_->Receive(rx, wait)) {
@@ -1032,7 +1098,27 @@ bool Run::WaitFirmware(const std::function<bool()>& done, double timeout_s) {
     const double left = timeout_s - WallSeconds(t0);
     if (left <= 0) return false;
     bus::ReceivedFrame rx;
-    const auto ec = can_->Receive(rx, std::max(1, std::min(50, static_cast<int>(left * 1000))));
+    const int wait_ms = std::max(1, std::min(50, static_cast<int>(left * 1000)));
+    if (pumped_) {
+      // Frames already routed to us first; else one broker pass, which hands the firmware what
+      // the emulator sent since the last one and then sleeps until the firmware writes.
+      if (broker_->ReceiveLocal(local_port_, &rx.frame)) {
+        OnFirmwareFrame(rx.frame);
+        continue;
+      }
+      PumpBroker(wait_ms);
+      if (!failure_.empty()) return false;
+      // waitpid costs a system call: look at most every 20 ms (a pass ends on any traffic).
+      if (firmware_.running() && WallSeconds(last_exit_check_) > 0.02) {
+        last_exit_check_ = Clock::now();
+        if (firmware_.Exited()) {
+          failure_ = "the firmware exited during the run (see firmware.log)";
+          return false;
+        }
+      }
+      continue;
+    }
+    const auto ec = can_->Receive(rx, wait_ms);
     if (!ec) {
       OnFirmwareFrame(rx.frame);
     } else if (firmware_.running() && firmware_.Exited()) {
@@ -1068,12 +1154,13 @@ RunResult Run::Execute() {
         fmt::format("no DBC files in '{}' (set WHEELHIL_DBC_DIR)", o_.dbc_dir));
   }
   const bool lockstep = s_.timing.lockstep && !o_.realtime;
+  if (lockstep) ConfineToOneCpu();
   wall0_ = Clock::now();
   last_progress_ = wall0_;
   truth_every_ns_ = std::min<std::int64_t>(10'000'000, std::llround(s_.timing.sync_period_s * 1e9));
   BuildWorld();
   BuildDevices();
-  OpenBus();
+  OpenBus(lockstep);
   events_.push_back(json{{"t_s", 0.0},
                          {"event", "run_start"},
                          {"seed", seed_},
@@ -1382,7 +1469,9 @@ json Run::BuildReport(double wall_s) {
     metrics["faults"] = fj;
   }
   r["metrics"] = metrics;
-  r["wall"] = json{{"wall_time_s", wall_s}, {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0}};
+  r["wall"] = json{{"wall_time_s", wall_s},
+                   {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
+                   {"cpu", cpu_}};
   return r;
 }
 

@@ -39,6 +39,12 @@ struct RunOptions {
   bool progress = false;              ///< Progress line on stderr (a terminal).
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.
+  /// Lockstep only: the CPU the run (emulator, bus and firmware process) is confined to.
+  /// Lockstep is strictly sequential, and on one CPU each hand-over between emulator and
+  /// firmware is a cheap local context switch instead of a cross-CPU wake-up. nullopt: the CPU
+  /// the run starts on; -1: no confinement. Also puts the run at SCHED_BATCH, so that a woken
+  /// side does not preempt the one still writing its frames.
+  std::optional<int> cpu;
   /// Environment a child needs on a private userspace bus in `runtime_dir` (LD_PRELOAD ...).
   std::function<std::vector<std::pair<std::string, std::string>>(const std::string&)>
       ucan_child_env;

@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <atomic>
 #include <cerrno>
 #include <random>
 #include <thread>
@@ -685,6 +686,58 @@ TEST(UcanBroker, ControlRequestsListAddRemove) {
   broker.Wait();  // returns: the broker stopped
   testing::TempRuntimeDir empty;
   EXPECT_TRUE(UcanListBuses(empty.path(), &list));  // no broker there
+}
+
+// Lockstep runs drive the broker from their own thread and talk to it through an in-process
+// port: nothing moves between two Pump() calls, and the local port keeps the bus order with
+// the socket clients.
+TEST_F(UcanBusTest, PumpedBrokerWithLocalPortRoutesOnlyWhenPumpedAndKeepsOrder) {
+  // bind() waits for the broker's answer: pump from a helper thread while the client opens.
+  broker_.UseCallerThread();
+  std::atomic<bool> opening{true};
+  std::thread pumper([&] {
+    while (opening) broker_.Pump(5);
+  });
+  const int fw = OpenCan("ucan0");
+  opening = false;
+  pumper.join();
+  ASSERT_GE(fw, 0);
+  const int port = broker_.OpenLocalPort("ucan0");
+  EXPECT_THROW(broker_.OpenLocalPort("nosuchbus"), std::invalid_argument);
+  EXPECT_EQ(StatsOf("ucan0").clients, 2u);
+
+  // Emulator -> firmware: queued until the next pass, then in send order.
+  for (std::uint8_t i = 0; i < 5; ++i) {
+    ASSERT_TRUE(broker_.SendLocal(port, CanFrame::Classic(0x180 + i, std::array{i})));
+  }
+  EXPECT_TRUE(testing::NothingPending(fw));
+  ASSERT_TRUE(broker_.Pump(0));
+  for (canid_t i = 0; i < 5; ++i) EXPECT_EQ(Receive(fw).can_id, 0x180 + i);
+
+  // Firmware -> emulator: the pass waits for the write, and the local port gets it in order.
+  CanFrame got;
+  EXPECT_FALSE(broker_.ReceiveLocal(port, &got));
+  ASSERT_TRUE(Send(fw, Frame(0x680, {1})));
+  ASSERT_TRUE(Send(fw, Frame(0x681, {2})));
+  ASSERT_TRUE(broker_.Pump(1000));
+  ASSERT_TRUE(broker_.ReceiveLocal(port, &got));
+  EXPECT_EQ(got.id, 0x680u);
+  EXPECT_EQ(got.len, 1u);
+  EXPECT_EQ(got.data[0], 1u);
+  ASSERT_TRUE(broker_.ReceiveLocal(port, &got));
+  EXPECT_EQ(got.id, 0x681u);
+  EXPECT_FALSE(broker_.ReceiveLocal(port, &got));  // its own frames are not looped back
+
+  // A frame the firmware wrote before the local one is delivered first (one bus order).
+  ASSERT_TRUE(Send(fw, Frame(0x700)));
+  ASSERT_TRUE(broker_.SendLocal(port, CanFrame::Classic(0x080, {})));
+  ASSERT_TRUE(broker_.Pump(0));
+  ASSERT_TRUE(broker_.ReceiveLocal(port, &got));
+  EXPECT_EQ(got.id, 0x700u);
+  EXPECT_EQ(Receive(fw).can_id, 0x080u);
+  EXPECT_THROW(UcanBroker(MakeOptions(dir_.path(), 8)), std::system_error);  // still serving
+  EXPECT_FALSE(broker_.SendLocal(port, CanFrame{.id = 0x800}));              // invalid: 12-bit id
+  ::close(fw);
 }
 
 }  // namespace
