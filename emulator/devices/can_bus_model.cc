@@ -13,19 +13,42 @@ namespace {
 constexpr unsigned kTrailerBits = 3 + 7 + 3;  // CRC delimiter, ACK slot, ACK delimiter; EOF; IFS
 constexpr unsigned kIfsBits = 3;
 
-// Unstuffed bits SOF .. CRC of one classic frame (at most 39 + 64 + 15 = 118).
-struct BitStream {
-  std::array<std::uint8_t, 128> bits{};
-  std::size_t size = 0;
-  void Push(std::uint32_t value, int count) {
-    for (int i = count - 1; i >= 0; --i) {
-      bits[size++] = static_cast<std::uint8_t>((value >> i) & 1u);
+// One pass over the bits SOF .. CRC of a classic frame: the CRC-15 (poly 0x4599, init 0) over
+// SOF .. data as the bits go by, and the stuff bits the transmitter inserts: after 5 equal bits
+// one complementary bit, which starts a new run (the first bit starts the first run).
+struct StuffCounter {
+  std::uint16_t crc = 0;
+  bool crc_on = true;  // false once the CRC field itself is sent
+  unsigned bits = 0;
+  unsigned stuffed = 0;
+  int run = 0;
+  unsigned prev = 2;
+  void Bit(unsigned b) {
+    if (crc_on) {
+      const bool crc_next = (b != 0) != ((crc & 0x4000u) != 0);
+      crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
+      if (crc_next) crc ^= 0x4599;
     }
+    ++bits;
+    if (b == prev) {
+      ++run;
+    } else {
+      prev = b;
+      run = 1;
+    }
+    if (run == 5) {
+      ++stuffed;
+      prev ^= 1u;
+      run = 1;
+    }
+  }
+  void Push(std::uint32_t value, int count) {
+    for (int i = count - 1; i >= 0; --i) Bit((value >> i) & 1u);
   }
 };
 
 unsigned ExactBits(const bus::CanFrame& f) {
-  BitStream b;
+  StuffCounter b;
   b.Push(0, 1);  // SOF, dominant
   if (f.extended) {
     b.Push(f.id >> 18, 11);  // base id
@@ -43,25 +66,9 @@ unsigned ExactBits(const bus::CanFrame& f) {
   if (!f.rtr) {
     for (std::size_t i = 0; i < f.len; ++i) b.Push(f.data[i], 8);
   }
-  b.Push(CanCrc15({b.bits.data(), b.size}), 15);
-  // After 5 equal bits the transmitter inserts one complementary bit, which starts a new run.
-  unsigned stuffed = 0;
-  int run = 1;
-  std::uint8_t prev = b.bits[0];
-  for (std::size_t i = 1; i < b.size; ++i) {
-    if (b.bits[i] == prev) {
-      ++run;
-    } else {
-      prev = b.bits[i];
-      run = 1;
-    }
-    if (run == 5) {
-      ++stuffed;
-      prev = static_cast<std::uint8_t>(prev ^ 1u);
-      run = 1;
-    }
-  }
-  return static_cast<unsigned>(b.size) + stuffed + kTrailerBits;
+  b.crc_on = false;
+  b.Push(b.crc, 15);
+  return b.bits + b.stuffed + kTrailerBits;
 }
 
 }  // namespace
