@@ -164,6 +164,7 @@ struct Decoded {
 class Run {
  public:
   Run(const Scenario& s, const RunOptions& o) : s_(s), o_(o) {}
+  ~Run() { ReleaseCpu(); }
 
   RunResult Execute();
 
@@ -174,6 +175,8 @@ class Run {
   // Lockstep: this thread (and so the broker and the firmware, created later) on one CPU at
   // SCHED_BATCH (RunOptions::cpu). Throws std::invalid_argument for a CPU not allowed here.
   void ConfineToOneCpu();
+  // Gives the caller's thread back its CPU set and policy (a library call leaves no trace).
+  void ReleaseCpu();
   bool WaitForFirmwareConnection(std::string& why);
   // One physics step plus the devices and the bus up to the end of the step.
   void Step(bool motion);
@@ -214,6 +217,9 @@ class Run {
   // instead of one per hop through a broker thread.
   bool pumped_ = false;
   int cpu_ = -1;  // ConfineToOneCpu(): the CPU, -1 none
+  cpu_set_t saved_cpus_{};
+  int saved_policy_ = -1;
+  sched_param saved_param_{};
   static constexpr int kMaxUnpumpedFrames = 32;
   int unpumped_frames_ = 0;
   int local_port_ = -1;  // the emulator's port on the pumped bus
@@ -458,10 +464,20 @@ void Run::ConfineToOneCpu() {
   cpu_set_t one;
   CPU_ZERO(&one);
   CPU_SET(cpu, &one);
+  saved_cpus_ = allowed;
   if (::sched_setaffinity(0, sizeof(one), &one) == 0) cpu_ = cpu;
+  saved_policy_ = ::sched_getscheduler(0);
+  (void)::sched_getparam(0, &saved_param_);
   // Refused only under a real-time policy; then the run keeps it.
   sched_param none{};
-  (void)::sched_setscheduler(0, SCHED_BATCH, &none);
+  if (saved_policy_ == SCHED_OTHER) (void)::sched_setscheduler(0, SCHED_BATCH, &none);
+}
+
+void Run::ReleaseCpu() {
+  if (cpu_ >= 0) (void)::sched_setaffinity(0, sizeof(saved_cpus_), &saved_cpus_);
+  if (saved_policy_ == SCHED_OTHER) (void)::sched_setscheduler(0, SCHED_OTHER, &saved_param_);
+  cpu_ = -1;
+  saved_policy_ = -1;
 }
 
 bool Run::WaitForFirmwareConnection(std::string& why) {

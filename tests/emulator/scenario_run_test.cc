@@ -2,6 +2,8 @@
 // (wheelhil-fw) on a private userspace bus, paper-000 scenario shortened to a few seconds.
 // Same seed -> byte-identical can.log and report.json (minus the `wall` object); a firmware
 // that never joins the bus fails the run with the reason.
+#include <sched.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -70,6 +72,43 @@ TEST_F(ScenarioRun, SameSeedGivesIdenticalLogAndReport) {
     EXPECT_TRUE(fs::exists(dir_ / "a" / f)) << f;
   }
   EXPECT_THAT(Slurp(dir_ / "a" / "report.html"), HasSubstr("<svg"));
+}
+
+// Lockstep confines the run and its firmware to one CPU (RunOptions::cpu, `wheelhil run --cpu`):
+// the CPU is reported under `wall`, the caller's thread gets its CPU set back, the run does not
+// change, and a CPU this process may not use is an input error naming the option.
+TEST_F(ScenarioRun, CpuConfinementIsReportedUndoneAndChangesNothing) {
+  Scenario s = ShortPaper000();
+  s.timing.duration_s = 1.0;
+  cpu_set_t before;
+  ASSERT_EQ(::sched_getaffinity(0, sizeof(before), &before), 0);
+  int last = -1;
+  for (int c = 0; c < CPU_SETSIZE; ++c) {
+    if (CPU_ISSET(c, &before)) last = c;
+  }
+  RunOptions pinned = Options(dir_ / "pinned");
+  pinned.cpu = last;
+  const RunResult a = RunScenario(s, pinned);
+  ASSERT_EQ(a.failure, "");
+  EXPECT_EQ(a.report["wall"]["cpu"].get<int>(), last);
+  cpu_set_t after;
+  ASSERT_EQ(::sched_getaffinity(0, sizeof(after), &after), 0);
+  EXPECT_TRUE(CPU_EQUAL(&before, &after));
+  EXPECT_EQ(::sched_getscheduler(0), SCHED_OTHER);
+  RunOptions free = Options(dir_ / "free");
+  free.cpu = -1;
+  const RunResult b = RunScenario(s, free);
+  ASSERT_EQ(b.failure, "");
+  EXPECT_EQ(b.report["wall"]["cpu"].get<int>(), -1);
+  EXPECT_EQ(Slurp(dir_ / "pinned" / "can.log"), Slurp(dir_ / "free" / "can.log"));
+  RunOptions bad = Options(dir_ / "bad");
+  bad.cpu = 100000;
+  try {
+    RunScenario(s, bad);
+    ADD_FAILURE() << "a CPU outside the affinity mask was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("--cpu 100000"));
+  }
 }
 
 TEST_F(ScenarioRun, AnotherSeedChangesTheFloor) {
