@@ -329,6 +329,21 @@ void RunCampaignThroughput(const BenchOptions& o, const std::string& self_exe,
   std::filesystem::remove_all(dir, ec);
 }
 
+// The documented keys (bench_report.h: what --check holds a report to) under `prefix`, minus
+// those under `except`: what a worker must fill, or mark unavailable when it fails.
+std::vector<std::string> DocumentedKeysUnder(const std::string& prefix,
+                                             const std::string& except = "") {
+  std::vector<std::string> out;
+  for (const auto& keys : {DocumentedMetricKeys(), DocumentedTextKeys()}) {
+    for (const auto& k : keys) {
+      if (k.rfind(prefix, 0) == 0 && (except.empty() || k.rfind(except, 0) != 0)) {
+        out.push_back(k);
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
@@ -501,11 +516,7 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
     return w.max_rss_mib;
   };
 
-  std::vector<std::string> physics_keys;
-  for (const auto& k : DocumentedMetricKeys()) {
-    if (k.rfind("physics.", 0) == 0) physics_keys.push_back(k);
-  }
-  SetPath(report, "rss.physics_mib", run("physics", false, physics_keys));
+  SetPath(report, "rss.physics_mib", run("physics", false, DocumentedKeysUnder("physics.")));
   SetPath(report, "rss.bus_mib",
           run("bus-ucan", true, {"bus.ucan_frames_per_s", "bus.ucan_fanout4_frames_per_s"}));
 
@@ -545,23 +556,9 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
     SetPath(report, "bus.ucan_vs_vcan_ratio", Unavailable("needs both bus rates"));
   }
 
-  const std::vector<std::string> rt_keys = {"realtime.p50_us",
-                                            "realtime.p99_us",
-                                            "realtime.max_us",
-                                            "realtime.missed_deadlines",
-                                            "realtime.frames",
-                                            "realtime.duration_s",
-                                            "realtime.arrival_p99_us",
-                                            "realtime.scheduling",
-                                            "realtime.spin_us",
-                                            "realtime.bare_timer_p99_us",
-                                            "realtime.bare_timer_max_us",
-                                            "realtime.bare_spin_p99_us",
-                                            "realtime.bare_spin_max_us"};
-  SetPath(report, "rss.realtime_mib", run("realtime", true, rt_keys));
-  run("realtime-loaded", true,
-      {"realtime.loaded_p50_us", "realtime.loaded_p99_us", "realtime.loaded_max_us",
-       "realtime.loaded_missed_deadlines"});
+  SetPath(report, "rss.realtime_mib",
+          run("realtime", true, DocumentedKeysUnder("realtime.", "realtime.loaded_")));
+  run("realtime-loaded", true, DocumentedKeysUnder("realtime.loaded_"));
 
   RunLockstep(o, self_exe, lockstep_unavailable, report, peak_mib);
   RunLockstepVcan(o, self_exe, lockstep_unavailable, report);

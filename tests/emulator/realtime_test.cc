@@ -159,18 +159,25 @@ TEST(Deadlines, BareTimerMeasurementHasOneNonNegativeErrorPerWait) {
   EXPECT_THAT(realtime::MeasureWakeErrorsNs(0, 5, 0), IsEmpty());
 }
 
-TEST(RealtimeSettings, TimerSlackIsSetToOneNanosecondAndReported) {
-  // On a thread of its own: the settings stay with that thread. No SCHED_FIFO, no mlockall, no
-  // pinning: only the slack is asked for, which any thread may set.
+// Asks only for a timer slack (no SCHED_FIFO, no mlockall, no pinning: any thread may) on a
+// thread of its own, so the settings stay with that thread; `slack_before_ns` gets that
+// thread's slack before the call.
+realtime::RealtimeStatus ApplySlackOnNewThread(long slack_ns, long* slack_before_ns = nullptr) {
   realtime::RealtimeStatus status;
   std::thread t([&] {
+    if (slack_before_ns != nullptr) *slack_before_ns = ::prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0);
     realtime::RealtimeOptions o;
     o.sched_fifo = false;
     o.lock_memory = false;
-    o.timer_slack_ns = 1;
+    o.timer_slack_ns = slack_ns;
     status = realtime::ApplyRealtimeSettings(o);
   });
   t.join();
+  return status;
+}
+
+TEST(RealtimeSettings, TimerSlackIsSetToOneNanosecondAndReported) {
+  const realtime::RealtimeStatus status = ApplySlackOnNewThread(1);
   EXPECT_EQ(status.timer_slack_ns, 1);
   EXPECT_THAT(status.notes, IsEmpty());
   EXPECT_FALSE(status.sched_fifo);
@@ -178,17 +185,8 @@ TEST(RealtimeSettings, TimerSlackIsSetToOneNanosecondAndReported) {
   EXPECT_EQ(status.pinned_cpu, -1);
   // timer_slack_ns = 0 leaves the thread's slack alone (the default of a new thread: 50 µs
   // unless the process was started with another).
-  realtime::RealtimeStatus untouched;
   long before = -2;
-  std::thread u([&] {
-    before = ::prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0);
-    realtime::RealtimeOptions o;
-    o.sched_fifo = false;
-    o.lock_memory = false;
-    o.timer_slack_ns = 0;
-    untouched = realtime::ApplyRealtimeSettings(o);
-  });
-  u.join();
+  const realtime::RealtimeStatus untouched = ApplySlackOnNewThread(0, &before);
   EXPECT_EQ(untouched.timer_slack_ns, before);
 }
 
