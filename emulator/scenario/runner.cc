@@ -196,6 +196,7 @@ class Run {
   void AppendFaultEvents();
   // Reads frames from the firmware until `done` or the wall-clock timeout; false on timeout.
   bool WaitFirmware(const std::function<bool()>& done, double timeout_s);
+  // Realtime only (the transport is open there; lockstep waits with WaitFirmware).
   void DrainFirmware(int timeout_ms);
   // One pass of the pumped broker (see pumped_).
   void PumpBroker(int timeout_ms);
@@ -1094,12 +1095,6 @@ void Run::PumpBroker(int timeout_ms) {
 }
 
 void Run::DrainFirmware(int timeout_ms) {
-  if (pumped_) {
-    PumpBroker(timeout_ms);
-    bus::CanFrame f;
-    while (broker_->ReceiveLocal(local_port_, &f)) OnFirmwareFrame(f);
-    return;
-  }
   bus::ReceivedFrame rx;
   int wait = timeout_ms;
   while (!can_->Receive(rx, wait)) {
