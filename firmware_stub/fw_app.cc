@@ -40,6 +40,14 @@ CanopenMasterConfig MasterConfigFrom(const FwConfig& config) {
   m.reset_communication_at_start = c.reset_communication_at_start;
   m.produce_sync = config.sync.produce;
   m.sync_period_ns = ToNs(config.sync.period_s);
+  if (!config.sync.produce) {
+    // Following SYNC the master runs on bus time (FwApp::MasterClockNs), which knows a frame's
+    // instant only to the SYNC interval it came in: each timeout waits one period more, so it
+    // never fires before it is due (at most one period late).
+    m.boot_timeout_ns += m.sync_period_ns;
+    m.sdo_timeout_ns += m.sync_period_ns;
+    if (m.heartbeat_timeout_ns > 0) m.heartbeat_timeout_ns += m.sync_period_ns;
+  }
   return m;
 }
 
@@ -58,7 +66,10 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
       master_(MasterConfigFrom(config), protocol),
       assembler_(AssemblerConfigFrom(config)),
       nodes_(config.encoder_nodes()),
-      period_ns_(ToNs(config.sync.period_s)) {
+      period_ns_(ToNs(config.sync.period_s)),
+      bus_clock_(!config.sync.produce),
+      sync_silence_ns_(
+          std::max(kSyncSilenceMinNs, kSyncSilencePeriods * ToNs(config.sync.period_s))) {
   const std::string where =
       fmt::format("{}: {}", config.source_path, EstimatorName(config.estimator));
   try {
@@ -119,7 +130,9 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
 }
 
 void FwApp::Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
-  master_.Start(t_ns);
+  last_sync_host_ns_ = t_ns;  // Following SYNC: bus time 0, the silence counted from here.
+  bus_ns_ = 0;
+  master_.Start(MasterClockNs(t_ns));
   next_startup_status_ns_ = t_ns;
   state_ = FwState::kWaitingForNodes;
   Poll(t_ns, out);
@@ -154,9 +167,21 @@ std::int64_t ArrivalOnMonotonicNs(std::int64_t stamp_real_ns, std::int64_t now_r
   return age >= 0 && age <= max_age_ns ? now_mono_ns - age : now_mono_ns;
 }
 
+std::int64_t FwApp::MasterClockNs(std::int64_t t_ns) const {
+  if (!bus_clock_) return t_ns;
+  // Bus time stands still between SYNCs; only a silence longer than sync_silence_ns_ lets it
+  // run on with the host clock (from the end of that grace, so it never jumps).
+  const std::int64_t over = t_ns - last_sync_host_ns_ - sync_silence_ns_;
+  return over > 0 ? bus_ns_ + over : bus_ns_;
+}
+
 void FwApp::Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
   last_t_ns_ = std::max(last_t_ns_, t_ns);
-  HandleMasterPoll(master_.Poll(t_ns), t_ns, out);
+  if (bus_clock_ && !sync_silent_ && t_ns - last_sync_host_ns_ > sync_silence_ns_) {
+    sync_silent_ = true;  // No SYNC for that long: the master's timers go on the host clock.
+    ++stats_.sync_silences;
+  }
+  HandleMasterPoll(master_.Poll(MasterClockNs(t_ns)), t_ns, out);
   if (auto closed = assembler_.Poll(t_ns)) OnCycle(*closed, out);
   if (StartupStatusDue() && t_ns >= next_startup_status_ns_) {
     // Alive while waiting for the nodes: a receiver that sees no FW_Status for 3 cycles takes
@@ -172,7 +197,21 @@ bool FwApp::StartupStatusDue() const {
 }
 
 std::int64_t FwApp::NextEventNs() const {
-  std::int64_t next = std::min(master_.NextEventNs(), assembler_.NextDeadlineNs());
+  std::int64_t master_next = master_.NextEventNs();
+  if (bus_clock_ && master_next != std::numeric_limits<std::int64_t>::max()) {
+    // The host instant MasterClockNs reaches it: due now when bus time is already there,
+    // else only through the fallback (bus time does not move between SYNCs otherwise).
+    const std::int64_t ahead = master_next - bus_ns_;
+    const std::int64_t fallback_ns = last_sync_host_ns_ + sync_silence_ns_;
+    if (ahead <= 0) {
+      master_next = last_sync_host_ns_;
+    } else if (ahead > std::numeric_limits<std::int64_t>::max() - fallback_ns) {
+      master_next = std::numeric_limits<std::int64_t>::max();
+    } else {
+      master_next = fallback_ns + ahead;
+    }
+  }
+  std::int64_t next = std::min(master_next, assembler_.NextDeadlineNs());
   if (StartupStatusDue()) next = std::min(next, next_startup_status_ns_);
   return next;
 }
@@ -206,7 +245,7 @@ void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
         return;
       }
       const std::uint64_t bad_before = master_.bad_frames();
-      master_.OnFrame(frame, t_ns);
+      master_.OnFrame(frame, MasterClockNs(t_ns));
       if (master_.bad_frames() != bad_before) {
         bad();
         return;
@@ -217,7 +256,7 @@ void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
         if (protocol_.DecodeEmcy(frame, code, reg) && code != 0) last_emcy_node_ = node;
       }
       // A node reset may have made it pre-operational: the master answers at once.
-      HandleMasterPoll(master_.Poll(t_ns), t_ns, out);
+      HandleMasterPoll(master_.Poll(MasterClockNs(t_ns)), t_ns, out);
       return;
     }
     case FrameKind::kSync:
@@ -229,6 +268,12 @@ void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
         bad();
         return;
       }
+      // Bus time moves on by one period (or to where the host-clock fallback took it); the
+      // master's timeouts due by now are judged before the closing cycle reports them.
+      bus_ns_ = std::max(bus_ns_ + period_ns_, MasterClockNs(t_ns));
+      last_sync_host_ns_ = std::max(last_sync_host_ns_, t_ns);
+      sync_silent_ = false;
+      HandleMasterPoll(master_.Poll(bus_ns_), t_ns, out);
       if (auto closed = assembler_.OnSync(t_ns)) OnCycle(*closed, out);
       return;
     case FrameKind::kTpdo1: {

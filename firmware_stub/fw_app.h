@@ -13,6 +13,15 @@
 /// FW_Status (state WaitingForNodes, cycle 0) goes out every sync period. Time steps are the
 /// configured SYNC period times the SYNC intervals a step spans (not receive times), so the
 /// output depends only on the frames, never on scheduling.
+/// Clocks: `t_ns` everywhere is the host's monotonic clock (frame arrival, SYNC production, the
+/// cycle deadline). The CANopen master's timers (heartbeat consumer, SDO, boot timeout) run on
+/// it only while the app produces SYNC. While it follows SYNC (sync.produce false) they run on
+/// *bus time*: sync.period_s per SYNC received, standing still between SYNCs, so a timeout
+/// depends on the frame sequence, not on how fast the frames come (a lockstep emulator runs
+/// 20-200x faster than real time; docs/firmware.md). Fallback for a bus without SYNC (dead
+/// producer, or one that waits for the nodes): after SyncSilenceNs() of host time with no SYNC
+/// (also counted from Start), bus time runs on with the host clock from there (sync_silent(),
+/// FwAppStats::sync_silences) until SYNC returns; it never runs backwards.
 /// Degrading, not dying: a cycle with an encoder missing skips the estimator step (the next
 /// complete cycle spans the gap: counters are absolute, gyro and accelerometer samples carry
 /// over); paper 002 instead steps its fusion every cycle of the gap without odometry (the
@@ -62,6 +71,8 @@ struct FwAppStats {
   std::uint64_t frames_out = 0;
   std::uint64_t accel_duplicates = 0;  ///< Accel frames repeating the previous counter.
   std::uint64_t accel_gaps = 0;        ///< Accel samples lost (counter jumps).
+  /// Times the followed SYNC stayed away for SyncSilenceNs() of host time (bus dead?).
+  std::uint64_t sync_silences = 0;
 };
 
 class FwApp {
@@ -86,7 +97,19 @@ class FwApp {
                       std::vector<bus::CanFrame>& out);
   /// Timed work (master timers, SYNC production, cycle deadlines).
   void Poll(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
+  /// Next host instant Poll has something to do (INT64_MAX if nothing).
   std::int64_t NextEventNs() const;
+
+  /// Following SYNC: host time without SYNC after which the master's timers fall back to the
+  /// host clock: max(kSyncSilenceMinNs, kSyncSilencePeriods x sync period).
+  static constexpr std::int64_t kSyncSilenceMinNs = 2'000'000'000;
+  static constexpr std::int64_t kSyncSilencePeriods = 10;
+  std::int64_t SyncSilenceNs() const { return sync_silence_ns_; }
+  /// Following SYNC: the master's clock [ns] at host time t_ns (>= every value it gave before
+  /// for an earlier t_ns). Producing SYNC: t_ns.
+  std::int64_t MasterClockNs(std::int64_t t_ns) const;
+  /// Following SYNC and none came for SyncSilenceNs() (host clock fallback active).
+  bool sync_silent() const { return sync_silent_; }
 
   const CanopenMaster& master() const { return master_; }
   const CycleAssembler& assembler() const { return assembler_; }
@@ -113,6 +136,13 @@ class FwApp {
   CycleAssembler assembler_;
   std::vector<EncoderNode> nodes_;
   std::int64_t period_ns_ = 0;
+
+  // The master's clock while following SYNC (see MasterClockNs).
+  bool bus_clock_ = false;              // Following SYNC: the master runs on bus time.
+  std::int64_t sync_silence_ns_ = 0;    // Host time without SYNC before the fallback.
+  std::int64_t bus_ns_ = 0;             // Master clock at the last SYNC (or fallback catch-up).
+  std::int64_t last_sync_host_ns_ = 0;  // Host time of the last SYNC (or Start).
+  bool sync_silent_ = false;
 
   std::optional<SlipCorrectingOdometry> p000_;
   std::optional<FollowerOdometry> p001_;
@@ -152,7 +182,9 @@ std::int64_t ArrivalOnMonotonicNs(std::int64_t stamp_real_ns, std::int64_t now_r
                                   std::int64_t now_mono_ns,
                                   std::int64_t max_age_ns = 1'000'000'000);
 
-/// Master and assembler settings derived from a firmware config (also used by tests).
+/// Master and assembler settings derived from a firmware config (also used by tests). Following
+/// SYNC, the master's boot, SDO and heartbeat timeouts are one sync period longer (bus time is
+/// known to one period).
 CanopenMasterConfig MasterConfigFrom(const FwConfig& config);
 CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config);
 

@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <filesystem>
 #include <memory>
@@ -29,13 +30,20 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
+double g_clock_rate = 1.0;  // --clock-rate: host seconds the firmware counts per real second.
 
 extern "C" void OnSignal(int) { g_stop.store(true); }
 
+/// A real duration [ns] on the firmware's host clock (scaled by --clock-rate).
+std::int64_t ScaledNs(std::int64_t real_ns) {
+  return g_clock_rate == 1.0 ? real_ns
+                             : static_cast<std::int64_t>(std::llround(real_ns * g_clock_rate));
+}
+
 std::int64_t NowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return ScaledNs(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                      std::chrono::steady_clock::now().time_since_epoch())
+                      .count());
 }
 
 std::int64_t RealtimeNs() {
@@ -67,6 +75,10 @@ int main(int argc, char** argv) {
                  "$WHEELHIL_DBC_DIR, <exe>/../../bus/dbc, <exe>/../share/wheelhil/dbc)");
   app.add_option("--log", log_path, "Write every frame received and sent (candump -L format)");
   app.add_flag("--quiet", quiet, "No start-up / summary messages on stderr");
+  app.add_option("--clock-rate", g_clock_rate,
+                 "Test aid: the firmware's host clock runs this many times faster than real "
+                 "time (a slow emulator seen from the firmware; default 1)")
+      ->check(CLI::Range(0.001, 1000.0));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -146,17 +158,26 @@ int main(int argc, char** argv) {
   };
   fwapp->Start(t0, out);
   flush(t0);
+  bool sync_silent = false;
   while (!g_stop.load()) {
     const std::int64_t now = NowNs();
     const std::int64_t next = fwapp->NextEventNs();
-    const std::int64_t wait_ns = next <= now ? 0 : std::min<std::int64_t>(next - now, 50'000'000);
+    const std::int64_t wait_ns =
+        next <= now ? 0
+                    : std::min<std::int64_t>(
+                          static_cast<std::int64_t>(static_cast<double>(next - now) / g_clock_rate),
+                          50'000'000);
     bus::ReceivedFrame rx;
     const std::error_code ec = can->Receive(rx, static_cast<int>((wait_ns + 999'999) / 1'000'000));
     const std::int64_t t = NowNs();
     if (!ec) {
       // Judged by when it arrived (the kernel's receive stamp), not when this loop read it.
+      const std::int64_t now_real = RealtimeNs();
       const std::int64_t arrival =
-          rx.kernel_timestamp ? fw::ArrivalOnMonotonicNs(rx.timestamp_ns, RealtimeNs(), t) : t;
+          rx.kernel_timestamp
+              ? fw::ArrivalOnMonotonicNs(now_real - ScaledNs(now_real - rx.timestamp_ns), now_real,
+                                         t, ScaledNs(1'000'000'000))
+              : t;
       if (log) (void)log->Write(arrival - t0, iface, rx.frame);
       fwapp->OnFrameArrived(rx.frame, arrival, out);
     } else if (ec != std::errc::timed_out && ec != std::errc::resource_unavailable_try_again &&
@@ -166,14 +187,27 @@ int main(int argc, char** argv) {
     }
     fwapp->Poll(t, out);
     flush(t);
+    if (fwapp->sync_silent() != sync_silent) {
+      // Not a node fault: the whole bus (or its SYNC producer) is quiet.
+      sync_silent = fwapp->sync_silent();
+      if (sync_silent) {
+        fmt::print(stderr,
+                   "wheelhil-fw: no SYNC on {} for {} s: bus dead or SYNC producer gone; CANopen "
+                   "timers run on the host clock until SYNC returns\n",
+                   iface, static_cast<double>(fwapp->SyncSilenceNs()) * 1e-9);
+      } else {
+        fmt::print(stderr, "wheelhil-fw: SYNC back on {}; CANopen timers on bus time again\n",
+                   iface);
+      }
+    }
   }
   if (!quiet) {
     const auto& s = fwapp->stats();
     fmt::print(stderr,
                "wheelhil-fw: stopped: {} frames in ({} bad, {} unknown ids), {} out ({} send "
-               "errors), {} cycles, {} steps, {} skipped, faults 0x{:X}\n",
+               "errors), {} cycles, {} steps, {} skipped, {} SYNC silences, faults 0x{:X}\n",
                s.frames_in, s.bad_frames, s.unknown_frames, s.frames_out, send_errors, s.cycles,
-               s.steps, s.skipped_steps, fwapp->last_faults());
+               s.steps, s.skipped_steps, s.sync_silences, fwapp->last_faults());
   }
   return 0;
 }

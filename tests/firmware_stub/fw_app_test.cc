@@ -558,6 +558,144 @@ TEST(FwApp, TpdoIsJudgedByItsArrivalNotByWhenItIsRead) {
   }
 }
 
+// The firmware following SYNC (as under `wheelhil run`): a script in bus time (SYNC every 250 ms,
+// heartbeats every 100 ms, node 2's heartbeats lost from 1.0 s to 2.5 s, its TPDO1s still
+// coming) played with the host clock `host_per_bus` times bus time. Returns every frame the app
+// sent, as text, and the cycle counters of the FW_Status frames with Status_NodeLostEnc2 set.
+struct FollowerRun {
+  std::vector<std::string> frames;
+  std::vector<int> lost_cycles;
+  FwAppStats stats;
+};
+
+FollowerRun RunFollower(double host_per_bus) {
+  const std::string yaml = std::string(kPaper000).replace(
+      std::string(kPaper000).find("sync: {period_s: 0.25, deadline_s: 0.2}"), 39,
+      "sync: {produce: false, period_s: 0.25, deadline_s: 0}");
+  const FwConfig config = ParseFwConfig(yaml, "test.yaml");
+  const FwProtocol protocol = FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0x174, 0);
+  const Devices dev;
+  FwApp app(config, protocol);
+  FollowerRun run;
+  std::vector<bus::CanFrame> out;
+  auto host = [&](std::int64_t bus_ns) {
+    return static_cast<std::int64_t>(std::llround(static_cast<double>(bus_ns) * host_per_bus));
+  };
+  std::vector<bus::CanFrame> pending;  // Frames the app sent, answered by the nodes.
+  auto flush = [&](std::int64_t bus_ns) {
+    while (!out.empty()) {
+      std::vector<bus::CanFrame> sent;
+      sent.swap(out);
+      for (const auto& f : sent) {
+        run.frames.push_back(testing::Strings({f})[0]);
+        OutValues v;
+        if (protocol.DecodeOutput(OutMessage::kStatus, f, v) &&
+            v.Get(OutField::kNodeLostEnc2) == 1) {
+          run.lost_cycles.push_back(static_cast<int>(v.Get(OutField::kCycle)));
+        }
+        if (f.id >= 0x601 && f.id <= 0x602) app.OnFrameArrived(dev.SdoAnswer(f), host(bus_ns), out);
+      }
+    }
+  };
+  auto feed = [&](const bus::CanFrame& f, std::int64_t bus_ns) {
+    app.OnFrameArrived(f, host(bus_ns), out);
+    flush(bus_ns);
+  };
+  app.Start(0, out);
+  flush(0);
+  feed(dev.Boot(1), 10 * kMs);
+  feed(dev.Boot(2), 10 * kMs);
+  EXPECT_TRUE(app.master().started());
+  for (std::int64_t t = 10 * kMs; t <= 4000 * kMs; t += 10 * kMs) {
+    const bool beat = t % (100 * kMs) == 10 * kMs && t > 10 * kMs;
+    if (beat) feed(dev.State(1, 0x05), t);
+    if (beat && (t < 1000 * kMs || t > 2500 * kMs)) feed(dev.State(2, 0x05), t);
+    if (t % (250 * kMs) == 0) {
+      feed(dev.Yaw(0.0), t);
+      feed(testing::Frame("080#"), t);
+      feed(dev.Tpdo(1, 0), t);
+      feed(dev.Tpdo(2, 0), t);
+    }
+    app.Poll(host(t + 5 * kMs), out);  // The program polls between frames too.
+    flush(t + 5 * kMs);
+  }
+  run.stats = app.stats();
+  return run;
+}
+
+// The heartbeat consumer runs on bus time while the firmware follows SYNC: node 2 silent for
+// 1.5 s of bus time is flagged at the same cycle whether the frames come 200x faster than real
+// time (a lockstep emulator) or 4x slower (a loaded host): the same frames out, byte for byte.
+// Its last heartbeat (0.91 s) came in the interval of the SYNC at 0.75 s; the consumer waits
+// heartbeat_timeout_s (0.35 s) + one period (0.6 s) of bus time, so the first SYNC beyond is
+// 1.5 s (the 6th: cycle 5, as cycles count from 0 at the SYNC at 0.25 s); the heartbeat at
+// 2.51 s clears it, after the status of the cycle opened at 2.5 s (cycle 9).
+TEST(FwApp, FollowingSyncHeartbeatTimeoutIsJudgedOnBusTime) {
+  const FollowerRun fast = RunFollower(1.0 / 200.0);
+  const FollowerRun real = RunFollower(1.0);
+  const FollowerRun slow = RunFollower(4.0);
+  EXPECT_EQ(fast.lost_cycles, (std::vector<int>{5, 6, 7, 8, 9}));
+  EXPECT_EQ(fast.frames, real.frames);
+  EXPECT_EQ(fast.frames, slow.frames);
+  EXPECT_EQ(fast.stats.cycles, 16u);        // SYNCs at 0.25 ... 4.0 s.
+  EXPECT_EQ(slow.stats.sync_silences, 0u);  // 1 s of host time between SYNCs: not silent.
+}
+
+// No SYNC at all (dead bus or producer) for SyncSilenceNs() of host time: the master's timers
+// fall back to the host clock, so a silent node is still flagged; the first SYNC after that
+// puts them back on bus time (which never runs backwards).
+TEST(FwApp, WithoutSyncTheMasterFallsBackToTheHostClock) {
+  const std::string yaml = std::string(kPaper000).replace(
+      std::string(kPaper000).find("sync: {period_s: 0.25, deadline_s: 0.2}"), 39,
+      "sync: {produce: false, period_s: 0.01, deadline_s: 0}");
+  const FwConfig config = ParseFwConfig(yaml, "test.yaml");
+  const FwProtocol protocol = FwProtocol::LoadDir(testing::DbcDir(), {1, 2}, 0x174, 0);
+  const Devices dev;
+  FwApp app(config, protocol);
+  ASSERT_EQ(app.SyncSilenceNs(), FwApp::kSyncSilenceMinNs);  // 10 periods are less.
+  std::vector<bus::CanFrame> out;
+  app.Start(0, out);
+  auto answer = [&](std::int64_t t) {
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      const bus::CanFrame f = out[i];
+      if (f.id >= 0x601 && f.id <= 0x602) app.OnFrameArrived(dev.SdoAnswer(f), t, out);
+    }
+    out.clear();
+  };
+  app.OnFrameArrived(dev.Boot(1), 1 * kMs, out);
+  app.OnFrameArrived(dev.Boot(2), 1 * kMs, out);
+  answer(1 * kMs);
+  ASSERT_TRUE(app.master().started());
+  // Only node 1 beats; no SYNC. Within the grace bus time stands still: nobody is lost.
+  std::int64_t t = 1 * kMs;
+  for (; t < app.SyncSilenceNs(); t += 100 * kMs) {
+    app.OnFrameArrived(dev.State(1, 0x05), t, out);
+    app.Poll(t, out);
+  }
+  EXPECT_FALSE(app.master().nodes()[1].lost);
+  EXPECT_FALSE(app.sync_silent());
+  // Past the grace the host clock drives the timers: node 2 lost 0.36 s later, node 1 not.
+  const std::int64_t due = app.SyncSilenceNs() + 360 * kMs + 10 * kMs;  // + one period.
+  EXPECT_LE(app.NextEventNs(), due);
+  for (; t <= due + 50 * kMs; t += 50 * kMs) {
+    if (t % (100 * kMs) == 1 * kMs) app.OnFrameArrived(dev.State(1, 0x05), t, out);
+    app.Poll(t, out);
+  }
+  EXPECT_TRUE(app.sync_silent());
+  EXPECT_EQ(app.stats().sync_silences, 1u);
+  EXPECT_TRUE(app.master().nodes()[1].lost);
+  EXPECT_FALSE(app.master().nodes()[0].lost);
+  // SYNC returns: bus time again, continuing from where the host clock took it.
+  const std::int64_t before = app.MasterClockNs(t);
+  app.OnFrameArrived(testing::Frame("080#"), t, out);
+  EXPECT_FALSE(app.sync_silent());
+  EXPECT_GE(app.MasterClockNs(t + 500 * kMs), before);
+  EXPECT_EQ(app.MasterClockNs(t + 500 * kMs), app.MasterClockNs(t));  // Stands still again.
+  EXPECT_TRUE(app.master().nodes()[1].lost);                          // Still silent.
+  app.OnFrameArrived(dev.State(2, 0x05), t + kMs, out);
+  EXPECT_FALSE(app.master().nodes()[1].lost);
+}
+
 TEST(FwApp, KernelStampIsMappedOntoTheMonotonicClock) {
   // 3 ms old at real time 1000.000 s, monotonic now 50 ms.
   EXPECT_EQ(ArrivalOnMonotonicNs(999'997 * kMs, 1'000'000 * kMs, 50 * kMs), 47 * kMs);
