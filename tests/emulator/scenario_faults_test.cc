@@ -398,5 +398,54 @@ TEST_F(ScenarioFaultsRun, DeviceAndBusFaultsRunToTheEnd) {
   EXPECT_THAT(events, HasSubstr("\"fault\":\"bus_off\""));
 }
 
+// The firmware's CANopen timers run on bus time in lockstep (docs/firmware.md, "Clocks"):
+// faults_demo with node 2's heartbeats lost for 3 s (1.0 .. 4.0 s), run once as it is and once
+// with the firmware's host clock 8x faster (the emulator as the firmware would see it on a host
+// 8x slower). The node is flagged lost (Status_NodeLostEnc2) from the same cycle and cleared at
+// the same cycle, and can.log, events.jsonl and report.json (minus `wall`) are byte-identical.
+// On the host clock it was flagged only when 3 s of bus time took more than 0.35 s of wall time.
+TEST_F(ScenarioFaultsRun, HeartbeatTimeoutDoesNotDependOnTheHostSpeed) {
+  const std::string path = std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml";
+  std::string text = Slurp(path);
+  const std::string window = "node_id: 2, start_s: 1.0, end_s: 2.0}";
+  ASSERT_NE(text.find(window), std::string::npos);
+  text.replace(text.find(window), window.size(), "node_id: 2, start_s: 1.0, end_s: 4.0}");
+  Scenario s = ParseScenario(text, path);
+  s.expectations.clear();
+  const double period_s = s.timing.sync_period_s;
+  (void)Run(s, "host1");
+  s.firmware.command += " --clock-rate 8";
+  (void)Run(s, "host8");
+  const std::string log = Slurp(dir_ / "host1" / "can.log");
+  EXPECT_EQ(log, Slurp(dir_ / "host8" / "can.log"));
+  EXPECT_EQ(Slurp(dir_ / "host1" / "events.jsonl"), Slurp(dir_ / "host8" / "events.jsonl"));
+  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "host1" / "report.json"));
+  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "host8" / "report.json"));
+  ra.erase("wall");
+  rb.erase("wall");
+  EXPECT_EQ(ra.dump(1), rb.dump(1));
+  // FW_Status (0x686): byte 2 bit 1 Status_NodeLostEnc2, byte 7 Status_Cycle (cycle k opens at
+  // SYNC k, motion time k x period).
+  std::vector<int> lost;
+  for (const LogFrame& f : ReadLog(dir_ / "host1" / "can.log")) {
+    if (f.id != 0x686 || f.data.size() != 16) continue;
+    if (std::stoi(f.data.substr(4, 2), nullptr, 16) & 0x02) {
+      lost.push_back(std::stoi(f.data.substr(14, 2), nullptr, 16));
+    }
+  }
+  ASSERT_FALSE(lost.empty());
+  // Flagged once silent for more than heartbeat_timeout_s (0.35 s) of bus time, at most one
+  // period + one heartbeat period (0.1 s) + one period later; cleared by the first heartbeat
+  // after 4.0 s (within a period or two).
+  const double first_s = lost.front() * period_s - 1.0;
+  EXPECT_GE(first_s, 0.35 - 0.1);
+  EXPECT_LE(first_s, 0.35 + 0.1 + 2 * period_s);
+  EXPECT_GE(lost.back() * period_s, 4.0 - period_s);
+  EXPECT_LE(lost.back() * period_s, 4.0 + 2 * period_s);
+  EXPECT_EQ(lost.back() - lost.front() + 1, static_cast<int>(lost.size()));  // One stretch.
+  const std::string fw_log = Slurp(dir_ / "host8" / "firmware.log");
+  EXPECT_THAT(fw_log, ::testing::Not(HasSubstr("no SYNC")));
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator::scenario
