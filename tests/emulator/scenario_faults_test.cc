@@ -399,22 +399,27 @@ TEST_F(ScenarioFaultsRun, DeviceAndBusFaultsRunToTheEnd) {
 }
 
 // The firmware's CANopen timers run on bus time in lockstep (docs/firmware.md, "Clocks"):
-// faults_demo with node 2's heartbeats lost for 3 s (1.0 .. 4.0 s), run once as it is and once
-// with the firmware's host clock 8x faster (the emulator as the firmware would see it on a host
-// 8x slower). The node is flagged lost (Status_NodeLostEnc2) from the same cycle and cleared at
-// the same cycle, and can.log, events.jsonl and report.json (minus `wall`) are byte-identical.
-// On the host clock it was flagged only when 3 s of bus time took more than 0.35 s of wall time.
+// faults_demo (cut to 3.25 s) with node 2's heartbeats lost for 1.5 s (1.0 .. 2.5 s), run once as
+// it is and once with the firmware's host clock 8x slower (the emulator as the firmware would see
+// it on a host 8x faster). The node is flagged lost (Status_NodeLostEnc2) from the same cycle and
+// cleared at the same cycle, and can.log, events.jsonl and report.json (minus `wall`) are
+// byte-identical. On the host clock it was flagged only when 3 s of bus time took more than 0.35 s
+// of wall time (never in a Release build here: ~15 ms). The other direction (a slower host) is
+// FwApp.FollowingSyncHeartbeatTimeoutIsJudgedOnBusTime: here a firmware clock 8x faster would
+// turn a sanitizer build's ~1x real-time run into a bus without SYNC for 10 periods, i.e. the
+// host-clock fallback.
 TEST_F(ScenarioFaultsRun, HeartbeatTimeoutDoesNotDependOnTheHostSpeed) {
   const std::string path = std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml";
   std::string text = Slurp(path);
   const std::string window = "node_id: 2, start_s: 1.0, end_s: 2.0}";
   ASSERT_NE(text.find(window), std::string::npos);
-  text.replace(text.find(window), window.size(), "node_id: 2, start_s: 1.0, end_s: 4.0}");
+  text.replace(text.find(window), window.size(), "node_id: 2, start_s: 1.0, end_s: 2.5}");
   Scenario s = ParseScenario(text, path);
   s.expectations.clear();
+  s.timing.duration_s = 3.25;
   const double period_s = s.timing.sync_period_s;
   (void)Run(s, "host1");
-  s.firmware.command += " --clock-rate 8";
+  s.firmware.command += " --clock-rate 0.125";
   (void)Run(s, "host8");
   const std::string log = Slurp(dir_ / "host1" / "can.log");
   EXPECT_EQ(log, Slurp(dir_ / "host8" / "can.log"));
@@ -436,15 +441,13 @@ TEST_F(ScenarioFaultsRun, HeartbeatTimeoutDoesNotDependOnTheHostSpeed) {
   ASSERT_FALSE(lost.empty());
   // Flagged once silent for more than heartbeat_timeout_s (0.35 s) of bus time, at most one
   // period + one heartbeat period (0.1 s) + one period later; cleared by the first heartbeat
-  // after 4.0 s (within a period or two).
+  // after 2.5 s (within a period or two).
   const double first_s = lost.front() * period_s - 1.0;
   EXPECT_GE(first_s, 0.35 - 0.1);
   EXPECT_LE(first_s, 0.35 + 0.1 + 2 * period_s);
-  EXPECT_GE(lost.back() * period_s, 4.0 - period_s);
-  EXPECT_LE(lost.back() * period_s, 4.0 + 2 * period_s);
+  EXPECT_GE(lost.back() * period_s, 2.5 - period_s);
+  EXPECT_LE(lost.back() * period_s, 2.5 + 2 * period_s);
   EXPECT_EQ(lost.back() - lost.front() + 1, static_cast<int>(lost.size()));  // One stretch.
-  const std::string fw_log = Slurp(dir_ / "host8" / "firmware.log");
-  EXPECT_THAT(fw_log, ::testing::Not(HasSubstr("no SYNC")));
 }
 
 }  // namespace
