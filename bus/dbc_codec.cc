@@ -269,4 +269,21 @@ SignalValues DecodeMessage(const DbcMessage& msg, const CanFrame& frame) {
   return out;
 }
 
+bool DecodeSignalIfPresent(const DbcMessage& msg, const DbcSignal& sig, const CanFrame& frame,
+                           double* out) noexcept {
+  const auto payload = frame.payload();
+  if (sig.multiplex_value) {
+    const DbcSignal* mux = msg.multiplexer();
+    std::int64_t mux_raw = 0;
+    if (mux == nullptr || !ExtractRawSigned(*mux, payload, mux_raw) ||
+        *sig.multiplex_value != mux_raw) {
+      return false;
+    }
+  }
+  std::uint64_t raw = 0;
+  if (!ExtractRaw(sig, payload, raw)) return false;
+  *out = DecodeSignal(sig, payload);
+  return true;
+}
+
 }  // namespace wheelhil::bus

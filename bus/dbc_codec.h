@@ -67,4 +67,10 @@ CanFrame EncodeMessage(const DbcMessage& msg, const SignalValues& values);
 /// the payload is too short for are left out (a short frame never reads past its length).
 SignalValues DecodeMessage(const DbcMessage& msg, const CanFrame& frame);
 
+/// One signal of `msg` exactly as DecodeMessage decodes it, without building the map: true and
+/// `*out` = its physical value when DecodeMessage would list it (multiplexer value matches, the
+/// payload is long enough); false, `*out` untouched, when DecodeMessage would leave it out.
+bool DecodeSignalIfPresent(const DbcMessage& msg, const DbcSignal& sig, const CanFrame& frame,
+                           double* out) noexcept;
+
 }  // namespace wheelhil::bus

@@ -201,6 +201,19 @@ class Run {
   // One pass of the pumped broker (see pumped_).
   void PumpBroker(int timeout_ms);
   void OnFirmwareFrame(const bus::CanFrame& f);
+  // What OnFirmwareFrame reads from one firmware message, worked out at its first frame: the
+  // signals of each field (DecodeMessage's first present one of that name wins) instead of a
+  // decoded map and formatted names per frame.
+  struct FwFramePlan {
+    enum class Kind { kStatus, kPose, kVelocity, kSlip, kIgnored };
+    Kind kind = Kind::kIgnored;
+    std::string stream;  // estimate stream name (pose / velocity kinds)
+    // kStatus: cycle, state. Estimates: cycle, then the kind's values in order.
+    std::vector<std::vector<const bus::DbcSignal*>> fields;
+    std::vector<PoseSample>* pose = nullptr;     // pose_streams_[stream], once it exists
+    std::vector<VelocitySample>* vel = nullptr;  // vel_streams_[stream], once it exists
+  };
+  FwFramePlan& FwPlanFor(const bus::DbcMessage& msg);
   void RecordTruth(bool force);
   void Progress(bool final);
   json BuildReport(double wall_s);
@@ -305,6 +318,7 @@ class Run {
   std::vector<EstimateRow> estimates_;
   std::map<std::string, std::vector<PoseSample>> pose_streams_;
   std::map<std::string, std::vector<VelocitySample>> vel_streams_;
+  std::map<const bus::DbcMessage*, FwFramePlan> fw_plans_;
   std::vector<DetectionSample> detections_;
   std::vector<double> residual_t_, residual_, band_lo_, band_hi_;
   std::vector<json> events_;
@@ -1032,15 +1046,20 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   }
   const bus::DbcMessage* msg = fwdbc_->FindMessage(f.id, false);
   if (msg == nullptr) return;
-  const auto v = bus::DecodeMessage(*msg, f);
-  auto get = [&](const char* name) {
-    auto it = v.find(name);
-    return it == v.end() ? 0.0 : it->second;
+  FwFramePlan& plan = FwPlanFor(*msg);
+  // A field's value as DecodeMessage's map would give it: its first signal of that name present
+  // in the frame, 0 when none is.
+  auto get = [&](std::size_t field) {
+    double value = 0.0;
+    for (const bus::DbcSignal* sig : plan.fields[field]) {
+      if (bus::DecodeSignalIfPresent(*msg, *sig, f, &value)) return value;
+    }
+    return 0.0;
   };
-  if (f.id == kFwStatusId) {
+  if (plan.kind == FwFramePlan::Kind::kStatus) {
     ++status_frames_;
-    last_status_cycle_ = static_cast<int>(get("Status_Cycle"));
-    const int state = static_cast<int>(get("Status_State"));
+    last_status_cycle_ = static_cast<int>(get(0));
+    const int state = static_cast<int>(get(1));
     if (state != last_fw_state_) {
       last_fw_state_ = state;
       const double t = static_cast<double>(bus_->now_ns()) * 1e-9 - t_motion0_s_;
@@ -1049,44 +1068,94 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
     return;
   }
   // Estimate frames: time of the SYNC that opened their cycle.
-  const std::string prefix_cycle = [&] {
-    for (const auto& sg : msg->signals) {
-      if (sg.name.size() > 6 && sg.name.ends_with("_Cycle")) return sg.name;
-    }
-    return std::string();
-  }();
-  if (prefix_cycle.empty()) return;
-  const int cycle = static_cast<int>(get(prefix_cycle.c_str()));
+  if (plan.kind == FwFramePlan::Kind::kIgnored) return;
+  const int cycle = static_cast<int>(get(0));
   const auto it = sync_time_by_cycle_.find(cycle);
   if (it == sync_time_by_cycle_.end()) return;
   const double t = it->second - t_motion0_s_;
-  auto pose = [&](const std::string& stream, const char* p) {
-    const PoseSample ps{t, get(fmt::format("{}_X", p).c_str()), get(fmt::format("{}_Y", p).c_str()),
-                        get(fmt::format("{}_Theta", p).c_str())};
-    pose_streams_[stream].push_back(ps);
-    estimates_.push_back({t, cycle, stream, ps.x_m, ps.y_m, ps.theta_rad});
+  switch (plan.kind) {
+    case FwFramePlan::Kind::kPose: {
+      const PoseSample ps{t, get(1), get(2), get(3)};
+      if (plan.pose == nullptr) plan.pose = &pose_streams_[plan.stream];
+      plan.pose->push_back(ps);
+      estimates_.push_back({t, cycle, plan.stream, ps.x_m, ps.y_m, ps.theta_rad});
+      break;
+    }
+    case FwFramePlan::Kind::kVelocity: {
+      const VelocitySample vs{t, get(1), get(2), get(3)};
+      if (plan.vel == nullptr) plan.vel = &vel_streams_[plan.stream];
+      plan.vel->push_back(vs);
+      estimates_.push_back({t, cycle, plan.stream, vs.vx_m_s, vs.vy_m_s, vs.omega_rad_s});
+      break;
+    }
+    case FwFramePlan::Kind::kSlip:
+      detections_.push_back({t, get(1) != 0});
+      if (get(2) != 0) {
+        residual_t_.push_back(t);
+        residual_.push_back(get(3));
+        band_lo_.push_back(get(4));
+        band_hi_.push_back(get(5));
+      }
+      break;
+    default:
+      break;
+  }
+}
+
+Run::FwFramePlan& Run::FwPlanFor(const bus::DbcMessage& msg) {
+  const auto found = fw_plans_.find(&msg);
+  if (found != fw_plans_.end()) return found->second;
+  FwFramePlan plan;
+  auto field = [&](const std::string& name) {
+    std::vector<const bus::DbcSignal*> sigs;
+    for (const auto& sg : msg.signals) {
+      if (sg.name == name) sigs.push_back(&sg);
+    }
+    plan.fields.push_back(std::move(sigs));
   };
-  auto vel = [&](const std::string& stream, const char* p) {
-    const VelocitySample vs{t, get(fmt::format("{}_Vx", p).c_str()),
-                            get(fmt::format("{}_Vy", p).c_str()),
-                            get(fmt::format("{}_Omega", p).c_str())};
-    vel_streams_[stream].push_back(vs);
-    estimates_.push_back({t, cycle, stream, vs.vx_m_s, vs.vy_m_s, vs.omega_rad_s});
+  auto estimate = [&](FwFramePlan::Kind kind, const char* stream, const std::string& prefix,
+                      std::initializer_list<const char*> names) {
+    plan.kind = kind;
+    plan.stream = stream;
+    for (const char* n : names) field(prefix + n);
   };
-  if (msg->name == "FW_Pose") pose("pose", "Pose");
-  if (msg->name == "FW_PoseRaw") pose("pose_raw", "PoseRaw");
-  if (msg->name == "FW_Velocity") vel("fused", "Vel");
-  if (msg->name == "FW_VelocityOdom") vel("odometry", "VelOdom");
-  if (msg->name == "FW_VelocityAccel") vel("accel", "VelAccel");
-  if (msg->name == "FW_SlipStatus") {
-    detections_.push_back({t, get("Slip_OutOfBand") != 0});
-    if (get("Slip_Calibrated") != 0) {
-      residual_t_.push_back(t);
-      residual_.push_back(get("Slip_Residual"));
-      band_lo_.push_back(get("Slip_BandLower"));
-      band_hi_.push_back(get("Slip_BandUpper"));
+  if (msg.id == kFwStatusId && !msg.extended) {
+    plan.kind = FwFramePlan::Kind::kStatus;
+    field("Status_Cycle");
+    field("Status_State");
+  } else {
+    // The cycle: the first signal named <prefix>_Cycle; a message without one is not an estimate.
+    std::string cycle;
+    for (const auto& sg : msg.signals) {
+      if (sg.name.size() > 6 && sg.name.ends_with("_Cycle")) {
+        cycle = sg.name;
+        break;
+      }
+    }
+    plan.kind = FwFramePlan::Kind::kIgnored;
+    if (!cycle.empty()) {
+      field(cycle);
+      if (msg.name == "FW_Pose")
+        estimate(FwFramePlan::Kind::kPose, "pose", "Pose", {"_X", "_Y", "_Theta"});
+      if (msg.name == "FW_PoseRaw") {
+        estimate(FwFramePlan::Kind::kPose, "pose_raw", "PoseRaw", {"_X", "_Y", "_Theta"});
+      }
+      if (msg.name == "FW_Velocity") {
+        estimate(FwFramePlan::Kind::kVelocity, "fused", "Vel", {"_Vx", "_Vy", "_Omega"});
+      }
+      if (msg.name == "FW_VelocityOdom") {
+        estimate(FwFramePlan::Kind::kVelocity, "odometry", "VelOdom", {"_Vx", "_Vy", "_Omega"});
+      }
+      if (msg.name == "FW_VelocityAccel") {
+        estimate(FwFramePlan::Kind::kVelocity, "accel", "VelAccel", {"_Vx", "_Vy", "_Omega"});
+      }
+      if (msg.name == "FW_SlipStatus") {
+        estimate(FwFramePlan::Kind::kSlip, "", "Slip_",
+                 {"OutOfBand", "Calibrated", "Residual", "BandLower", "BandUpper"});
+      }
     }
   }
+  return fw_plans_.emplace(&msg, std::move(plan)).first->second;
 }
 
 void Run::PumpBroker(int timeout_ms) {

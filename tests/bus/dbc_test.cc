@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -461,6 +462,62 @@ TEST(ProjectDbcTest, EverySignalRoundTripsRandomRawValues) {
       }
     }
   }
+}
+
+// DecodeSignalIfPresent lists exactly what DecodeMessage lists, with the same values: checked
+// on every project message with random payloads of every length (short frames leave signals
+// out) and on the multiplexed fixture for both multiplexer values and a frame too short for it.
+void ExpectSameAsDecodeMessage(const DbcMessage& m, const CanFrame& f) {
+  const auto values = DecodeMessage(m, f);
+  std::size_t present = 0;
+  for (const auto& sig : m.signals) {
+    double v = -12345.0;
+    const bool ok = DecodeSignalIfPresent(m, sig, f, &v);
+    const auto it = values.find(sig.name);
+    ASSERT_EQ(ok, it != values.end()) << m.name << "." << sig.name << " len " << int{f.len};
+    if (!ok) {
+      EXPECT_EQ(v, -12345.0) << m.name << "." << sig.name << ": out written although absent";
+      continue;
+    }
+    ++present;
+    // Bit-identical, NaN included.
+    EXPECT_EQ(std::memcmp(&v, &it->second, sizeof v), 0) << m.name << "." << sig.name;
+  }
+  EXPECT_EQ(present, values.size()) << m.name;
+}
+
+TEST(DbcCodecTest, DecodeSignalIfPresentAgreesWithDecodeMessage) {
+  std::mt19937_64 rng(11);
+  for (const auto& path : ProjectDbcFiles()) {
+    const auto db = DbcDatabase::LoadFile(path);
+    for (const auto& m : db.messages()) {
+      for (int len = 0; len <= m.length; ++len) {
+        for (int i = 0; i < 8; ++i) {
+          CanFrame f = CanFrame{};
+          f.id = m.id;
+          f.len = static_cast<std::uint8_t>(len);
+          for (int b = 0; b < len; ++b) f.data[b] = static_cast<std::uint8_t>(rng());
+          ExpectSameAsDecodeMessage(m, f);
+        }
+      }
+    }
+  }
+  const auto mux = DbcDatabase::Parse(kMultiplexed, "mux.dbc");
+  const DbcMessage* m = mux.FindMessage("Mux");
+  ASSERT_NE(m, nullptr);
+  CanFrame f;
+  ASSERT_TRUE(EncodeMessage(*m, {{"Sel", 1}, {"Common", 7}, {"A", -1.5}}, f));
+  ExpectSameAsDecodeMessage(*m, f);
+  double a = 0;
+  EXPECT_TRUE(DecodeSignalIfPresent(*m, *m->FindSignal("A"), f, &a));
+  EXPECT_EQ(a, -1.5);
+  EXPECT_FALSE(DecodeSignalIfPresent(*m, *m->FindSignal("B"), f, &a));
+  ASSERT_TRUE(EncodeMessage(*m, {{"Sel", 2}, {"B", 101}, {"C", 9}}, f));
+  ExpectSameAsDecodeMessage(*m, f);
+  EXPECT_FALSE(DecodeSignalIfPresent(*m, *m->FindSignal("A"), f, &a));
+  f.len = 0;  // no multiplexer value at all: only plain signals could be present (none fit)
+  ExpectSameAsDecodeMessage(*m, f);
+  EXPECT_FALSE(DecodeSignalIfPresent(*m, *m->FindSignal("B"), f, &a));
 }
 
 const DbcMessage& Msg(const DbcDatabase& db, std::string_view name) {
