@@ -23,7 +23,7 @@ struct StuffCounter {
   unsigned stuffed = 0;
   int run = 0;
   unsigned prev = 2;
-  void Bit(unsigned b) {
+  constexpr void Bit(unsigned b) {
     if (crc_on) {
       const bool crc_next = (b != 0) != ((crc & 0x4000u) != 0);
       crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
@@ -42,10 +42,44 @@ struct StuffCounter {
       run = 1;
     }
   }
-  void Push(std::uint32_t value, int count) {
+  constexpr void Push(std::uint32_t value, int count) {
     for (int i = count - 1; i >= 0; --i) Bit((value >> i) & 1u);
   }
 };
+
+// The data field a byte at a time. There the run state is prev in {0, 1} and run in 1..4 (a run
+// of 5 has just been stuffed and restarted at 1): 8 states. For each state and byte: the stuff
+// bits inserted, the state after, and the CRC-15 of the byte from a zero register (the register
+// is linear, so crc' = (crc << 8) ^ crc_of[(crc >> 7) ^ byte]). Built by StuffCounter::Bit, bit
+// by bit, at compile time.
+struct ByteTables {
+  std::uint8_t stuffed[8][256] = {};
+  std::uint8_t next[8][256] = {};
+  std::uint16_t crc_of[256] = {};
+};
+
+constexpr ByteTables MakeByteTables() {
+  ByteTables t;
+  for (unsigned s = 0; s < 8; ++s) {
+    for (unsigned d = 0; d < 256; ++d) {
+      StuffCounter c;
+      c.crc_on = false;
+      c.prev = s >> 2;
+      c.run = static_cast<int>(s & 3u) + 1;
+      c.Push(d, 8);
+      t.stuffed[s][d] = static_cast<std::uint8_t>(c.stuffed);
+      t.next[s][d] = static_cast<std::uint8_t>(c.prev << 2 | static_cast<unsigned>(c.run - 1));
+    }
+  }
+  for (unsigned d = 0; d < 256; ++d) {
+    StuffCounter c;
+    c.Push(d, 8);
+    t.crc_of[d] = c.crc;
+  }
+  return t;
+}
+
+constexpr ByteTables kByteTables = MakeByteTables();
 
 unsigned ExactBits(const bus::CanFrame& f) {
   StuffCounter b;
@@ -63,8 +97,20 @@ unsigned ExactBits(const bus::CanFrame& f) {
     b.Push(0, 2);  // IDE (dominant), r0
   }
   b.Push(f.len, 4);  // DLC
-  if (!f.rtr) {
-    for (std::size_t i = 0; i < f.len; ++i) b.Push(f.data[i], 8);
+  if (!f.rtr && f.len > 0) {
+    unsigned state = b.prev << 2 | static_cast<unsigned>(b.run - 1);
+    std::uint16_t crc = b.crc;
+    for (std::size_t i = 0; i < f.len; ++i) {
+      const std::uint8_t d = f.data[i];
+      crc = static_cast<std::uint16_t>(((crc << 8) & 0x7FFF) ^
+                                       kByteTables.crc_of[((crc >> 7) ^ d) & 0xFF]);
+      b.stuffed += kByteTables.stuffed[state][d];
+      state = kByteTables.next[state][d];
+    }
+    b.crc = crc;
+    b.bits += 8u * f.len;
+    b.prev = state >> 2;
+    b.run = static_cast<int>(state & 3u) + 1;
   }
   b.crc_on = false;
   b.Push(b.crc, 15);
@@ -167,6 +213,8 @@ std::int64_t CanBusModel::EarliestReady(const Node& n) {
 
 void CanBusModel::Schedule(std::int64_t limit_ns) {
   for (;;) {
+    // The next SOF is at bus_free_ns_ or later: nothing to arbitrate before limit_ns.
+    if (bus_free_ns_ >= limit_ns) return;
     std::int64_t ready = std::numeric_limits<std::int64_t>::max();
     for (const Node& n : nodes_) ready = std::min(ready, EarliestReady(n));
     if (ready == std::numeric_limits<std::int64_t>::max()) return;

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <initializer_list>
 #include <memory>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
@@ -71,6 +72,70 @@ TEST(CanFrameBits, ExactMatchesCanUtils) {
   // Exact always lies between the unstuffed length and the worst case.
   EXPECT_GE(CanFrameBits(f123, StuffingMode::kExact), 111u);
   EXPECT_LE(CanFrameBits(f123, StuffingMode::kExact), 135u);
+}
+
+// The textbook form: every bit SOF .. CRC in an array, the CRC-15 over SOF .. data, then the
+// stuff bits counted over SOF .. CRC (5 equal bits -> one complementary bit, which starts the
+// next run).
+unsigned ReferenceExactBits(const CanFrame& f) {
+  std::vector<unsigned> bits;
+  auto push = [&](std::uint32_t v, int n) {
+    for (int i = n - 1; i >= 0; --i) bits.push_back((v >> i) & 1u);
+  };
+  push(0, 1);
+  if (f.extended) {
+    push(f.id >> 18, 11);
+    push(3, 2);
+    push(f.id & 0x3FFFF, 18);
+    push(f.rtr ? 1 : 0, 1);
+    push(0, 2);
+  } else {
+    push(f.id, 11);
+    push(f.rtr ? 1 : 0, 1);
+    push(0, 2);
+  }
+  push(f.len, 4);
+  for (std::size_t i = 0; !f.rtr && i < f.len; ++i) push(f.data[i], 8);
+  std::uint16_t crc = 0;
+  for (unsigned b : bits) {
+    const bool next = (b != 0) != ((crc & 0x4000u) != 0);
+    crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
+    if (next) crc ^= 0x4599;
+  }
+  push(crc, 15);
+  unsigned stuffed = 0;
+  unsigned prev = 2;
+  int run = 0;
+  for (unsigned b : bits) {
+    run = b == prev ? run + 1 : 1;
+    prev = b;
+    if (run == 5) {
+      ++stuffed;
+      prev ^= 1u;
+      run = 1;
+    }
+  }
+  return static_cast<unsigned>(bits.size()) + stuffed + 13u;  // + CRC/ACK delimiters, EOF, IFS
+}
+
+TEST(CanFrameBits, ExactMatchesBitByBitReferenceOnRandomFrames) {
+  // The reference itself against can-utils (ExactMatchesCanUtils).
+  ASSERT_EQ(ReferenceExactBits(Std(0x123, {1, 2, 3, 4, 5, 6, 7, 8})), 119u);
+  ASSERT_EQ(ReferenceExactBits(Std(0x000, {0, 0, 0, 0, 0, 0, 0, 0})), 127u);
+  ASSERT_EQ(ReferenceExactBits(Ext(0x1FFFFFFF, {})), 74u);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> byte(0, 255);
+  for (int k = 0; k < 100'000; ++k) {
+    const bool ext = (k & 1) != 0;
+    const std::uint32_t id = static_cast<std::uint32_t>(rng()) & (ext ? 0x1FFFFFFFu : 0x7FFu);
+    std::vector<std::uint8_t> data(static_cast<std::size_t>(rng() % 9));
+    // Long equal runs as well as random bytes: every stuffing state at every byte boundary.
+    const int fill = k % 3 == 0 ? 0x00 : k % 3 == 1 ? 0xFF : -1;
+    for (auto& d : data) d = static_cast<std::uint8_t>(fill >= 0 && rng() % 2 ? fill : byte(rng));
+    CanFrame f = CanFrame::Classic(id, data, ext);
+    if (k % 17 == 0) f.rtr = true;
+    ASSERT_EQ(CanFrameBits(f, StuffingMode::kExact), ReferenceExactBits(f)) << k;
+  }
 }
 
 TEST(CanFrameBits, RejectsFramesItDoesNotModel) {
