@@ -277,7 +277,11 @@ class Run {
   std::unique_ptr<FaultyCanBus> faulty_bus_;
   std::unique_ptr<SensorFaultInjector> gyro_fault_;
   std::array<std::unique_ptr<SensorFaultInjector>, 4> accel_fault_;
-  std::vector<char> physical_on_;  // per scenario fault: physical fault active
+  std::vector<char> physical_on_;     // per scenario fault: physical fault active
+  bool has_physical_faults_ = false;  // a wheel_friction or torque_disturbance fault exists
+  std::vector<double> phys_scale_, phys_torque_;  // ApplyPhysicalFaults' per-wheel scratch
+  std::vector<std::optional<Friction>> phys_over_;
+  std::vector<char> phys_touched_;
   bool library_faults_ = false;
   std::int64_t motion0_ns_ = 0;
   std::uint64_t enqueued_ = 0, completed_ = 0, silenced_ = 0, enqueue_failures_ = 0;
@@ -709,11 +713,25 @@ void Run::ArmFaults() {
 }
 
 void Run::ApplyPhysicalFaults(double tm_s) {
-  if (physical_on_.size() != s_.faults.size()) physical_on_.assign(s_.faults.size(), 0);
+  if (physical_on_.size() != s_.faults.size()) {
+    physical_on_.assign(s_.faults.size(), 0);
+    has_physical_faults_ = std::any_of(s_.faults.begin(), s_.faults.end(), [](const FaultSpec& f) {
+      return f.kind == FaultSpec::Kind::kWheelFriction ||
+             f.kind == FaultSpec::Kind::kTorqueDisturbance;
+    });
+  }
+  // Called every step: nothing to do (and nothing to allocate) without a physical fault.
+  if (!has_physical_faults_) return;
   const std::size_t nw = s_.platform.vehicle.wheels.size();
-  std::vector<double> scale(nw, 1.0), torque(nw, 0.0);
-  std::vector<std::optional<Friction>> over(nw);
-  std::vector<char> touched(nw, 0);
+  // Per-wheel scratch, sized once (assign does not reallocate after the first step).
+  auto& scale = phys_scale_;
+  auto& torque = phys_torque_;
+  auto& over = phys_over_;
+  auto& touched = phys_touched_;
+  scale.assign(nw, 1.0);
+  torque.assign(nw, 0.0);
+  over.assign(nw, std::nullopt);
+  touched.assign(nw, 0);
   for (std::size_t i = 0; i < s_.faults.size(); ++i) {
     const FaultSpec& f = s_.faults[i];
     if (f.kind != FaultSpec::Kind::kWheelFriction &&
