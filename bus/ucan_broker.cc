@@ -7,6 +7,7 @@
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
 #include <sys/file.h>
+#include <sys/mman.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -149,6 +150,48 @@ Filter Normalize(can_filter f) {
 
 struct Bus;
 
+/// The shared-memory rings of a data connection (bus/ucan_protocol.h, "Rings"): mapped here,
+/// the memfd passed to the client at kOpen. The client's indexes are untrusted.
+struct Rings {
+  ucan::RingHeader* header = nullptr;
+  std::size_t bytes = 0;
+  Rings() = default;
+  Rings(const Rings&) = delete;
+  Rings& operator=(const Rings&) = delete;
+  ~Rings() {
+    if (header != nullptr) ::munmap(header, bytes);
+  }
+};
+
+/// Creates the sealed memfd and maps it; -1 on failure (the client then uses plain messages).
+int CreateRings(std::uint32_t slots, Rings* out) {
+  const std::size_t bytes = ucan::RingBytes(slots);
+  const int fd = ::memfd_create("ucan-rings", MFD_CLOEXEC | MFD_ALLOW_SEALING);
+  if (fd < 0) return -1;
+  if (::ftruncate(fd, static_cast<off_t>(bytes)) != 0 ||
+      ::fcntl(fd, F_ADD_SEALS, F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  if (p == MAP_FAILED) {
+    ::close(fd);
+    return -1;
+  }
+  auto* h = new (p) ucan::RingHeader;
+  h->slots = slots;
+  pthread_mutexattr_t a;
+  pthread_mutexattr_init(&a);
+  pthread_mutexattr_setpshared(&a, PTHREAD_PROCESS_SHARED);
+  pthread_mutexattr_setrobust(&a, PTHREAD_MUTEX_ROBUST);
+  pthread_mutex_init(&h->rx.lock, &a);
+  pthread_mutex_init(&h->tx.lock, &a);
+  pthread_mutexattr_destroy(&a);
+  out->header = h;
+  out->bytes = bytes;
+  return fd;
+}
+
 struct Client {
   Fd fd;
   std::uint32_t id = 0;
@@ -164,6 +207,7 @@ struct Client {
   std::vector<Filter> filters;
   MsgRing queue;
   std::uint32_t drops = 0;
+  std::unique_ptr<Rings> rings;  // kOpenRings: frames go through shared memory
 
   /// net/can/raw.c raw_rcv(): filter match counting incl. CAN_RAW_JOIN_FILTERS.
   bool Accepts(std::uint32_t can_id) const {
@@ -272,6 +316,7 @@ struct UcanBroker::Impl {
   std::map<std::string, int> index_of;  // every name ever added -> its ifindex
   int next_named_index = ucan::kFirstNamedIfindex;
   std::vector<Client*> any_clients;
+  std::vector<Client*> ring_clients;  // drained every pass (TxStamp order needs every ring)
   std::vector<Client*> dirty;
   std::vector<Pending> pending;  // read, not yet routed (see Dispatch)
   struct DeferredOptions {
@@ -409,6 +454,7 @@ struct UcanBroker::Impl {
   void Kill(Client* c) {
     if (c->dead) return;
     c->dead = true;
+    if (c->rings) c->rings->header->closed.store(1);
     if (!c->local) ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
   }
 
@@ -428,6 +474,10 @@ struct UcanBroker::Impl {
                           any_clients.end());
       }
       dirty.erase(std::remove(dirty.begin(), dirty.end(), c), dirty.end());
+      if (c->rings) {
+        ring_clients.erase(std::remove(ring_clients.begin(), ring_clients.end(), c),
+                           ring_clients.end());
+      }
       it = clients.erase(it);
     }
   }
@@ -468,12 +518,22 @@ struct UcanBroker::Impl {
   }
 
   void SendReply(Client* c, const Reply& reply, const void* extra = nullptr,
-                 std::size_t extra_len = 0) {
+                 std::size_t extra_len = 0, int pass_fd = -1) {
     iovec iov[2] = {{const_cast<Reply*>(&reply), sizeof(reply)},
                     {const_cast<void*>(extra), extra_len}};
     msghdr msg{};
     msg.msg_iov = iov;
     msg.msg_iovlen = extra_len ? 2 : 1;
+    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
+    if (pass_fd >= 0) {
+      msg.msg_control = control;
+      msg.msg_controllen = sizeof(control);
+      cmsghdr* cm = CMSG_FIRSTHDR(&msg);
+      cm->cmsg_level = SOL_SOCKET;
+      cm->cmsg_type = SCM_RIGHTS;
+      cm->cmsg_len = CMSG_LEN(sizeof(int));
+      std::memcpy(CMSG_DATA(cm), &pass_fd, sizeof(int));
+    }
     [[maybe_unused]] ssize_t n = ::sendmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
   }
 
@@ -540,7 +600,17 @@ struct UcanBroker::Impl {
           any_clients.push_back(c);
         }
         reply.client_id = c->id;
-        SendReply(c, reply);
+        int ring_fd = -1;
+        if (req.flags & ucan::kOpenRings) {
+          auto rings = std::make_unique<Rings>();
+          ring_fd = CreateRings(RingSlotsFor(options.client_queue_limit), rings.get());
+          if (ring_fd >= 0) {
+            c->rings = std::move(rings);
+            ring_clients.push_back(c);
+          }
+        }
+        SendReply(c, reply, nullptr, 0, ring_fd);
+        if (ring_fd >= 0) ::close(ring_fd);
         return;  // stays connected
       }
       case Op::kSetOptions: {
@@ -615,6 +685,40 @@ struct UcanBroker::Impl {
     Kill(c);
   }
 
+  static std::uint32_t RingSlotsFor(std::size_t queue_limit) {
+    std::uint32_t slots = 64;
+    while (slots < queue_limit && slots < 8192) slots *= 2;
+    return slots;
+  }
+
+  /// Takes every frame in `c`'s tx ring into `pending` (after the doorbells were read: a push
+  /// that saw `pending` set before the clear below is visible to the drain after it).
+  /// A dead client's ring is drained too: what it wrote before closing is on the bus, as the
+  /// messages queued in a closed socket are.
+  void DrainRing(Client* c) {
+    if (!c->rings) return;
+    ucan::RingHeader* h = c->rings->header;
+    ucan::RingIndex& r = h->tx;
+    r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
+    std::uint64_t head = r.head.load(std::memory_order_relaxed);
+    const std::uint64_t tail = r.tail.load(std::memory_order_acquire);
+    if (tail - head > h->slots) {  // a client wrote nonsense into its indexes
+      ++orphan_bad_messages;
+      Kill(c);
+      return;
+    }
+    const std::int64_t read_ns = MonotonicNs();
+    ucan::RingSlot* slots = ucan::TxSlots(h);
+    std::array<std::uint8_t, ucan::kSlotBytes> copy;
+    for (; head != tail; ++head) {
+      const ucan::RingSlot& slot = slots[head & (h->slots - 1)];
+      const std::uint32_t len = std::min<std::uint32_t>(slot.len, ucan::kSlotBytes);
+      std::memcpy(copy.data(), slot.bytes, len);  // copied once: the client may scribble
+      HandleFrame(c, copy.data(), len, false, read_ns);
+    }
+    r.head.store(head, std::memory_order_release);
+  }
+
   /// Reads `c`'s frames into `pending`, up to and including the first batch holding a frame
   /// stamped at or after `stop_ns` (later frames wait in the socket for the next pass).
   void ReadData(Client* c, int max_batches, std::int64_t stop_ns) {
@@ -631,7 +735,7 @@ struct UcanBroker::Impl {
       const int n = ::recvmmsg(c->fd.get(), msgs.data(), kBatch, MSG_DONTWAIT, nullptr);
       if (n < 0) {
         if (errno != EAGAIN && errno != EINTR) Kill(c);
-        return;
+        break;
       }
       if (n == 0) {
         Kill(c);
@@ -646,12 +750,14 @@ struct UcanBroker::Impl {
           Kill(c);
           return;
         }
+        if (c->rings && len == ucan::kDoorbellSize) continue;  // DrainRing reads the ring
         const std::int64_t stamp = HandleFrame(
             c, bufs[i].data(), len, (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0, read_ns);
         reached_stop = reached_stop || stamp >= stop_ns;
       }
-      if (n < kBatch || reached_stop) return;
+      if (n < kBatch || reached_stop) break;
     }
+    DrainRing(c);
   }
 
   void CountBad(Client* c) {
@@ -744,6 +850,10 @@ struct UcanBroker::Impl {
       }
       if (is_fd && !r->options.fd_frames) return;
       if (!r->Accepts(can_id)) return;
+      if (r->rings) {
+        PushRx(r, bus, frame, frame_len, flags, ts);
+        return;
+      }
       if (r->queue.size() >= options.client_queue_limit) {
         ++r->drops;
         ++bus->drops;
@@ -765,6 +875,38 @@ struct UcanBroker::Impl {
     };
     for (Client* r : bus->members) deliver(r);
     for (Client* r : any_clients) deliver(r);
+  }
+
+  /// Route() to a ring client: a full ring is a drop (counted as a full queue is).
+  void PushRx(Client* r, Bus* bus, const std::uint8_t* frame, std::size_t frame_len,
+              std::uint32_t flags, std::int64_t ts) {
+    ucan::RingHeader* h = r->rings->header;
+    ucan::RingIndex& ring = h->rx;
+    const std::uint64_t tail = ring.tail.load(std::memory_order_relaxed);
+    const std::uint64_t used = tail - ring.head.load(std::memory_order_acquire);
+    if (used > h->slots) {  // nonsense from the client
+      Kill(r);
+      return;
+    }
+    if (used == h->slots) {
+      ++r->drops;
+      ++bus->drops;
+      return;
+    }
+    ucan::RingSlot& slot = ucan::RxSlots(h)[tail & (h->slots - 1)];
+    std::memcpy(slot.bytes, frame, frame_len);
+    RxTrailer t;
+    t.ifindex = bus->ifindex;
+    t.flags = flags;
+    t.timestamp_ns = ts;
+    t.drops = r->drops;
+    std::memcpy(slot.bytes + frame_len, &t, sizeof(t));
+    slot.len = static_cast<std::uint32_t>(frame_len + sizeof(t));
+    ring.tail.store(tail + 1, std::memory_order_release);
+    if (!r->dirty) {
+      r->dirty = true;
+      dirty.push_back(r);
+    }
   }
 
   void Flush(Client* c) {
@@ -803,6 +945,15 @@ struct UcanBroker::Impl {
     for (std::size_t i = 0; i < dirty.size(); ++i) {
       Client* c = dirty[i];
       c->dirty = false;
+      if (c->rings) {
+        // One doorbell per pass at most, none while the client has not consumed the last one.
+        if (!c->dead && ucan::RingTakeDoorbell(c->rings->header->rx)) {
+          const std::uint64_t bell = 1;
+          [[maybe_unused]] ssize_t n =
+              ::send(c->fd.get(), &bell, sizeof(bell), MSG_DONTWAIT | MSG_NOSIGNAL);
+        }
+        continue;
+      }
       if (!c->want_out && !c->local) Flush(c);  // a blocked reader is flushed on EPOLLOUT
     }
     dirty.clear();
@@ -874,6 +1025,9 @@ struct UcanBroker::Impl {
         }
       }
     }
+    // Every ring, ready or not: a push that returned before T0 may have found its doorbell
+    // already pending (one rung in an earlier pass, not yet read), so readiness says nothing.
+    for (std::size_t i = 0; i < ring_clients.size(); ++i) DrainRing(ring_clients[i]);
     Dispatch(pass_start_ns);
     ApplyDeferredOptions();
     FlushDirty();

@@ -24,7 +24,9 @@
 #include <signal.h>
 #include <stdarg.h>
 #include <sys/ioctl.h>
+#include <sys/mman.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/uio.h>
 #include <sys/un.h>
 #include <time.h>
@@ -103,6 +105,22 @@ REAL_FN(if_indextoname, char*, (unsigned, char*))
 
 // ---- per-fd state ----
 
+/// The shared-memory rings of a bound socket (bus/ucan_protocol.h "Rings"); refcounted because
+/// a data call keeps using them outside the table lock while another thread may rebind/close.
+struct MappedRings {
+  int refs = 1;
+  ucan::RingHeader* header = nullptr;
+  std::size_t bytes = 0;
+};
+
+/// Lock held.
+void ReleaseRings(MappedRings* m) {
+  if (m != nullptr && --m->refs == 0) {
+    ::munmap(m->header, m->bytes);
+    delete m;
+  }
+}
+
 struct UcanSocket {
   int refs = 1;
   int type_flags = 0;  // SOCK_NONBLOCK | SOCK_CLOEXEC given to socket()
@@ -115,9 +133,13 @@ struct UcanSocket {
   int timestamp_mode = 0;         // 0 none, 1 us, 2 ns
   int timestamp_cmsg = 0;         // SCM type to emit
   bool rxq_ovfl = false;
+  MappedRings* rings = nullptr;  // bound with rings
 };
 
-/// What the data path needs, copied out under the lock.
+void LockTable();
+void UnlockTable();
+
+/// What the data path needs, copied out under the lock (holds a reference to the rings).
 struct View {
   bool bound = false;
   int ifindex = 0;
@@ -126,6 +148,17 @@ struct View {
   int timestamp_cmsg = 0;
   bool rxq_ovfl = false;
   char name[ucan::kNameSize] = {};
+  MappedRings* rings = nullptr;
+  View() = default;
+  View(const View&) = delete;
+  View& operator=(const View&) = delete;
+  ~View() {
+    if (rings != nullptr) {
+      LockTable();
+      ReleaseRings(rings);
+      UnlockTable();
+    }
+  }
 };
 
 pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -147,6 +180,7 @@ inline bool IsUcan(int fd) {
 void Release(UcanSocket* s) {
   if (s != nullptr && --s->refs == 0) {
     free(s->filters);
+    ReleaseRings(s->rings);
     delete s;
   }
 }
@@ -193,6 +227,10 @@ bool GetView(int fd, View* v) {
     v->timestamp_cmsg = s->timestamp_cmsg;
     v->rxq_ovfl = s->rxq_ovfl;
     std::memcpy(v->name, s->name, sizeof(v->name));
+    if (s->rings != nullptr) {
+      ++s->rings->refs;
+      v->rings = s->rings;
+    }
     ok = true;
   }
   UnlockTable();
@@ -237,7 +275,8 @@ int ConnectBroker() {
 /// Sends `req` (+ filters) and waits for the reply. Returns the connected socket (caller
 /// closes) or -1 with errno. A broker-side refusal is reported in reply->error.
 int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* reply,
-             void* extra = nullptr, std::size_t extra_cap = 0) {
+             void* extra = nullptr, std::size_t extra_cap = 0, int* passed_fd = nullptr) {
+  if (passed_fd != nullptr) *passed_fd = -1;
   const int s = ConnectBroker();
   if (s < 0) return -1;
   iovec iov[2] = {
@@ -261,8 +300,29 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msghdr rmsg{};
   rmsg.msg_iov = riov;
   rmsg.msg_iovlen = extra != nullptr ? 2 : 1;
-  const ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT) : -1;
+  alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
+  rmsg.msg_control = control;
+  rmsg.msg_controllen = sizeof(control);
+  const ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC) : -1;
+  if (n >= 0) {
+    for (cmsghdr* c = CMSG_FIRSTHDR(&rmsg); c != nullptr; c = CMSG_NXTHDR(&rmsg, c)) {
+      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_RIGHTS &&
+          c->cmsg_len >= CMSG_LEN(sizeof(int))) {
+        int got = -1;
+        std::memcpy(&got, CMSG_DATA(c), sizeof(got));
+        if (passed_fd != nullptr) {
+          *passed_fd = got;
+        } else {
+          real_close()(got);
+        }
+      }
+    }
+  }
   if (n < static_cast<ssize_t>(sizeof(*reply)) || reply->magic != ucan::kMagic) {
+    if (passed_fd != nullptr && *passed_fd >= 0) {
+      real_close()(*passed_fd);
+      *passed_fd = -1;
+    }
     real_close()(s);
     errno = rc == 0 ? ETIMEDOUT : EIO;
     return -1;
@@ -392,6 +452,38 @@ int SwitchToKernel(int fd, const sockaddr* addr, socklen_t len) {
   return real_bind()(fd, addr, len) == 0 ? 0 : errno;
 }
 
+/// Rings unless WHEELHIL_UCAN_RINGS=0 (then every frame is one socket message, protocol v2 style).
+bool RingsWanted() {
+  const char* v = getenv("WHEELHIL_UCAN_RINGS");
+  return v == nullptr || std::strcmp(v, "0") != 0;
+}
+
+/// Maps the broker's ring memfd; nullptr (plain messages) when it does not look right.
+MappedRings* MapRings(int memfd) {
+  struct stat st {};
+  if (::fstat(memfd, &st) != 0 || st.st_size < static_cast<off_t>(sizeof(ucan::RingHeader))) {
+    return nullptr;
+  }
+  const auto bytes = static_cast<std::size_t>(st.st_size);
+  void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memfd, 0);
+  if (p == MAP_FAILED) return nullptr;
+  auto* h = static_cast<ucan::RingHeader*>(p);
+  const std::uint32_t slots = h->slots;
+  if (h->magic != ucan::kMagic || slots == 0 || (slots & (slots - 1)) != 0 ||
+      ucan::RingBytes(slots) != bytes) {
+    ::munmap(p, bytes);
+    return nullptr;
+  }
+  auto* m = new (std::nothrow) MappedRings;
+  if (m == nullptr) {
+    ::munmap(p, bytes);
+    return nullptr;
+  }
+  m->header = h;
+  m->bytes = bytes;
+  return m;
+}
+
 int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   if (addr == nullptr) return EFAULT;
   if (len < static_cast<socklen_t>(offsetof(sockaddr_can, can_ifindex) + sizeof(int))) {
@@ -414,8 +506,19 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   req.op = ucan::Op::kOpen;
   std::memcpy(req.name, name, sizeof(name));
   req.options = opts;
+  if (RingsWanted()) req.flags |= ucan::kOpenRings;
   ucan::Reply reply;
-  const int conn = Transact(req, filters, &reply);
+  int ring_fd = -1;
+  int conn = Transact(req, filters, &reply, nullptr, 0, &ring_fd);
+  MappedRings* rings = ring_fd >= 0 ? MapRings(ring_fd) : nullptr;
+  if (ring_fd >= 0) real_close()(ring_fd);
+  if (conn >= 0 && reply.error == 0 && (req.flags & ucan::kOpenRings) && rings == nullptr) {
+    // Rings granted but not usable here (no fd passed: out of fds; mapping refused): the
+    // broker would fill a ring nobody reads. Open again without them.
+    real_close()(conn);
+    req.flags &= ~ucan::kOpenRings;
+    conn = Transact(req, filters, &reply);
+  }
   free(filters);
   if (conn < 0) {
     // No broker: only "any" can get here (an index was resolved above); let the kernel say.
@@ -423,6 +526,11 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   }
   if (reply.error != 0) {
     real_close()(conn);
+    if (rings != nullptr) {
+      LockTable();
+      ReleaseRings(rings);
+      UnlockTable();
+    }
     return reply.error == ENODEV ? SwitchToKernel(fd, addr, len) : reply.error;
   }
   const int fl = real_fcntl()(fd, F_GETFL);
@@ -438,8 +546,12 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
       std::memcpy(s->name, reply.name, sizeof(s->name));
       s->name[ucan::kNameSize - 1] = '\0';
       s->client_id = reply.client_id;
+      ReleaseRings(s->rings);
+      s->rings = rings;
+      rings = nullptr;
     }
   }
+  ReleaseRings(rings);
   UnlockTable();
   real_close()(conn);
   return rc < 0 ? err : 0;
@@ -450,6 +562,133 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
 ssize_t Fail(int err) {
   errno = err;
   return -1;
+}
+
+void LockRing(ucan::RingIndex& r) {
+  if (pthread_mutex_lock(&r.lock) == EOWNERDEAD) pthread_mutex_consistent(&r.lock);
+}
+
+std::int64_t MonotonicNow() {
+  timespec now{};
+  ::clock_gettime(CLOCK_MONOTONIC, &now);
+  return static_cast<std::int64_t>(now.tv_sec) * 1000000000 + now.tv_nsec;
+}
+
+/// The tx ring: `msg` is frame + room for the TxStamp at `frame_len` (+ TxAddress), `len` bytes
+/// in all. Stamped under the ring lock, so the ring order is the stamp order. A full ring sends
+/// the frame as a plain message (blocking like a full socket); the broker merges by stamp.
+ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t frame_len,
+                 std::size_t len, int flags) {
+  ucan::RingIndex& r = h->tx;
+  LockRing(r);
+  if (h->closed.load() != 0) {
+    pthread_mutex_unlock(&r.lock);
+    return Fail(ENETDOWN);
+  }
+  ucan::TxStamp stamp;
+  stamp.monotonic_ns = MonotonicNow();
+  std::memcpy(msg + frame_len, &stamp, sizeof(stamp));
+  const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
+  if (tail - r.head.load(std::memory_order_acquire) >= h->slots) {
+    const ssize_t n = real_send()(fd, msg, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+    const int err = errno;
+    pthread_mutex_unlock(&r.lock);
+    if (n < 0) {
+      if (err == EPIPE || err == ECONNRESET || err == ENOTCONN) return Fail(ENETDOWN);
+      return Fail(err);
+    }
+    return static_cast<ssize_t>(frame_len);
+  }
+  ucan::RingSlot& slot = ucan::TxSlots(h)[tail & (h->slots - 1)];
+  std::memcpy(slot.bytes, msg, len);
+  slot.len = static_cast<std::uint32_t>(len);
+  r.tail.store(tail + 1, std::memory_order_release);
+  pthread_mutex_unlock(&r.lock);
+  if (ucan::RingTakeDoorbell(r)) {
+    const std::uint64_t bell = 1;
+    if (real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT) < 0 &&
+        (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) {
+      return Fail(ENETDOWN);
+    }
+  }
+  return static_cast<ssize_t>(frame_len);
+}
+
+/// rx ring, lock held; the ring was found empty at `head` (or its last entry just taken).
+/// Clears `pending`; if the ring is still empty, discards the doorbells triggered before the
+/// clear (later ones announce pushes after it and stay).
+void SettleRx(int fd, ucan::RingIndex& r, std::uint64_t head) {
+  const std::uint64_t w = r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
+  if (r.tail.load() != head) return;                            // entries: every doorbell stays
+  const std::uint64_t triggered = w >> 1;
+  std::uint64_t bell = 0;
+  while (r.bells_taken < triggered) {
+    if (real_recv()(fd, &bell, sizeof(bell), MSG_DONTWAIT) != sizeof(bell)) break;  // in flight
+    ++r.bells_taken;
+  }
+}
+
+/// One message (frame + RxTrailer) from the rx ring into `buf`: its length, 0 at the end of
+/// the connection, -1 with errno. Waits like the socket's recv would (O_NONBLOCK, MSG_DONTWAIT,
+/// SO_RCVTIMEO -> EAGAIN), but in poll(): a blocking recv wakes one waiter per message, and a
+/// waiter that leaves the doorbell queued (frames left) would leave the others asleep. So a
+/// signal interrupts the wait with EINTR even under SA_RESTART (docs/ucan.md).
+ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap, int flags) {
+  ucan::RingIndex& r = h->rx;
+  bool may_block = (flags & MSG_DONTWAIT) == 0;
+  bool checked_mode = false;
+  std::int64_t deadline_ns = -1;  // SO_RCVTIMEO
+  for (;;) {
+    LockRing(r);
+    const std::uint64_t head = r.head.load(std::memory_order_relaxed);
+    const std::uint64_t tail = r.tail.load(std::memory_order_acquire);
+    if (tail - head > h->slots) {
+      pthread_mutex_unlock(&r.lock);
+      return Fail(EIO);
+    }
+    if (head != tail) {
+      const ucan::RingSlot& slot = ucan::RxSlots(h)[head & (h->slots - 1)];
+      const std::size_t len = std::min<std::size_t>({slot.len, ucan::kSlotBytes, cap});
+      std::memcpy(buf, slot.bytes, len);
+      if (!(flags & MSG_PEEK)) {
+        r.head.store(head + 1, std::memory_order_release);
+        if (head + 1 == tail) SettleRx(fd, r, head + 1);
+      }
+      pthread_mutex_unlock(&r.lock);
+      return static_cast<ssize_t>(len);
+    }
+    SettleRx(fd, r, head);
+    pthread_mutex_unlock(&r.lock);
+    if (h->closed.load() != 0) return 0;
+    // A doorbell still queued announces a push after the clear above: take the frame.
+    std::uint64_t bell = 0;
+    const ssize_t n = real_recv()(fd, &bell, sizeof(bell), MSG_PEEK | MSG_DONTWAIT);
+    if (n == 0) return 0;  // the broker closed the connection
+    if (n > 0) continue;
+    if (errno != EAGAIN) return -1;
+    if (!checked_mode && may_block) {
+      checked_mode = true;
+      const int fl = real_fcntl()(fd, F_GETFL);
+      if (fl >= 0 && (fl & O_NONBLOCK)) may_block = false;
+      timeval tv{};
+      socklen_t len = sizeof(tv);
+      if (may_block && real_getsockopt()(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, &len) == 0 &&
+          (tv.tv_sec > 0 || tv.tv_usec > 0)) {
+        deadline_ns = MonotonicNow() + static_cast<std::int64_t>(tv.tv_sec) * 1000000000 +
+                      static_cast<std::int64_t>(tv.tv_usec) * 1000;
+      }
+    }
+    if (!may_block) return Fail(EAGAIN);
+    int timeout_ms = -1;
+    if (deadline_ns >= 0) {
+      const std::int64_t left_ns = deadline_ns - MonotonicNow();
+      if (left_ns <= 0) return Fail(EAGAIN);
+      timeout_ms = static_cast<int>((left_ns + 999999) / 1000000);
+    }
+    pollfd p{fd, POLLIN, 0};
+    const int rc = ::poll(&p, 1, timeout_ms);
+    if (rc < 0) return -1;  // EINTR
+  }
 }
 
 /// Writes one frame gathered from iov to the broker, with the kernel's checks.
@@ -486,6 +725,7 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
     std::memcpy(buf + len, &to, sizeof(to));
     len += sizeof(to);
   }
+  if (v.rings != nullptr) return RingSend(fd, v.rings->header, buf, total, len, flags);
   // Stamped last, right before the send: a write that returned before this one began has a
   // smaller stamp (see ucan::TxStamp).
   timespec now{};
@@ -532,7 +772,9 @@ ssize_t RecvFrame(int fd, const View& v, msghdr* msg, int flags) {
   msghdr m{};
   m.msg_iov = &iov;
   m.msg_iovlen = 1;
-  const ssize_t n = real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));
+  const ssize_t n = v.rings != nullptr
+                        ? RingRecv(fd, v.rings->header, buf, sizeof(buf), flags)
+                        : real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));
   if (n < 0) {
     if (errno == ECONNRESET || errno == EPIPE) return Fail(ENETDOWN);
     return -1;

@@ -13,9 +13,20 @@
 ///   broker -> client: the frame (16 / 72 bytes) followed by an RxTrailer (24 bytes).
 /// All other ops are one request, one Reply, then the broker closes the connection.
 ///
+/// Rings (v3, opt-in per data connection: Request::flags & kOpenRings): the kOpen Reply then
+/// carries (SCM_RIGHTS) a sealed memfd holding a RingHeader and two rings of RingSlot: broker ->
+/// client (slot = the message above: frame + RxTrailer) and client -> broker (frame + TxStamp
+/// [+ TxAddress]). The socket stays the readiness signal and carries 8-byte doorbells (and, when
+/// the client's ring is full, plain frame messages, merged by TxStamp). Invariant: a ring that
+/// holds entries has a doorbell queued (or being sent) on its socket; spurious doorbells are
+/// allowed. See docs/ucan.md "Rings".
+///
 /// Plain C layout, host byte order (both ends run on the same machine). No C++ runtime needed,
 /// so the interposition library can include it.
 
+#include <pthread.h>
+
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 
@@ -23,7 +34,7 @@ namespace wheelhil::bus::ucan {
 
 inline constexpr char kSocketName[] = "ucan.sock";
 inline constexpr char kLockName[] = "ucan.lock";
-inline constexpr std::uint32_t kMagic = 0x32414355u;  // "UCA2" (v2: frames carry a TxStamp)
+inline constexpr std::uint32_t kMagic = 0x33414355u;  // "UCA3" (v3: optional rings)
 inline constexpr std::size_t kNameSize = 16;          // IFNAMSIZ, including the NUL
 inline constexpr std::size_t kCanMtu = 16;            // sizeof(struct can_frame)
 inline constexpr std::size_t kCanFdMtu = 72;          // sizeof(struct canfd_frame)
@@ -64,7 +75,11 @@ struct Request {
   std::int32_t ifindex = 0;
   std::uint32_t client_id = 0;
   RawOptions options;
+  std::uint32_t flags = 0;  ///< kOpen: kOpenRings.
+  std::uint32_t reserved = 0;
 };
+
+inline constexpr std::uint32_t kOpenRings = 1;
 
 struct Reply {
   std::uint32_t magic = kMagic;
@@ -107,9 +122,65 @@ struct TxAddress {
   std::uint32_t magic = kMagic;
 };
 
+// ---- rings ----
+
+inline constexpr std::size_t kDoorbellSize = 8;  ///< A doorbell message (content ignored).
+inline constexpr std::size_t kSlotBytes = 120;
+
+struct RingSlot {
+  std::uint32_t len = 0;  ///< Bytes used in `bytes` (a message as on the socket).
+  std::uint32_t reserved = 0;
+  std::uint8_t bytes[kSlotBytes] = {};
+};
+
+/// One single-consumer or single-producer ring's indexes. `bell` = (doorbells triggered << 1)
+/// | pending: a producer, after pushing (seq_cst), sends a doorbell only when it sets pending
+/// (count + 1); consumers never set it. A client consumer that finds the ring empty right after
+/// clearing pending discards only doorbells triggered before its clear (`bells_taken` counts
+/// them), so a doorbell for a later push is never taken by mistake.
+struct RingIndex {
+  alignas(64) std::atomic<std::uint64_t> tail{0};  ///< Next slot to write (producer).
+  alignas(64) std::atomic<std::uint64_t> head{0};  ///< Next slot to read (consumer).
+  alignas(64) std::atomic<std::uint64_t> bell{0};
+  std::uint64_t bells_taken = 0;  ///< Client consumers, under `lock`.
+  pthread_mutex_t lock;           ///< Client side (threads, forked processes): robust, shared.
+};
+
+struct RingHeader {
+  std::uint32_t magic = kMagic;
+  std::uint32_t slots = 0;               ///< Per ring, a power of two.
+  std::atomic<std::uint32_t> closed{0};  ///< Set by the broker before it drops the connection.
+  std::uint32_t reserved = 0;
+  RingIndex rx;  ///< broker -> client
+  RingIndex tx;  ///< client -> broker
+};
+
+inline std::size_t RingBytes(std::uint32_t slots) {
+  return (sizeof(RingHeader) + 63) / 64 * 64 + 2 * std::size_t{slots} * sizeof(RingSlot);
+}
+inline RingSlot* RxSlots(RingHeader* h) {
+  return reinterpret_cast<RingSlot*>(reinterpret_cast<std::uint8_t*>(h) +
+                                     (sizeof(RingHeader) + 63) / 64 * 64);
+}
+inline RingSlot* TxSlots(RingHeader* h) { return RxSlots(h) + h->slots; }
+
+/// After a producer's pushes: true when it must send one doorbell.
+inline bool RingTakeDoorbell(RingIndex& r) {
+  std::atomic_thread_fence(std::memory_order_seq_cst);
+  std::uint64_t w = r.bell.load();
+  while (!(w & 1)) {
+    if (r.bell.compare_exchange_weak(w, w + 3)) return true;
+  }
+  return false;
+}
+
+static_assert(std::atomic<std::uint64_t>::is_always_lock_free);
+static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 static_assert(sizeof(RxTrailer) == 24);
 static_assert(sizeof(TxAddress) == 8);
 static_assert(sizeof(TxStamp) == 8);
 inline constexpr std::size_t kMaxRxMessage = kCanFdMtu + sizeof(RxTrailer);
+static_assert(kMaxRxMessage <= kSlotBytes);
+static_assert(kCanFdMtu + sizeof(TxStamp) + sizeof(TxAddress) <= kSlotBytes);
 
 }  // namespace wheelhil::bus::ucan
