@@ -4,20 +4,10 @@
 #include <cmath>
 #include <stdexcept>
 
-#include <LinearMath/btQuickprof.h>
 #include <btBulletDynamicsCommon.h>
 #include <fmt/format.h>
 
 namespace wheelhil::emulator::physics {
-namespace {
-
-// Bullet's CProfileSample (BT_PROFILE in stepSimulation, the solver, the broadphase ...) calls
-// these on every zone: by default they time each zone into CProfileManager's tree, which no one
-// here reads. No-op hooks keep the step free of that bookkeeping.
-void NoProfileEnter(const char* /*name*/) {}
-void NoProfileLeave() {}
-
-}  // namespace
 
 PhysicsWorld::PhysicsWorld(const WorldOptions& options)
     : step_s_(options.step_s), gravity_W_(options.gravity_W) {
@@ -26,8 +16,6 @@ PhysicsWorld::PhysicsWorld(const WorldOptions& options)
         fmt::format("world: step_s ({}) must be finite and in (0, 0.1]", step_s_));
   }
   if (!gravity_W_.allFinite()) throw std::invalid_argument("world: gravity_W: must be finite");
-  btSetCustomEnterProfileZoneFunc(&NoProfileEnter);
-  btSetCustomLeaveProfileZoneFunc(&NoProfileLeave);
   terrain_ = std::make_unique<Terrain>();
   config_ = std::make_unique<btDefaultCollisionConfiguration>();
   dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
