@@ -615,17 +615,11 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
 }
 
 /// rx ring, lock held; the ring was found empty at `head` (or its last entry just taken).
-/// Clears `pending`; if the ring is still empty, discards the doorbells triggered before the
-/// clear (later ones announce pushes after it and stay).
 void SettleRx(int fd, ucan::RingIndex& r, std::uint64_t head) {
-  const std::uint64_t w = r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
-  if (r.tail.load() != head) return;                            // entries: every doorbell stays
-  const std::uint64_t triggered = w >> 1;
-  std::uint64_t bell = 0;
-  while (r.bells_taken < triggered) {
-    if (real_recv()(fd, &bell, sizeof(bell), MSG_DONTWAIT) != sizeof(bell)) break;  // in flight
-    ++r.bells_taken;
-  }
+  ucan::RingSettle(r, head, [fd] {
+    std::uint64_t bell = 0;
+    return real_recv()(fd, &bell, sizeof(bell), MSG_DONTWAIT) == sizeof(bell);
+  });
 }
 
 /// One message (frame + RxTrailer) from the rx ring into `buf`: its length, 0 at the end of

@@ -174,6 +174,26 @@ inline bool RingTakeDoorbell(RingIndex& r) {
   return false;
 }
 
+/// A client consumer, `lock` held, after it found the ring empty at `head` or took its last
+/// entry: clears `pending`; if the ring is still empty after that, discards the doorbells
+/// triggered before the clear (`discard_one()`: receive one without waiting, false when none is
+/// there yet: a doorbell still in flight is discarded by a later call). Doorbells triggered
+/// after the clear announce later pushes and stay. `between` runs between the clear and the
+/// re-check (tests widen that window with it).
+template <typename DiscardOne, typename Between>
+void RingSettle(RingIndex& r, std::uint64_t head, DiscardOne discard_one, Between between) {
+  const std::uint64_t w = r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
+  between();
+  if (r.tail.load() != head) return;  // entries: every doorbell stays
+  const std::uint64_t triggered = w >> 1;
+  while (r.bells_taken < triggered && discard_one()) ++r.bells_taken;
+}
+
+template <typename DiscardOne>
+void RingSettle(RingIndex& r, std::uint64_t head, DiscardOne discard_one) {
+  RingSettle(r, head, discard_one, [] {});
+}
+
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free);
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 static_assert(sizeof(RxTrailer) == 24);

@@ -5,6 +5,7 @@
 
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
+#include <sys/mman.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
 
@@ -308,6 +309,114 @@ TEST_F(UcanRingTest, FramesOfAClientThatClosedAreDelivered) {
   ASSERT_EQ(::waitpid(child, &status, 0), child);
   for (int i = 0; i < 10; ++i) ASSERT_EQ(Receive(rx).can_id, 0x300u + i);
   ::close(rx);
+}
+
+// The eventcount itself (ucan::RingTakeDoorbell / ucan::RingSettle, as the broker and the
+// library use them) with its race windows widened by random spins: one producer (the broker's
+// side of an rx ring) pushing bursts, three consumers sharing one socket end and the ring (two
+// threads and a forked process, under the ring's robust process-shared lock) that sleep in
+// poll() whenever the ring looks empty. A lost doorbell leaves a consumer in poll() while the
+// ring holds entries: counted after a 2 s timeout, and the test fails. (The first design of the
+// settle step, "re-set pending when entries are found, else take one doorbell", fails here.)
+struct SharedRing {
+  ucan::RingIndex index;
+  std::atomic<int> done{0};
+  std::atomic<std::uint64_t> consumed{0};
+  std::atomic<std::uint64_t> sum{0};
+  std::atomic<std::uint64_t> lost{0};
+  std::uint64_t slots[256] = {};
+};
+
+void SpinSometimes(std::minstd_rand& rng) {
+  if (rng() % 4 != 0) return;
+  const unsigned n = rng() % 2000;
+  for (unsigned i = 0; i < n; ++i) asm volatile("" ::: "memory");
+}
+
+TEST(UcanRingEventcount, NoDoorbellIsLostUnderRacingProducerAndConsumers) {
+  void* mem = ::mmap(nullptr, sizeof(SharedRing), PROT_READ | PROT_WRITE,
+                     MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+  ASSERT_NE(mem, MAP_FAILED);
+  auto* sr = new (mem) SharedRing;
+  pthread_mutexattr_t a;
+  pthread_mutexattr_init(&a);
+  pthread_mutexattr_setpshared(&a, PTHREAD_PROCESS_SHARED);
+  pthread_mutexattr_setrobust(&a, PTHREAD_MUTEX_ROBUST);
+  pthread_mutex_init(&sr->index.lock, &a);
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv), 0);
+  constexpr std::uint64_t kFrames = 150000;
+  ucan::RingIndex& r = sr->index;
+  auto consume = [&](unsigned seed) {
+    std::minstd_rand rng(seed);
+    auto discard_one = [&] {
+      std::uint64_t bell = 0;
+      return ::recv(sv[1], &bell, sizeof(bell), MSG_DONTWAIT) == sizeof(bell);
+    };
+    auto spin = [&] { SpinSometimes(rng); };
+    for (;;) {
+      if (pthread_mutex_lock(&r.lock) == EOWNERDEAD) pthread_mutex_consistent(&r.lock);
+      const std::uint64_t head = r.head.load(std::memory_order_relaxed);
+      const std::uint64_t tail = r.tail.load(std::memory_order_acquire);
+      if (head != tail) {
+        const std::uint64_t v = sr->slots[head % 256];
+        r.head.store(head + 1, std::memory_order_release);
+        if (head + 1 == tail) ucan::RingSettle(r, head + 1, discard_one, spin);
+        pthread_mutex_unlock(&r.lock);
+        sr->sum.fetch_add(v);
+        sr->consumed.fetch_add(1);
+        continue;
+      }
+      ucan::RingSettle(r, head, discard_one, spin);
+      pthread_mutex_unlock(&r.lock);
+      if (sr->done.load() != 0) return;
+      pollfd p{sv[1], POLLIN, 0};
+      if (::poll(&p, 1, 2000) == 0 && r.head.load() != r.tail.load()) sr->lost.fetch_add(1);
+    }
+  };
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    consume(3);
+    _exit(0);
+  }
+  std::thread c1(consume, 1), c2(consume, 2);
+  std::minstd_rand rng(11);
+  std::uint64_t pushed = 0, expect_sum = 0;
+  while (pushed < kFrames) {
+    const std::uint64_t burst = 1 + rng() % 8;
+    for (std::uint64_t k = 0; k < burst && pushed < kFrames; ++k) {
+      const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
+      if (tail - r.head.load(std::memory_order_acquire) >= 256) break;  // full: ring first
+      sr->slots[tail % 256] = pushed + 1;
+      r.tail.store(tail + 1, std::memory_order_release);
+      expect_sum += ++pushed;
+      SpinSometimes(rng);
+    }
+    if (ucan::RingTakeDoorbell(r)) {
+      const std::uint64_t bell = 1;
+      ASSERT_EQ(::send(sv[0], &bell, sizeof(bell), MSG_NOSIGNAL), 8);
+    }
+    if (rng() % 32 == 0) {  // let the consumers drain and fall asleep
+      while (sr->consumed.load() < pushed) std::this_thread::yield();
+    }
+  }
+  while (sr->consumed.load() < kFrames) std::this_thread::yield();
+  sr->done.store(1);
+  for (int k = 0; k < 3; ++k) {  // wake every consumer for its exit (outside the count)
+    const std::uint64_t bell = 1;
+    ::send(sv[0], &bell, sizeof(bell), MSG_NOSIGNAL);
+  }
+  c1.join();
+  c2.join();
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  EXPECT_EQ(sr->lost.load(), 0u);
+  EXPECT_EQ(sr->consumed.load(), kFrames);
+  EXPECT_EQ(sr->sum.load(), expect_sum);
+  ::close(sv[0]);
+  ::close(sv[1]);
+  ::munmap(mem, sizeof(SharedRing));
 }
 
 }  // namespace
