@@ -319,6 +319,8 @@ class Run {
   std::vector<VelocitySample> truth_vel_;
   std::vector<double> slip_t_;
   std::vector<bool> slip_flag_;
+  /// Per wheel (vehicle order), per motion step at slip_t_: the wheel is off the floor.
+  std::vector<std::vector<bool>> airborne_;
   std::vector<EstimateRow> estimates_;
   std::map<std::string, std::vector<PoseSample>> pose_streams_;
   std::map<std::string, std::vector<VelocitySample>> vel_streams_;
@@ -1041,6 +1043,8 @@ void Run::Step(bool motion) {
     }
     slip_t_.push_back(t_now - step_ns_ * 1e-9 - t_motion0_s_);
     slip_flag_.push_back(slip);
+    airborne_.resize(wt2.size());
+    for (std::size_t w = 0; w < wt2.size(); ++w) airborne_[w].push_back(!wt2[w].in_contact);
   }
 }
 
@@ -1495,6 +1499,32 @@ json Run::BuildReport(double wall_s) {
     events_.push_back(
         json{{"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s}, {"end_s", iv.end_s}});
   }
+  // Contact loss per wheel (ground truth): episodes are merged over regained contact shorter
+  // than 10 ms, so a wheel chattering over a bump is one episode; the time is the steps off the
+  // floor.
+  json contact{{"wheels_losing_contact", 0}, {"episodes", 0}};
+  const double step_s = static_cast<double>(step_ns_) * 1e-9;
+  for (std::size_t w = 0; w < airborne_.size(); ++w) {
+    const auto episodes = FlagsToIntervals(slip_t_, airborne_[w], step_s, 0.01, 0.0);
+    if (episodes.empty()) continue;
+    const std::string& wheel = s_.platform.vehicle.wheels[w].name;
+    double longest = 0;
+    for (const auto& iv : episodes) {
+      longest = std::max(longest, iv.end_s - iv.start_s);
+      events_.push_back(json{{"t_s", iv.start_s},
+                             {"event", "contact_lost"},
+                             {"wheel", wheel},
+                             {"start_s", iv.start_s},
+                             {"end_s", iv.end_s}});
+    }
+    const auto steps = std::count(airborne_[w].begin(), airborne_[w].end(), true);
+    contact["wheels_losing_contact"] = contact["wheels_losing_contact"].get<int>() + 1;
+    contact["episodes"] = contact["episodes"].get<std::size_t>() + episodes.size();
+    contact[wheel + "_episodes"] = episodes.size();
+    contact[wheel + "_time_s"] = static_cast<double>(steps) * step_s;
+    contact[wheel + "_longest_s"] = longest;
+  }
+  metrics["contact"] = contact;
   std::stable_sort(events_.begin(), events_.end(), [](const json& a, const json& b) {
     return a["t_s"].get<double>() < b["t_s"].get<double>();
   });

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -190,6 +191,8 @@ TEST_F(ScenarioRun, Paper002VelocityStreamsAreScored) {
   EXPECT_LT(odom, 0.03);
   EXPECT_GT(accel, odom);
   EXPECT_GT(accel, fused);
+  // A flat floor: no wheel ever leaves it.
+  EXPECT_EQ(m["contact"]["wheels_losing_contact"].get<int>(), 0);
   // The accelerometer frames (0x170) are in the log.
   EXPECT_THAT(Slurp(dir_ / "p002" / "can.log"), HasSubstr(" 170#"));
   EXPECT_THAT(Slurp(dir_ / "p002" / "report.html"), HasSubstr("paper 002"));
@@ -266,6 +269,55 @@ TEST_F(ScenarioRun, Paper002SilentEncoderStaysDeterministic) {
   EXPECT_EQ(events, Slurp(dir_ / "b" / "events.jsonl"));
   EXPECT_THAT(events, HasSubstr("\"event\":\"last_cycle_incomplete\""));
   EXPECT_THAT(events, HasSubstr("\"event\":\"firmware_state\",\"state\":4"));
+}
+
+// The Mecanum platform over the 12 mm door threshold at x = 1 m (meshes/door_threshold.obj):
+// the ground truth reports every wheel losing contact (drive wheels dropping off the step,
+// followers lifted by the chassis' pitch), and only while a wheel is near the threshold: chassis
+// x in [0.6, 1.4] m for wheels mounted within 0.25 m of its centre. Each episode is an event.
+TEST_F(ScenarioRun, DoorThresholdReportsContactLossWhereTheWheelsCrossIt) {
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                "/scenarios/suspension_door_threshold.yaml");
+  const RunResult r = RunScenario(s, Options(dir_ / "door"));
+  ASSERT_EQ(r.failure, "");
+  const auto& c = r.report["metrics"]["contact"];
+  for (const char* w : {"follower_front", "follower_left", "follower_right", "front_left",
+                        "front_right", "rear_left", "rear_right"}) {
+    ASSERT_TRUE(c.contains(std::string(w) + "_episodes")) << w;
+    EXPECT_GE(c[std::string(w) + "_episodes"].get<int>(), 1) << w;
+    const double t = c[std::string(w) + "_time_s"].get<double>();
+    EXPECT_GT(t, 0.0) << w;
+    EXPECT_LT(t, 0.5) << w;  // a drop off 12 mm, not a wheel left in the air
+    EXPECT_LE(c[std::string(w) + "_longest_s"].get<double>(), t) << w;
+  }
+  EXPECT_EQ(c["wheels_losing_contact"].get<int>(), 7);
+  // Truth x at each episode's start (truth.csv rows every 10 ms).
+  std::vector<std::pair<double, double>> tx;
+  std::istringstream truth(Slurp(dir_ / "door" / "truth.csv"));
+  std::string line;
+  std::getline(truth, line);
+  while (std::getline(truth, line)) {
+    double t = 0, x = 0;
+    char comma = 0;
+    std::istringstream(line) >> t >> comma >> x;
+    tx.emplace_back(t, x);
+  }
+  ASSERT_GT(tx.size(), 100u);
+  int episodes = 0;
+  std::istringstream events(Slurp(dir_ / "door" / "events.jsonl"));
+  while (std::getline(events, line)) {
+    const auto e = nlohmann::json::parse(line);
+    if (e["event"] != "contact_lost") continue;
+    ++episodes;
+    const double t0 = e["start_s"].get<double>();
+    EXPECT_GT(e["end_s"].get<double>(), t0);
+    const auto near = std::min_element(tx.begin(), tx.end(), [&](const auto& a, const auto& b) {
+      return std::abs(a.first - t0) < std::abs(b.first - t0);
+    });
+    EXPECT_GT(near->second, 0.6) << line;
+    EXPECT_LT(near->second, 1.4) << line;
+  }
+  EXPECT_EQ(episodes, c["episodes"].get<int>());
 }
 
 TEST(ScenarioAccel4, BadBiasListNamesFileLineAndField) {
