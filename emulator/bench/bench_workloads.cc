@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -287,11 +288,20 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
     const bool have_mask =
         ::pthread_getaffinity_np(::pthread_self(), sizeof(original_mask), &original_mask) == 0;
     bool pipeline_pinned = false;
-    if (pipeline_cpu >= 0 && pipeline_cpu < CPU_SETSIZE && have_mask) {
-      cpu_set_t set;
-      CPU_ZERO(&set);
-      CPU_SET(pipeline_cpu, &set);
-      pipeline_pinned = ::pthread_setaffinity_np(::pthread_self(), sizeof(set), &set) == 0;
+    std::string pipeline_pin_refused;  // why a requested --bus-cpu was not applied
+    if (pipeline_cpu >= 0) {
+      int err = !have_mask ? EINVAL : pipeline_cpu >= CPU_SETSIZE ? EINVAL : 0;
+      if (err == 0) {
+        cpu_set_t set;
+        CPU_ZERO(&set);
+        CPU_SET(pipeline_cpu, &set);
+        err = ::pthread_setaffinity_np(::pthread_self(), sizeof(set), &set);
+      }
+      pipeline_pinned = err == 0;
+      if (!pipeline_pinned) {
+        pipeline_pin_refused = fmt::format("; bus pipeline NOT pinned to CPU {}: {}", pipeline_cpu,
+                                           std::strerror(err));
+      }
     }
     bus::UcanBrokerOptions bo;
     bo.runtime_dir = dir;
@@ -487,6 +497,7 @@ nlohmann::json RunRealtimeWorkload(const RealtimeWorkloadOptions& options) {
       if (pipeline_pinned) {
         sched += fmt::format("; broker, producer, writer, reader pinned to CPU {}", pipeline_cpu);
       }
+      sched += pipeline_pin_refused;
       if (!rt.notes.empty()) sched += " (" + JoinNotes(rt.notes) + ")";
       if (!options.sched_fifo) sched += " (--no-rt)";
       SetPath(report, "realtime.scheduling", sched);
