@@ -368,6 +368,54 @@ TEST_F(ScenarioFaultsRun, SameSeedSameLogWithRandomFaults) {
   }
 }
 
+// A rebooted encoder (power cycle while the robot drives) comes back with its absolute count: the
+// firmware restarts it (boot-up -> SDO -> NMT start), spans the gap in one step, and its raw
+// odometry ends where the run without the reboot ends (a counter restarting at zero would move
+// the left wheel's travel by metres). Paper 000's no-slip floor, so only the reboot differs.
+TEST_F(ScenarioFaultsRun, RebootedEncoderRecoversItsCount) {
+  const std::string base_path =
+      std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_calibration.yaml";
+  Scenario s = LoadScenarioFile(base_path);
+  s.motion[1].distance = 1.0;
+  s.motion[1].duration_s = TrapezoidDuration(1.0, 0.25, 0.5);
+  s.timing.duration_s = 0.5 + s.motion[1].duration_s + 0.5;
+  s.expectations.clear();
+  const nlohmann::json plain = Run(s, "plain");
+  Scenario r =
+      ParseScenario(Slurp(base_path) +
+                        "faults:\n  - {type: device, kind: reboot, node_id: 1, start_s: 1.5, "
+                        "end_s: 1.7}\n",
+                    base_path);
+  r.motion = s.motion;
+  r.timing = s.timing;
+  r.expectations.clear();
+  const nlohmann::json rebooted = Run(r, "reboot");
+  const std::string events = Slurp(dir_ / "reboot" / "events.jsonl");
+  EXPECT_THAT(events, HasSubstr("\"fault\":\"reboot\""));
+  // Off (255 is the emulator's "no heartbeat" state), boot-up, then operational again.
+  std::vector<std::pair<double, int>> node1;
+  std::istringstream in(events);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto e = nlohmann::json::parse(line);
+    if (e["event"] == "node_state" && e["node_id"] == 1) {
+      node1.emplace_back(e["t_s"].get<double>(), e["state"].get<int>());
+    }
+  }
+  ASSERT_GE(node1.size(), 4u);
+  EXPECT_EQ(node1.back().second, 5);         // operational at the end
+  EXPECT_GT(node1.back().first, 1.7);        // after the power-on
+  EXPECT_LT(node1.back().first, 1.7 + 1.5);  // and well before the run ends
+  const auto& a = plain["metrics"]["pose_raw"];
+  const auto& b = rebooted["metrics"]["pose_raw"];
+  EXPECT_GT(b["distance_m"].get<double>(), 0.95);
+  EXPECT_NEAR(b["final_position_error_m"].get<double>(), a["final_position_error_m"].get<double>(),
+              1e-3);
+  EXPECT_NEAR(b["final_heading_error_rad"].get<double>(),
+              a["final_heading_error_rad"].get<double>(), 1e-3);
+  EXPECT_EQ(rebooted["verdict"], "pass");
+}
+
 // A node reboot (the firmware restarts it), then an error burst holding back the SYNC that
 // closes the incomplete cycle, bus-off, missed counts, gyro dropout, EMCY and a wrong DLC: the
 // lockstep run goes to the end and every fault shows in the metrics, can.log and events.
