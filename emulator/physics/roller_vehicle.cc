@@ -107,6 +107,8 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
     if (w.kind == WheelKind::kOrthogonal) {
       Require(w.handover_dip_m >= 0 && w.handover_dip_m < 0.5 * w.radius_m, where,
               f + "handover_dip_m", w.handover_dip_m, "must be in [0, radius/2)");
+      Require(w.handover_zone_rad > 0 && w.handover_zone_rad <= kPi / 2, where,
+              f + "handover_zone_deg", w.handover_zone_rad * 180 / kPi, "must be in (0, 90]");
     }
     const SuspensionSpec& q = w.suspension;
     Require(q.min_length_m >= 0 && q.min_length_m < q.max_length_m, where,
@@ -266,8 +268,16 @@ double RollerVehicle::EffectiveRadius(const WheelSpec& w, double angle,
   const long long iseg = static_cast<long long>(seg);
   const bool first_half = ((iseg % 2) + 2) % 2 == 0;
   *lateral_offset = first_half ? w.half_offset_m : -w.half_offset_m;
-  const double x = 4 * phi / kPi;
-  return w.radius_m - w.handover_dip_m * x * x;
+  if (w.handover_zone_rad >= kPi / 2) {
+    const double x = 4 * phi / kPi;
+    return w.radius_m - w.handover_dip_m * x * x;
+  }
+  // Spherical halves: full radius except near the hand-over, where the halves are cut short.
+  const double half_zone = 0.5 * w.handover_zone_rad;
+  const double psi = kPi / 4 - std::abs(phi);
+  if (psi >= half_zone) return w.radius_m;
+  const double u = 1 - psi / half_zone;
+  return w.radius_m - w.handover_dip_m * u * u;
 }
 
 void RollerVehicle::PreStep(double dt) noexcept {

@@ -69,10 +69,14 @@ struct WheelSpec {
   double bearing_friction_nm = 0.001;  ///< Coulomb torque on the spin
   double bearing_viscous_nm_s = 0.0;   ///< viscous torque per rad/s on the spin
   double lateral_mu_scale = 1.0;  ///< conventional: friction ellipse lateral/longitudinal ratio
-  // Orthogonal wheel only: the active half wheel switches every pi/2 of wheel angle; within a
-  // segment at phase phi in [-pi/4, pi/4) the rolling radius is radius - handover_dip*(4phi/pi)^2
-  // and the contact sits half_offset_m along the axle (+ for one half, - for the other).
+  // Orthogonal wheel only: the active half wheel switches every pi/2 of wheel angle; the rolling
+  // radius is short by up to handover_dip_m inside a zone of handover_zone_rad of wheel angle
+  // centred on each hand-over: radius - dip*(1 - psi/(zone/2))^2 at psi (angle to the nearest
+  // hand-over) < zone/2, the full radius elsewhere. zone = pi/2 (the default) dips across the
+  // whole segment: radius - dip*(4phi/pi)^2 at phase phi in [-pi/4, pi/4). The contact sits
+  // half_offset_m along the axle (+ for one half, - for the other).
   double handover_dip_m = 0.0;
+  double handover_zone_rad = 1.5707963267948966;
   double half_offset_m = 0.0;
   bool driven = false;
   MotorSpec motor;

@@ -106,6 +106,7 @@ const std::set<std::string> kWheelKeys = {"name",
                                           "bearing_viscous_nm_s",
                                           "lateral_mu_scale",
                                           "handover_dip_m",
+                                          "handover_zone_deg",
                                           "half_offset_m",
                                           "encoder",
                                           "suspension",
@@ -157,6 +158,9 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   w.bearing_viscous_nm_s = rd.GetOr(n, defaults, "bearing_viscous_nm_s", prefix, 0, 100, 0.0);
   w.lateral_mu_scale = rd.GetOr(n, defaults, "lateral_mu_scale", prefix, 0.01, 10, 1.0);
   w.handover_dip_m = rd.GetOr(n, defaults, "handover_dip_m", prefix, 0, 0.1, 0.0);
+  // 90 deg (the default) keeps the rad value bit-exact: the whole-segment dip.
+  const double zone_deg = rd.GetOr(n, defaults, "handover_zone_deg", prefix, 0.1, 90, 90.0);
+  w.handover_zone_rad = zone_deg == 90.0 ? 0.5 * std::numbers::pi : zone_deg * kDeg;
   w.half_offset_m = rd.GetOr(n, defaults, "half_offset_m", prefix, 0, 0.2, 0.0);
   const YAML::Node enc = rd.Find(n, defaults, "encoder");
   *encoder = false;

@@ -295,6 +295,39 @@ TEST(PhysicsDeterminism, SameInputsGiveBitIdenticalTrajectories) {
   for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i], b[i]) << i;
 }
 
+// ortho3's halves are spherical except within handover_zone_deg around each hand-over: the
+// rolling radius the truth reports is r away from the hand-overs and r - dip*(1 - psi/(zone/2))^2
+// at angle psi < zone/2 from the nearest one (docs/physics.md, Orthogonal wheels).
+TEST(PhysicsOrtho3, RollingRadiusDipsOnlyNearTheHandover) {
+  Rig rig("ortho3");
+  const auto& spec = rig.platform.vehicle.wheels[1];
+  ASSERT_NEAR(spec.handover_zone_rad, 20 * M_PI / 180, 1e-12);
+  const double r = spec.radius_m, dip = spec.handover_dip_m, half = 0.5 * spec.handover_zone_rad;
+  ASSERT_GT(dip, 0.0);
+  rig.world.StepFor(0.5);
+  rig.Command(0.1, 0, 0);
+  int full = 0, dipped = 0;
+  double r_min = r;
+  for (int k = 0; k < 3000; ++k) {
+    // The step rolls on the radius at the angle it starts from.
+    const double angle = rig.vehicle->wheel_truth()[1].angle_rad;
+    rig.world.Step();
+    const auto& t = rig.vehicle->wheel_truth()[1];
+    // Angle to the nearest hand-over (at odd multiples of pi/4).
+    const double a = std::remainder(angle - M_PI / 4, M_PI / 2);
+    const double psi = std::abs(a);
+    const double u = psi < half ? 1 - psi / half : 0.0;
+    EXPECT_NEAR(t.effective_radius_m, r - dip * u * u, 1e-12) << angle;
+    if (psi >= half) ++full;
+    if (psi < 0.5 * half) ++dipped;
+    r_min = std::min(r_min, t.effective_radius_m);
+  }
+  // 3 s at ~1.7 rad/s: several hand-overs, mostly on the full radius.
+  EXPECT_GT(full, 2000);
+  EXPECT_GT(dipped, 100);
+  EXPECT_LT(r_min, r - 0.8 * dip);
+}
+
 TEST(PhysicsOrtho3, HandoverDisturbsBodyPeriodically) {
   Rig rig("ortho3");
   rig.world.StepFor(1.0);
