@@ -42,15 +42,9 @@ constexpr canid_t kNothing = 0xFFFFFFFFu;
 
 class UcanBusTest : public ::testing::Test {
  protected:
-  UcanBusTest() : broker_(MakeOptions(dir_.path(), 8192)) {
+  UcanBusTest() : broker_(testing::TestBrokerOptions(dir_.path(), 8192)) {
     broker_.AddBus("ucan0");
     broker_.AddBus("ucan1");
-  }
-  static UcanBrokerOptions MakeOptions(const std::string& dir, std::size_t limit) {
-    UcanBrokerOptions o;
-    o.runtime_dir = dir;
-    o.client_queue_limit = limit;
-    return o;
   }
   UcanBusStats StatsOf(const std::string& name) const {
     for (const auto& s : broker_.Stats()) {
@@ -735,8 +729,9 @@ TEST_F(UcanBusTest, PumpedBrokerWithLocalPortRoutesOnlyWhenPumpedAndKeepsOrder) 
   ASSERT_TRUE(broker_.ReceiveLocal(port, &got));
   EXPECT_EQ(got.id, 0x700u);
   EXPECT_EQ(Receive(fw).can_id, 0x080u);
-  EXPECT_THROW(UcanBroker(MakeOptions(dir_.path(), 8)), std::system_error);  // still serving
-  EXPECT_FALSE(broker_.SendLocal(port, CanFrame{.id = 0x800}));              // invalid: 12-bit id
+  EXPECT_THROW(UcanBroker(testing::TestBrokerOptions(dir_.path(), 8)),
+               std::system_error);                               // still serving
+  EXPECT_FALSE(broker_.SendLocal(port, CanFrame{.id = 0x800}));  // invalid: 12-bit id
   ::close(fw);
 }
 

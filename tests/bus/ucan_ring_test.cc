@@ -42,14 +42,9 @@ long PeekSocketMessage(int fd) {
 
 class UcanRingTest : public ::testing::Test {
  protected:
-  explicit UcanRingTest(std::size_t limit = 8192) : broker_(Options(dir_.path(), limit)) {
+  explicit UcanRingTest(std::size_t limit = 8192)
+      : broker_(testing::TestBrokerOptions(dir_.path(), limit)) {
     broker_.AddBus("ucan0");
-  }
-  static UcanBrokerOptions Options(const std::string& dir, std::size_t limit) {
-    UcanBrokerOptions o;
-    o.runtime_dir = dir;
-    o.client_queue_limit = limit;
-    return o;
   }
   testing::TempRuntimeDir dir_;
   UcanBroker broker_;

@@ -41,6 +41,14 @@ class TempRuntimeDir {
   std::string path_;
 };
 
+/// Broker options for a test broker in `dir` with a per-client queue of `limit` frames.
+inline UcanBrokerOptions TestBrokerOptions(const std::string& dir, std::size_t limit) {
+  UcanBrokerOptions o;
+  o.runtime_dir = dir;
+  o.client_queue_limit = limit;
+  return o;
+}
+
 inline can_frame Frame(canid_t id, std::vector<std::uint8_t> data = {}) {
   can_frame f{};
   f.can_id = id;
