@@ -86,6 +86,15 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
 
+  // Installed before the start-up work (config, DBC files, the interface): a SIGTERM that comes
+  // while the firmware starts is a clean stop too, not the default action's death.
+  struct sigaction sa {};
+  sa.sa_handler = OnSignal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = 0;  // No SA_RESTART: a signal ends the wait at once.
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
   fw::FwConfig cfg;
   std::unique_ptr<fw::FwProtocol> protocol;
   std::unique_ptr<fw::FwApp> fwapp;
@@ -135,13 +144,6 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-
-  struct sigaction sa {};
-  sa.sa_handler = OnSignal;
-  sigemptyset(&sa.sa_mask);
-  sa.sa_flags = 0;  // No SA_RESTART: a signal ends the wait at once.
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
 
   const std::int64_t t0 = NowNs();
   std::vector<bus::CanFrame> out;

@@ -36,8 +36,11 @@ expect 2 "--can is required" -- "$fw" --config "$good"
 expect 2 "/nonexistent/cia406_encoder.dbc: DBC file not found" -- \
   "$fw" --can ucan0 --config "$good" --dbc-dir /nonexistent
 expect 1 "wheelhilnone0" -- "$fw" --can wheelhilnone0 --config "$good"
-# Runs until SIGTERM, then exits 0.
+# Runs until SIGTERM, then exits 0. The signal goes once the firmware says it has started (its
+# handlers are installed before that line), however slow the start-up (ASan, a loaded machine).
 expect 0 "rc=0" -- "$wheelhil" exec --bus ucan0 -- bash -c \
-  '"$0" --can ucan0 --config "$1" & p=$!; sleep 0.5; kill -TERM $p; wait $p; echo "rc=$?"' \
-  "$fw" "$good"
+  '"$0" --can ucan0 --config "$1" 2> "$2" & p=$!
+   for i in $(seq 200); do grep -q "wheelhil-fw: estimator" "$2" && break; sleep 0.1; done
+   sleep 0.2; kill -TERM $p; wait $p; echo "rc=$?"' \
+  "$fw" "$good" "$work/fw_stderr"
 exit $fail
