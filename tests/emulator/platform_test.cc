@@ -114,6 +114,11 @@ TEST(PlatformFile, BadFieldNamesFileLineAndField) {
   EXPECT_THAT([&] { LoadPlatformYaml(nan, "nan.yaml"); },
               ThrowsMessage<std::invalid_argument>(
                   AllOf(HasSubstr("nan.yaml:"), HasSubstr("chassis.mass_kg"))));
+  std::string zone = Shipped("ortho3");
+  zone.replace(zone.find("handover_zone_deg: 20"), 21, "handover_zone_deg: 120");
+  EXPECT_THAT([&] { LoadPlatformYaml(zone, "zone.yaml"); },
+              ThrowsMessage<std::invalid_argument>(AllOf(
+                  HasSubstr("zone.yaml:"), HasSubstr("handover_zone_deg"), HasSubstr("outside"))));
   EXPECT_THAT([&] { LoadPlatformYaml("name: [unclosed", "syntax.yaml"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("syntax.yaml:")));
 }
@@ -159,10 +164,10 @@ TEST(PlatformFile, OverridesMergeIntoTheFileAndWheelsByNameOrGlob) {
                        .vehicle.wheels[4]
                        .suspension.stiffness_n_m,
                    base.vehicle.wheels[4].suspension.stiffness_n_m);
-  EXPECT_THAT([&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("wheels: {caster_*: {}}")); },
-              ThrowsMessage<std::invalid_argument>(
-                  AllOf(HasSubstr("m.yaml:1:"), HasSubstr("wheels.caster_*"),
-                        HasSubstr("matches no wheel"))));
+  EXPECT_THAT(
+      [&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("wheels: {caster_*: {}}")); },
+      ThrowsMessage<std::invalid_argument>(AllOf(
+          HasSubstr("m.yaml:1:"), HasSubstr("wheels.caster_*"), HasSubstr("matches no wheel"))));
   EXPECT_THAT(
       [&] {
         LoadPlatformYaml(text, "m.yaml",
