@@ -202,19 +202,9 @@ TEST_F(UcanRingSmallQueueTest, FullRingDropsAreCountedAndTheRestReadsInOrder) {
   // The next frame carries the socket's drop count, like the kernel's SO_RXQ_OVFL.
   ASSERT_TRUE(Send(tx, Frame(0x1)));
   ASSERT_TRUE(Readable(slow, 2000));
-  iovec iov{&f, sizeof(f)};
-  alignas(cmsghdr) char control[CMSG_SPACE(sizeof(std::uint32_t))];
-  msghdr msg{};
-  msg.msg_iov = &iov;
-  msg.msg_iovlen = 1;
-  msg.msg_control = control;
-  msg.msg_controllen = sizeof(control);
-  ASSERT_EQ(::recvmsg(slow, &msg, 0), static_cast<ssize_t>(sizeof(f)));
-  cmsghdr* c = CMSG_FIRSTHDR(&msg);
-  ASSERT_NE(c, nullptr);
-  std::uint32_t reported = 0;
-  std::memcpy(&reported, CMSG_DATA(c), sizeof(reported));
-  EXPECT_EQ(reported, drops);
+  const auto reported = testing::ReceiveDropCount(slow, &f);
+  ASSERT_TRUE(reported.has_value());
+  EXPECT_EQ(*reported, drops);
   for (int s : {tx, fast, slow}) ::close(s);
 }
 

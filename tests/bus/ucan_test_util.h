@@ -14,6 +14,7 @@
 
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,26 @@ inline UcanBrokerOptions TestBrokerOptions(const std::string& dir, std::size_t l
   o.runtime_dir = dir;
   o.client_queue_limit = limit;
   return o;
+}
+
+/// Receives one classic frame into `f` with the SO_RXQ_OVFL drop count the socket reports with
+/// it; nullopt when the receive fails or no such control message comes.
+inline std::optional<std::uint32_t> ReceiveDropCount(int fd, can_frame* f) {
+  iovec iov{f, sizeof(*f)};
+  alignas(cmsghdr) char control[CMSG_SPACE(sizeof(std::uint32_t))];
+  msghdr msg{};
+  msg.msg_iov = &iov;
+  msg.msg_iovlen = 1;
+  msg.msg_control = control;
+  msg.msg_controllen = sizeof(control);
+  if (::recvmsg(fd, &msg, 0) != static_cast<ssize_t>(sizeof(*f))) return std::nullopt;
+  const cmsghdr* c = CMSG_FIRSTHDR(&msg);
+  if (c == nullptr || c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL) {
+    return std::nullopt;
+  }
+  std::uint32_t drops = 0;
+  std::memcpy(&drops, CMSG_DATA(c), sizeof(drops));
+  return drops;
 }
 
 inline can_frame Frame(canid_t id, std::vector<std::uint8_t> data = {}) {

@@ -7,6 +7,8 @@
 #include <sstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/scenario/runner.h"
 
@@ -17,6 +19,14 @@ inline std::string Slurp(const std::filesystem::path& p) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+/// A run's report.json without its `wall` object (the only wall-clock fields), for comparing
+/// two runs of one scenario and seed.
+inline nlohmann::json ReportWithoutWall(const std::filesystem::path& run_dir) {
+  nlohmann::json r = nlohmann::json::parse(Slurp(run_dir / "report.json"));
+  r.erase("wall");
+  return r;
 }
 
 /// Options for a run into `out` with this build's programs and a private userspace bus.

@@ -59,10 +59,8 @@ TEST_F(ScenarioRun, SameSeedGivesIdenticalLogAndReport) {
   const std::string log_a = Slurp(dir_ / "a" / "can.log");
   EXPECT_GT(log_a.size(), 1000u);
   EXPECT_EQ(log_a, Slurp(dir_ / "b" / "can.log"));
-  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "a" / "report.json"));
-  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "b" / "report.json"));
-  ra.erase("wall");
-  rb.erase("wall");
+  nlohmann::json ra = testing::ReportWithoutWall(dir_ / "a");
+  nlohmann::json rb = testing::ReportWithoutWall(dir_ / "b");
   EXPECT_EQ(ra, rb);
   // The firmware answered every cycle: 4 s at 4 Hz = 17 SYNCs, one pose per cycle after the first.
   EXPECT_EQ(ra["cycles"].get<int>(), 17);
@@ -225,10 +223,8 @@ TEST_F(ScenarioRun, Paper002SameSeedGivesIdenticalLogAndReport) {
     ADD_FAILURE() << "can.log differs from line " << line + 1 << ": '" << la << "' vs '" << lb
                   << "'";
   }
-  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "a" / "report.json"));
-  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "b" / "report.json"));
-  ra.erase("wall");
-  rb.erase("wall");
+  nlohmann::json ra = testing::ReportWithoutWall(dir_ / "a");
+  nlohmann::json rb = testing::ReportWithoutWall(dir_ / "b");
   EXPECT_EQ(ra.dump(1), rb.dump(1));
   EXPECT_EQ(Slurp(dir_ / "a" / "estimate.csv"), Slurp(dir_ / "b" / "estimate.csv"));
 }
@@ -260,10 +256,8 @@ TEST_F(ScenarioRun, Paper002SilentEncoderStaysDeterministic) {
   EXPECT_EQ(a.report["cycles"].get<int>(), 501);
   EXPECT_GE(a.report["metrics"]["bus"]["silenced_frames"].get<int>(), 28);
   EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
-  nlohmann::json ra = nlohmann::json::parse(Slurp(dir_ / "a" / "report.json"));
-  nlohmann::json rb = nlohmann::json::parse(Slurp(dir_ / "b" / "report.json"));
-  ra.erase("wall");
-  rb.erase("wall");
+  nlohmann::json ra = testing::ReportWithoutWall(dir_ / "a");
+  nlohmann::json rb = testing::ReportWithoutWall(dir_ / "b");
   EXPECT_EQ(ra.dump(1), rb.dump(1));
   const std::string events = Slurp(dir_ / "a" / "events.jsonl");
   EXPECT_EQ(events, Slurp(dir_ / "b" / "events.jsonl"));
