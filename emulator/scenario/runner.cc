@@ -1502,7 +1502,9 @@ json Run::BuildReport(double wall_s) {
   // Contact loss per wheel (ground truth): episodes are merged over regained contact shorter
   // than 10 ms, so a wheel chattering over a bump is one episode; the time is the steps off the
   // floor.
-  json contact{{"wheels_losing_contact", 0}, {"episodes", 0}};
+  json contact = json::object();
+  int wheels_losing_contact = 0;
+  std::size_t all_episodes = 0;
   const double step_s = static_cast<double>(step_ns_) * 1e-9;
   for (std::size_t w = 0; w < airborne_.size(); ++w) {
     const auto episodes = FlagsToIntervals(slip_t_, airborne_[w], step_s, 0.01, 0.0);
@@ -1518,12 +1520,14 @@ json Run::BuildReport(double wall_s) {
                              {"end_s", iv.end_s}});
     }
     const auto steps = std::count(airborne_[w].begin(), airborne_[w].end(), true);
-    contact["wheels_losing_contact"] = contact["wheels_losing_contact"].get<int>() + 1;
-    contact["episodes"] = contact["episodes"].get<std::size_t>() + episodes.size();
+    ++wheels_losing_contact;
+    all_episodes += episodes.size();
     contact[wheel + "_episodes"] = episodes.size();
     contact[wheel + "_time_s"] = static_cast<double>(steps) * step_s;
     contact[wheel + "_longest_s"] = longest;
   }
+  contact["wheels_losing_contact"] = wheels_losing_contact;
+  contact["episodes"] = all_episodes;
   metrics["contact"] = contact;
   std::stable_sort(events_.begin(), events_.end(), [](const json& a, const json& b) {
     return a["t_s"].get<double>() < b["t_s"].get<double>();

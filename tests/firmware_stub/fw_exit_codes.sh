@@ -36,6 +36,7 @@ expect 2 "--can is required" -- "$fw" --config "$good"
 expect 2 "/nonexistent/cia406_encoder.dbc: DBC file not found" -- \
   "$fw" --can ucan0 --config "$good" --dbc-dir /nonexistent
 expect 1 "wheelhilnone0" -- "$fw" --can wheelhilnone0 --config "$good"
+expect 2 "--clock-rate: Value 0 not in range" -- "$fw" --can ucan0 --config "$good" --clock-rate 0
 # Runs until SIGTERM, then exits 0. The signal goes once the firmware says it has started (its
 # handlers are installed before that line), however slow the start-up (ASan, a loaded machine).
 expect 0 "rc=0" -- "$wheelhil" exec --bus ucan0 -- bash -c \
