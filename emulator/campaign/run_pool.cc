@@ -216,6 +216,12 @@ std::vector<RunRecord> RunPool(
           argv.push_back("--cpu");
           argv.push_back(std::to_string(cpus[static_cast<std::size_t>(r.slot) % cpus.size()]));
         }
+        // As many runs as CPUs: a run's physics thread would only take another run's CPU.
+        if (!cpus.empty() && static_cast<std::size_t>(options.jobs) >= cpus.size() &&
+            std::find(argv.begin(), argv.end(), "--physics-thread") == argv.end()) {
+          argv.push_back("--physics-thread");
+          argv.push_back("off");
+        }
         r.pid = Spawn(argv, run_dir / "runner.log");
         if (r.pid < 0) {
           throw std::runtime_error(

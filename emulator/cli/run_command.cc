@@ -95,6 +95,10 @@ RunCommand::RunCommand(CLI::App& app) {
   run_->add_option("--cpu", cpu_,
                    "Lockstep: run emulator, bus and firmware on this CPU (default: the CPU the "
                    "run starts on; -1: no pinning)");
+  run_->add_option("--physics-thread", physics_thread_,
+                   "Lockstep: step the physics of the motion phase on a worker thread on another "
+                   "CPU (auto: when the run may use more than one CPU; results are identical)")
+      ->check(CLI::IsMember({"auto", "on", "off"}));
 }
 
 std::optional<int> RunCommand::Run() {
@@ -112,6 +116,9 @@ std::optional<int> RunCommand::Run() {
   o.can_iface = can_;
   o.realtime = realtime_;
   o.cpu = cpu_;
+  o.physics_thread = physics_thread_ == "on"    ? scenario::RunOptions::PhysicsThread::kOn
+                     : physics_thread_ == "off" ? scenario::RunOptions::PhysicsThread::kOff
+                                                : scenario::RunOptions::PhysicsThread::kAuto;
   o.progress = !quiet_ && ::isatty(2);
   o.bin_dir = ExeDir();
   o.dbc_dir = FindDbcDir();

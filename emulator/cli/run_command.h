@@ -26,6 +26,7 @@ class RunCommand {
   std::string can_;
   bool realtime_ = false;
   std::optional<int> cpu_;
+  std::string physics_thread_ = "auto";
   bool quiet_ = false;
 };
 

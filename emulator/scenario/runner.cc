@@ -44,6 +44,7 @@
 #include "emulator/physics/physics_world.h"
 #include "emulator/scenario/artefacts.h"
 #include "emulator/scenario/metrics.h"
+#include "emulator/scenario/step_pipeline.h"
 #include "emulator/sensors/encoder_model.h"
 
 namespace wheelhil::emulator::scenario {
@@ -190,8 +191,15 @@ class Run {
   bool EnqueueOnBus(int bus_node, const bus::CanFrame& f, std::int64_t ready_ns);
   // Builds the fault injectors at the motion start (windows are relative to it).
   void ArmFaults();
-  // Physical faults (wheel friction, torque disturbance) for the step starting at tm_s.
-  void ApplyPhysicalFaults(double tm_s);
+  // Physical faults (wheel friction, torque disturbance) for the step starting at tm_s; their
+  // start/end events go to `events`.
+  void ApplyPhysicalFaults(double tm_s, std::vector<json>& events);
+  // The physics of the step starting at t_ns: the command, the physical faults (motion only)
+  // and the world step. Touches the world, the vehicle and the fault scratch only, so during
+  // the motion phase it may run on the pipeline's worker.
+  void PhysicsStep(std::int64_t t_ns, bool motion, std::vector<json>& events);
+  // The pipeline's worker for the motion phase, or none (RunOptions::physics_thread).
+  void StartPhysicsPipeline(std::int64_t steps);
   void AddBumps(Terrain& terrain);
   void AppendFaultEvents();
   // Reads frames from the firmware until `done` or the wall-clock timeout; false on timeout.
@@ -244,6 +252,18 @@ class Run {
 
   std::unique_ptr<physics::PhysicsWorld> world_;
   physics::RollerVehicle* vehicle_ = nullptr;
+  // What the run reads from the vehicle after a motion step when a worker steps the physics.
+  struct MotionStepState {
+    physics::BodyTruth body;
+    std::vector<physics::WheelTruth> wheels;
+    std::vector<json> events;  // physical fault events of the step
+  };
+  MotionStepState start_state_;  // the vehicle at the motion start, when a worker steps it
+  std::unique_ptr<StepPipeline<MotionStepState>> pipeline_;
+  bool physics_thread_used_ = false;
+  // The vehicle's state after the latest step: the vehicle's own, or a pipeline slot.
+  const physics::BodyTruth* body_ = nullptr;
+  const std::vector<physics::WheelTruth>* wheels_ = nullptr;
   std::int64_t step_ns_ = 1'000'000;
   std::int64_t t_ns_ = 0;
 
@@ -374,6 +394,8 @@ void Run::BuildWorld() {
   }
   AddBumps(terrain);
   vehicle_ = &world_->AddVehicle(s_.platform.vehicle, 0.0, 0.0, 0.0);
+  body_ = &vehicle_->body_truth();
+  wheels_ = &vehicle_->wheel_truth();
   drive_wheels_ = s_.platform.drive_wheels;
 }
 
@@ -714,7 +736,7 @@ void Run::ArmFaults() {
   }
 }
 
-void Run::ApplyPhysicalFaults(double tm_s) {
+void Run::ApplyPhysicalFaults(double tm_s, std::vector<json>& events) {
   if (physical_on_.size() != s_.faults.size()) {
     physical_on_.assign(s_.faults.size(), 0);
     has_physical_faults_ = std::any_of(s_.faults.begin(), s_.faults.end(), [](const FaultSpec& f) {
@@ -767,7 +789,7 @@ void Run::ApplyPhysicalFaults(double tm_s) {
     } else {
       ev["torque_nm"] = f.torque_nm;
     }
-    events_.push_back(ev);
+    events.push_back(ev);
   }
   for (std::size_t w = 0; w < nw; ++w) {
     if (!touched[w]) continue;
@@ -877,7 +899,7 @@ void Run::AdvanceBus(std::int64_t t_ns) {
 
 void Run::RecordTruth(bool force) {
   if (!force && t_ns_ % truth_every_ns_ != 0) return;
-  const auto& b = vehicle_->body_truth();
+  const auto& b = *body_;
   const double t = static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_;
   const double c = std::cos(-yaw0_), sn = std::sin(-yaw0_);
   const Eigen::Vector3d d = b.p_WB - p0_;
@@ -892,7 +914,7 @@ void Run::RecordTruth(bool force) {
   r.vx_m_s = v_B.x();
   r.vy_m_s = v_B.y();
   r.omega_rad_s = w_B.z();
-  const auto& wt = vehicle_->wheel_truth();
+  const auto& wt = *wheels_;
   for (std::size_t i = 0; i < drive_wheels_.size(); ++i) {
     const bool slipping = s_.slip_threshold_m_s
                               ? wt[drive_wheels_[i]].slip_speed_m_s > *s_.slip_threshold_m_s
@@ -905,8 +927,8 @@ void Run::RecordTruth(bool force) {
   truth_vel_.push_back({t, r.vx_m_s, r.vy_m_s, r.omega_rad_s});
 }
 
-void Run::Step(bool motion) {
-  const double t_s = static_cast<double>(t_ns_) * 1e-9;
+void Run::PhysicsStep(std::int64_t t_ns, bool motion, std::vector<json>& events) {
+  const double t_s = static_cast<double>(t_ns) * 1e-9;
   // Command for the step.
   if (motion) {
     const double tm = t_s - t_motion0_s_;
@@ -925,8 +947,61 @@ void Run::Step(bool motion) {
   } else {
     platforms::CommandTwist(*vehicle_, s_.platform, platforms::BodyTwist{});
   }
-  if (motion) ApplyPhysicalFaults(static_cast<double>(t_ns_ - motion0_ns_) * 1e-9);
+  if (motion) ApplyPhysicalFaults(static_cast<double>(t_ns - motion0_ns_) * 1e-9, events);
   world_->Step();
+}
+
+void Run::StartPhysicsPipeline(std::int64_t steps) {
+  using PT = RunOptions::PhysicsThread;
+  if (o_.physics_thread == PT::kOff || steps <= 0) return;
+  // The worker's CPUs: those the run may use except the run's own (ConfineToOneCpu).
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  if (cpu_ >= 0) {
+    allowed = saved_cpus_;
+    CPU_CLR(cpu_, &allowed);
+  } else if (::sched_getaffinity(0, sizeof(allowed), &allowed) != 0) {
+    CPU_ZERO(&allowed);
+  }
+  const int others = CPU_COUNT(&allowed) - (cpu_ >= 0 ? 0 : 1);
+  if (o_.physics_thread == PT::kAuto && others < 1) return;
+  if (CPU_COUNT(&allowed) == 0) CPU_SET(cpu_ >= 0 ? cpu_ : 0, &allowed);  // kOn, one CPU
+  const std::int64_t t0_ns = t_ns_;
+  // From here the worker owns the vehicle: what the run reads before the first motion step
+  // (the truth row of the motion start) is a copy.
+  start_state_.body = vehicle_->body_truth();
+  start_state_.wheels = vehicle_->wheel_truth();
+  body_ = &start_state_.body;
+  wheels_ = &start_state_.wheels;
+  pipeline_ = std::make_unique<StepPipeline<MotionStepState>>(
+      256, steps,
+      [this, t0_ns](std::int64_t step, MotionStepState& out) {
+        out.events.clear();
+        PhysicsStep(t0_ns + step * step_ns_, true, out.events);
+        out.body = vehicle_->body_truth();
+        out.wheels = vehicle_->wheel_truth();
+      },
+      cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
+  physics_thread_used_ = true;
+}
+
+void Run::Step(bool motion) {
+  if (motion && pipeline_) {
+    const MotionStepState* st = nullptr;
+    try {
+      st = &pipeline_->Next();
+    } catch (const std::exception& e) {
+      if (failure_.empty()) failure_ = e.what();
+      return;
+    }
+    for (const json& e : st->events) events_.push_back(e);
+    body_ = &st->body;
+    wheels_ = &st->wheels;
+  } else {
+    PhysicsStep(t_ns_, motion, events_);
+    body_ = &vehicle_->body_truth();
+    wheels_ = &vehicle_->wheel_truth();
+  }
   t_ns_ += step_ns_;
   const double t_now = static_cast<double>(t_ns_) * 1e-9;
 
@@ -961,7 +1036,7 @@ void Run::Step(bool motion) {
   }
 
   // Sensors and devices.
-  const auto& wt = vehicle_->wheel_truth();
+  const auto& wt = *wheels_;
   for (std::size_t i = 0; i < encoders_.size(); ++i) {
     auto& e = encoders_[i];
     std::optional<std::uint32_t> counts = e.model->Sample(wt[e.wheel].angle_rad);
@@ -992,7 +1067,7 @@ void Run::Step(bool motion) {
   if (imu_) {
     while (imu_->next_sample_ns() <= t_ns_) {
       const std::int64_t ts = imu_->next_sample_ns();
-      const auto& b = vehicle_->body_truth();
+      const auto& b = *body_;
       const Eigen::Vector3d w_B = b.q_WB.conjugate() * b.omega_WB_W;
       const Eigen::Vector3d a_B = b.q_WB.conjugate() * b.a_WB_W;
       std::optional<double> rate = imu_->SampleYawRate(w_B);
@@ -1008,7 +1083,7 @@ void Run::Step(bool motion) {
     // The four accelerometers at each sample instant, from the body kinematics of this step.
     while (accel4_->next_sample_ns() <= t_ns_) {
       const std::int64_t ts = accel4_->next_sample_ns();
-      const auto& b = vehicle_->body_truth();
+      const auto& b = *body_;
       BodyKinematics k;
       k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
       k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
@@ -1035,7 +1110,7 @@ void Run::Step(bool motion) {
   for (auto& [node, filter] : frame_filters_) SubmitDeviceFrames(node, {}, true);
   for (auto& [node, dev] : node_faults_) dev->AdvanceTo(t_ns_);
   if (motion) {
-    const auto& wt2 = vehicle_->wheel_truth();
+    const auto& wt2 = *wheels_;
     bool slip = false;
     for (std::size_t w : drive_wheels_) {
       slip = slip || (s_.slip_threshold_m_s ? wt2[w].slip_speed_m_s > *s_.slip_threshold_m_s
@@ -1360,6 +1435,7 @@ RunResult Run::Execute() {
                       s_.timing.timeout_s, static_cast<double>(t_ns_) * 1e-9 - t_motion0_s_);
     }
   };
+  if (lockstep) StartPhysicsPipeline(cycles * steps_per_cycle);
   for (std::int64_t k = 0; failure_.empty() && k <= cycles; ++k) {
     // SYNC k at the start of the cycle.
     RecordTruth(true);
@@ -1430,6 +1506,7 @@ RunResult Run::Execute() {
       }
     }
   }
+  pipeline_.reset();  // stops the worker (a failed run leaves it steps ahead)
   Progress(true);
   for (const auto& w : bus_->Drain()) {
     ++completed_;
@@ -1603,7 +1680,8 @@ json Run::BuildReport(double wall_s) {
   r["metrics"] = metrics;
   r["wall"] = json{{"wall_time_s", wall_s},
                    {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
-                   {"cpu", cpu_}};
+                   {"cpu", cpu_},
+                   {"physics_thread", physics_thread_used_}};
   return r;
 }
 

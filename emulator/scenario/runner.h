@@ -45,6 +45,11 @@ struct RunOptions {
   /// the run starts on; -1: no confinement. Also puts the run at SCHED_BATCH, so that a woken
   /// side does not preempt the one still writing its frames.
   std::optional<int> cpu;
+  /// Lockstep only: step the physics of the motion phase on a worker thread on another allowed
+  /// CPU, ahead of the run's thread (results are the same bits either way). kAuto: when the
+  /// run may use more than one CPU.
+  enum class PhysicsThread { kAuto, kOn, kOff };
+  PhysicsThread physics_thread = PhysicsThread::kAuto;
   /// Environment a child needs on a private userspace bus in `runtime_dir` (LD_PRELOAD ...).
   std::function<std::vector<std::pair<std::string, std::string>>(const std::string&)>
       ucan_child_env;

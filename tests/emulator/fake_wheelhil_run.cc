@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
       out = argv[i + 1];
     else if (k == "--seed")
       seed = std::strtoull(argv[i + 1], nullptr, 10);
-    else if (k == "--can" || k == "--cpu")
+    else if (k == "--can" || k == "--cpu" || k == "--physics-thread")
       continue;
     else {
       std::fprintf(stderr, "fake_wheelhil_run: unknown option %s\n", k.c_str());

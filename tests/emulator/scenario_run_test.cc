@@ -314,6 +314,31 @@ TEST_F(ScenarioRun, DoorThresholdReportsContactLossWhereTheWheelsCrossIt) {
   EXPECT_EQ(episodes, c["episodes"].get<int>());
 }
 
+// The physics of the motion phase on a worker thread (RunOptions::physics_thread, `wheelhil run
+// --physics-thread`) changes no bit of what the run leaves: faults_demo has physical faults
+// (their events come from the worker's steps) next to bus and device faults.
+TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {
+  const Scenario s =
+      LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml");
+  RunOptions on = Options(dir_ / "on");
+  on.physics_thread = RunOptions::PhysicsThread::kOn;
+  RunOptions off = Options(dir_ / "off");
+  off.physics_thread = RunOptions::PhysicsThread::kOff;
+  const RunResult a = RunScenario(s, on);
+  const RunResult b = RunScenario(s, off);
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  EXPECT_TRUE(a.report["wall"]["physics_thread"].get<bool>());
+  EXPECT_FALSE(b.report["wall"]["physics_thread"].get<bool>());
+  for (const char* f : {"can.log", "truth.csv", "estimate.csv", "events.jsonl"}) {
+    const std::string text = Slurp(dir_ / "on" / f);
+    EXPECT_GT(text.size(), 100u) << f;
+    EXPECT_EQ(text, Slurp(dir_ / "off" / f)) << f;
+  }
+  EXPECT_THAT(Slurp(dir_ / "on" / "events.jsonl"), HasSubstr("wheel_friction"));
+  EXPECT_EQ(testing::ReportWithoutWall(dir_ / "on"), testing::ReportWithoutWall(dir_ / "off"));
+}
+
 TEST(ScenarioAccel4, BadBiasListNamesFileLineAndField) {
   const std::string text = R"(name: t
 platform: )" + std::string(WHEELHIL_SOURCE_DIR) +
