@@ -174,6 +174,8 @@ NormalityResult NormalityTest(const std::vector<double>& x, double z) {
   b2 /= n;
   b3 /= n;
   b4 /= n;
+  r.mean = mean;
+  r.sigma = std::sqrt(b2);
   if (!(b2 > 0)) return r;
   r.g1 = b3 / std::pow(b2, 1.5);
   r.g2 = b4 / (b2 * b2) - 3.0;

@@ -376,8 +376,20 @@ void Run::BuildWorld() {
     std::uniform_real_distribution<double> ux(rp.x_min_m, rp.x_max_m);
     std::uniform_real_distribution<double> ul(rp.length_min_m, rp.length_max_m);
     std::uniform_int_distribution<std::size_t> ut(0, rp.track_y_m.size() - 1);
+    const bool stratified = rp.placement == RandomPatchesSpec::Placement::kStratified;
+    const double section = (rp.x_max_m - rp.x_min_m) / rp.count;
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
     for (int i = 0; i < rp.count; ++i) {
-      const double x = ux(rng), len = ul(rng), y = rp.track_y_m[ut(rng)];
+      double x = 0;
+      double len = 0;
+      if (stratified) {
+        len = ul(rng);
+        x = rp.x_min_m + i * section + u01(rng) * (section - len);
+      } else {
+        x = ux(rng);
+        len = ul(rng);
+      }
+      const double y = rp.track_y_m[ut(rng)];
       const double hw = rp.width_m / 2;
       FrictionPatch p{fmt::format("random{}", i),
                       {{x, y - hw}, {x + len, y - hw}, {x + len, y + hw}, {x, y + hw}},
@@ -1626,9 +1638,14 @@ json Run::BuildReport(double wall_s) {
     metrics["slip"] = j;
     if (!residual_.empty()) {
       const NormalityResult n = NormalityTest(residual_);
-      metrics["residual"] =
-          json{{"samples", n.n}, {"skewness_g1", n.g1}, {"excess_kurtosis_g2", n.g2},
-               {"u1", n.u1},     {"u2", n.u2},          {"normality_accepted", n.accepted}};
+      metrics["residual"] = json{{"samples", n.n},
+                                 {"mean_rad", n.mean},
+                                 {"sigma_rad", n.sigma},
+                                 {"skewness_g1", n.g1},
+                                 {"excess_kurtosis_g2", n.g2},
+                                 {"u1", n.u1},
+                                 {"u2", n.u2},
+                                 {"normality_accepted", n.accepted}};
     }
   } else if (!intervals.empty()) {
     metrics["slip"] = json{{"truth_intervals", intervals.size()}};

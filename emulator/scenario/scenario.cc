@@ -158,7 +158,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     const std::string f = "terrain.random_patches";
     r.CheckKeys(rp, f,
                 {"count", "x_min_m", "x_max_m", "length_min_m", "length_max_m", "width_m",
-                 "track_y_m", "mu_peak", "mu_slide"});
+                 "track_y_m", "mu_peak", "mu_slide", "placement"});
     auto& s = t.random_patches;
     s.count = static_cast<int>(r.Number(rp, "count", f, 0, 1000, std::nullopt));
     s.x_min_m = r.Number(rp, "x_min_m", f, -1e4, 1e4, std::nullopt);
@@ -170,6 +170,20 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     if (!ty.IsSequence() || ty.size() == 0) r.Fail(ty, f + ".track_y_m", "must be a list of y");
     for (const auto& y : ty) s.track_y_m.push_back(y.as<double>());
     s.friction = ReadFriction(r, rp, f, Friction{0.05, 0.03});
+    const std::string placement = r.String(rp, "placement", f, "uniform");
+    if (placement == "stratified") {
+      s.placement = RandomPatchesSpec::Placement::kStratified;
+      const double section = s.count > 0 ? (s.x_max_m - s.x_min_m) / s.count : 0.0;
+      if (s.count > 0 && s.length_max_m > section) {
+        r.Fail(rp["length_max_m"], f + ".length_max_m",
+               fmt::format("({}) must be <= the section length (x_max_m - x_min_m) / count = {} "
+                           "with placement: stratified",
+                           s.length_max_m, section));
+      }
+    } else if (placement != "uniform") {
+      r.Fail(rp["placement"], f + ".placement",
+             fmt::format("must be uniform or stratified, not '{}'", placement));
+    }
   }
   return t;
 }

@@ -60,6 +60,10 @@ struct RandomPatchesSpec {
   double width_m = 0.1;           ///< Across, centred on a wheel track.
   std::vector<double> track_y_m;  ///< Wheel track lines (world y) to choose from.
   Friction friction{0.05, 0.03};
+  /// Uniform: each start x uniform in [x_min, x_max] (patches may overlap). Stratified: the
+  /// range cut into `count` equal sections, one patch placed uniformly inside each so that it
+  /// ends within its section (no overlaps; needs length_max <= the section length).
+  enum class Placement { kUniform, kStratified } placement = Placement::kUniform;
 };
 
 struct TerrainSpec {

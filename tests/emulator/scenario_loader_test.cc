@@ -117,9 +117,33 @@ TEST(ScenarioLoader, ShippedPaper000Loads) {
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");
   EXPECT_EQ(s.name, "paper000_slip");
   EXPECT_DOUBLE_EQ(s.timing.sync_period_s, 0.25);
-  EXPECT_EQ(s.terrain.random_patches.count, 16);
+  EXPECT_EQ(s.terrain.random_patches.count, 2);
+  EXPECT_EQ(s.terrain.random_patches.placement, RandomPatchesSpec::Placement::kStratified);
   ASSERT_TRUE(s.slip_threshold_m_s.has_value());
   EXPECT_FALSE(s.firmware.overrides_yaml.empty());
+}
+
+std::string RandomPatches(const std::string& placement, double length_max_m) {
+  return "terrain:\n"
+         "  random_patches: {count: 4, x_min_m: 0, x_max_m: 8, length_min_m: 0.5, length_max_m: " +
+         std::to_string(length_max_m) + ", track_y_m: [0], placement: " + placement + "}\n";
+}
+
+TEST(ScenarioLoader, RandomPatchPlacementIsReadAndChecked) {
+  EXPECT_EQ(ParseScenario(Minimal(), kFile).terrain.random_patches.placement,
+            RandomPatchesSpec::Placement::kUniform);
+  EXPECT_EQ(ParseScenario(Minimal(RandomPatches("stratified", 2.0)), kFile)
+                .terrain.random_patches.placement,
+            RandomPatchesSpec::Placement::kStratified);
+  // Four sections of 2 m cannot hold a 2.5 m patch each.
+  EXPECT_THAT([] { (void)ParseScenario(Minimal(RandomPatches("stratified", 2.5)), kFile); },
+              ThrowsMessage<std::invalid_argument>(AllOf(HasSubstr("inline.yaml:11:"),
+                                                         HasSubstr("random_patches.length_max_m"),
+                                                         HasSubstr("section length"))));
+  EXPECT_THAT(
+      [] { (void)ParseScenario(Minimal(RandomPatches("evenly", 1.0)), kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr(
+          "terrain.random_patches.placement: must be uniform or stratified, not 'evenly'")));
 }
 
 TEST(ScenarioLoader, PlatformOverridesAreMergedIntoThePlatformFile) {

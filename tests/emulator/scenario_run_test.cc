@@ -117,19 +117,30 @@ TEST_F(ScenarioRun, AnotherSeedChangesTheFloor) {
   const RunResult r = RunScenario(s, o);
   ASSERT_EQ(r.failure, "");
   EXPECT_EQ(r.report["seed"].get<int>(), 2);
-  EXPECT_NE(Slurp(dir_ / "s2" / "events.jsonl"), "");
+  // Stratified placement: the two 1 m wet zones lie one in each 4.5 m half of [0.5, 9.5] m.
+  std::istringstream events(Slurp(dir_ / "s2" / "events.jsonl"));
+  std::vector<double> x;
+  for (std::string line; std::getline(events, line);) {
+    const auto e = nlohmann::json::parse(line);
+    if (e["event"] == "patch") {
+      x.push_back(e["x_m"].get<double>());
+      EXPECT_DOUBLE_EQ(e["length_m"].get<double>(), 1.0);
+    }
+  }
+  ASSERT_EQ(x.size(), 2u);
+  EXPECT_GE(x[0], 0.5);
+  EXPECT_LE(x[0] + 1.0, 5.0);
+  EXPECT_GE(x[1], 5.0);
+  EXPECT_LE(x[1] + 1.0, 9.5);
 }
 
-// Paper 000 Table 2 in full (10 m at 0.25 m/s, 4 Hz, oily spots), ten runs as in the paper, on
-// seeds 1-10: in every run a drive wheel slips and the slip correction beats plain odometry by at
-// least the band's lower end (5x: the scenario's expectations), and the typical (median) run is in
-// the paper's 5-13x band. Not every run is in the band (seeds 3, 4, 6 are above it): the corrected
-// error is mostly the gyro's noise over the corrected intervals, zero-mean, so it spreads over
-// more than the band's width from run to run. docs/scenarios.md (Status) has the table and why.
-TEST_F(ScenarioRun, Paper000SlipCorrectionOverTenSeeds) {
+// Paper 000 Table 2 in full (10 m at 0.25 m/s, 4 Hz, two wet zones), ten runs as in the paper,
+// on seeds 1-10: in every run a drive wheel slips, the slip correction beats plain odometry, and
+// the ratio uncorrected / corrected end-point error is inside the paper's 5-13x band (Table 2:
+// 5.2-12.6). docs/scenarios.md (Status) has the table, seeds 11-40 and why the ratio holds.
+TEST_F(ScenarioRun, Paper000SlipCorrectionOverTenSeedsIsInThePapersBand) {
   const Scenario s =
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");
-  std::vector<double> ratios;
   for (int seed = 1; seed <= 10; ++seed) {
     RunOptions o = Options(dir_ / ("seed" + std::to_string(seed)));
     o.seed = static_cast<std::uint64_t>(seed);
@@ -142,14 +153,9 @@ TEST_F(ScenarioRun, Paper000SlipCorrectionOverTenSeeds) {
     const double corrected = m["pose"]["final_position_error_m"].get<double>();
     EXPECT_LT(corrected, raw) << "seed " << seed;
     EXPECT_GE(raw / corrected, 5.0) << "seed " << seed;
-    ratios.push_back(raw / corrected);
+    EXPECT_LE(raw / corrected, 13.0) << "seed " << seed;
     fs::remove_all(dir_ / ("seed" + std::to_string(seed)));
   }
-  ASSERT_EQ(ratios.size(), 10u);
-  std::sort(ratios.begin(), ratios.end());
-  const double median = 0.5 * (ratios[4] + ratios[5]);
-  EXPECT_GE(median, 5.0);
-  EXPECT_LE(median, 13.0);
 }
 
 TEST_F(ScenarioRun, SilentFirmwareFailsWithTheReason) {
