@@ -435,6 +435,11 @@ void Run::BuildDevices() {
     ep.missed_count_prob = s_.sensors.encoder_missed_count_prob;
     ep.glitch_prob = s_.sensors.encoder_glitch_prob;
     ep.seed = seed_ * 1000003ull + (++k);
+    // A disc is mounted at no particular angle: an edge right at the start angle would make a
+    // wheel that only settles there flip a count back and forth. Drawn apart from ep.seed's
+    // stream so that the encoder's own imperfections keep their draws.
+    std::mt19937_64 phase_rng(ep.seed ^ 0xD15C0FFull);
+    ep.disc_phase_counts = std::uniform_real_distribution<double>(0.0, 1.0)(phase_rng);
     enc.model = std::make_unique<EncoderModel>(ep);
     enc.model->Reset(vehicle_->wheel_truth()[enc.wheel].angle_rad, 0);
     Cia406NodeConfig nc;

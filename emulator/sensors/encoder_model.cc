@@ -30,6 +30,10 @@ EncoderModel::EncoderModel(const EncoderParams& params) : params_(params), rng_(
   }
   RequireProbability(params.missed_count_prob, "missed_count_prob");
   RequireProbability(params.glitch_prob, "glitch_prob");
+  if (!(params.disc_phase_counts >= 0.0 && params.disc_phase_counts < 1.0)) {
+    throw std::invalid_argument(
+        fmt::format("encoder.disc_phase_counts ({}) must be in [0, 1)", params.disc_phase_counts));
+  }
   counts_per_rev_ = params.lines_per_rev * (params.quadrature_x4 ? 4 : 1);
   counter_mask_ = (std::uint64_t{1} << params.counter_bits) - 1;
   Reset(0.0, 0);
@@ -37,7 +41,8 @@ EncoderModel::EncoderModel(const EncoderParams& params) : params_(params), rng_(
 
 std::int64_t EncoderModel::IdealEdgeIndex(double wheel_angle_rad) const {
   const double counts =
-      params_.direction * wheel_angle_rad * counts_per_rev_ / (2.0 * std::numbers::pi);
+      params_.direction * wheel_angle_rad * counts_per_rev_ / (2.0 * std::numbers::pi) +
+      params_.disc_phase_counts;
   return static_cast<std::int64_t>(std::floor(counts));
 }
 

@@ -26,7 +26,11 @@ struct EncoderParams {
   int direction = 1;               ///< +1 or -1.
   double missed_count_prob = 0.0;  ///< Probability that one edge is not counted, [0, 1].
   double glitch_prob = 0.0;        ///< Probability per sample of a spurious +-1 count, [0, 1].
-  std::uint64_t seed = 0;          ///< RNG seed.
+  /// Where the disc's edges sit at wheel angle 0, in counts, [0, 1): the ideal count is
+  /// floor(direction * angle * cpr / 2pi + disc_phase_counts). 0 puts an edge exactly at angle 0,
+  /// so a wheel that only trembles there flips between two counts.
+  double disc_phase_counts = 0.0;
+  std::uint64_t seed = 0;  ///< RNG seed.
 };
 
 class EncoderModel {

@@ -96,6 +96,23 @@ TEST(EncoderModel, SameSeedSameCounts) {
   EXPECT_TRUE(differs);
 }
 
+// With the disc's edge at angle 0 a wheel trembling by 1e-9 rad around its start flips between
+// counts -1 and 0; with the edge half a count away it reads 0 throughout, and the edges sit at
+// (k - phase) counts.
+TEST(EncoderModel, DiscPhaseMovesTheEdgesOffTheStartAngle) {
+  const double tremble = 1e-9;
+  EncoderModel on_edge({.lines_per_rev = 100});
+  EXPECT_EQ(on_edge.Sample(-tremble), 0xFFFFFFFFu);
+  EXPECT_EQ(on_edge.Sample(tremble), 0u);
+  EncoderModel mid({.lines_per_rev = 100, .disc_phase_counts = 0.5});
+  EXPECT_EQ(mid.Sample(-tremble), 0u);
+  EXPECT_EQ(mid.Sample(tremble), 0u);
+  const double count_rad = 2.0 * kPi / 400;
+  EXPECT_EQ(mid.Sample(0.49 * count_rad), 0u);
+  EXPECT_EQ(mid.Sample(0.51 * count_rad), 1u);
+  EXPECT_EQ(mid.Sample(-0.51 * count_rad), 0xFFFFFFFFu);
+}
+
 TEST(EncoderModel, RejectsBadParameters) {
   EXPECT_THAT([] { EncoderModel({.lines_per_rev = 0}); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("lines_per_rev")));
@@ -105,6 +122,9 @@ TEST(EncoderModel, RejectsBadParameters) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("direction")));
   EXPECT_THAT([] { EncoderModel({.missed_count_prob = 1.5}); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("missed_count_prob")));
+  EXPECT_THAT(
+      [] { EncoderModel({.disc_phase_counts = 1.0}); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("disc_phase_counts (1) must be in [0, 1)")));
 }
 
 TEST(GyroModel, IdealGyroReadsTrueRateOnItsAxis) {
