@@ -81,39 +81,75 @@ constexpr ByteTables MakeByteTables() {
 
 constexpr ByteTables kByteTables = MakeByteTables();
 
-unsigned ExactBits(const bus::CanFrame& f) {
-  StuffCounter b;
-  b.Push(0, 1);  // SOF, dominant
-  if (f.extended) {
-    b.Push(f.id >> 18, 11);  // base id
-    b.Push(1, 1);            // SRR, recessive
-    b.Push(1, 1);            // IDE, recessive
-    b.Push(f.id & 0x3FFFF, 18);
-    b.Push(f.rtr ? 1 : 0, 1);
-    b.Push(0, 2);  // r1, r0
-  } else {
-    b.Push(f.id, 11);
-    b.Push(f.rtr ? 1 : 0, 1);
-    b.Push(0, 2);  // IDE (dominant), r0
+// The stream SOF .. CRC through the tables: after the SOF bit the run state is always one of
+// the 8 table states, so every whole byte (at any bit position) is one lookup for the stuff
+// bits and one for the CRC; only the bits of a field beyond its whole bytes go bit by bit.
+struct TableStuffCounter {
+  std::uint16_t crc = 0;
+  unsigned bits = 0;
+  unsigned stuffed = 0;
+  unsigned state = 0;  // prev << 2 | (run - 1), valid after the SOF bit
+  void Bit(unsigned b, bool crc_on) {
+    if (crc_on) {
+      const bool crc_next = (b != 0) != ((crc & 0x4000u) != 0);
+      crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
+      if (crc_next) crc ^= 0x4599;
+    }
+    ++bits;
+    const unsigned prev = state >> 2;
+    unsigned run = (state & 3u) + 1;
+    if (b == prev) {
+      ++run;
+    } else {
+      run = 1;
+    }
+    if (run == 5) {
+      ++stuffed;
+      state = (b ^ 1u) << 2;  // the stuff bit starts a new run of one
+    } else {
+      state = b << 2 | (run - 1);
+    }
   }
-  b.Push(f.len, 4);  // DLC
-  if (!f.rtr && f.len > 0) {
-    unsigned state = b.prev << 2 | static_cast<unsigned>(b.run - 1);
-    std::uint16_t crc = b.crc;
-    for (std::size_t i = 0; i < f.len; ++i) {
-      const std::uint8_t d = f.data[i];
+  void Byte(unsigned d, bool crc_on) {
+    if (crc_on) {
       crc = static_cast<std::uint16_t>(((crc << 8) & 0x7FFF) ^
                                        kByteTables.crc_of[((crc >> 7) ^ d) & 0xFF]);
-      b.stuffed += kByteTables.stuffed[state][d];
-      state = kByteTables.next[state][d];
     }
-    b.crc = crc;
-    b.bits += 8u * f.len;
-    b.prev = state >> 2;
-    b.run = static_cast<int>(state & 3u) + 1;
+    bits += 8;
+    stuffed += kByteTables.stuffed[state][d];
+    state = kByteTables.next[state][d];
   }
-  b.crc_on = false;
-  b.Push(b.crc, 15);
+  // `count` bits of `value`, MSB first: the leading count % 8 bit by bit, then whole bytes.
+  void Push(std::uint64_t value, int count, bool crc_on) {
+    int i = count;
+    for (; i % 8 != 0; --i) Bit(static_cast<unsigned>(value >> (i - 1)) & 1u, crc_on);
+    for (; i > 0; i -= 8) Byte(static_cast<unsigned>(value >> (i - 8)) & 0xFFu, crc_on);
+  }
+};
+
+unsigned ExactBits(const bus::CanFrame& f) {
+  TableStuffCounter b;
+  // SOF (dominant): the first bit starts the first run, so the state is prev 0, run 1, and
+  // the CRC register (init 0) stays 0.
+  b.bits = 1;
+  b.state = 0;
+  const std::uint64_t rtr = f.rtr ? 1 : 0;
+  if (f.extended) {
+    // base id (11), SRR and IDE (recessive), extension (18), RTR, r1 r0 (dominant), DLC (4)
+    const std::uint64_t h = static_cast<std::uint64_t>(f.id >> 18 & 0x7FFu) << 27 | 0x3u << 25 |
+                            static_cast<std::uint64_t>(f.id & 0x3FFFFu) << 7 | rtr << 6 |
+                            (f.len & 0xFu);
+    b.Push(h, 38, true);
+  } else {
+    // id (11), RTR, IDE and r0 (dominant), DLC (4)
+    const std::uint64_t h =
+        static_cast<std::uint64_t>(f.id & 0x7FFu) << 7 | rtr << 6 | (f.len & 0xFu);
+    b.Push(h, 18, true);
+  }
+  if (!f.rtr) {
+    for (std::size_t i = 0; i < f.len; ++i) b.Byte(f.data[i], true);
+  }
+  b.Push(b.crc, 15, false);
   return b.bits + b.stuffed + kTrailerBits;
 }
 
@@ -255,7 +291,13 @@ void CanBusModel::Schedule(std::int64_t limit_ns) {
 
 std::vector<WireFrame> CanBusModel::AdvanceTo(std::int64_t t_ns) {
   std::vector<WireFrame> done;
-  if (t_ns < now_ns_) return done;
+  AdvanceTo(t_ns, done);
+  return done;
+}
+
+void CanBusModel::AdvanceTo(std::int64_t t_ns, std::vector<WireFrame>& done) {
+  done.clear();
+  if (t_ns < now_ns_) return;
   Schedule(t_ns);
   now_ns_ = t_ns;
   while (!in_flight_.empty() && in_flight_.front().complete_ns <= t_ns) {
@@ -263,7 +305,17 @@ std::vector<WireFrame> CanBusModel::AdvanceTo(std::int64_t t_ns) {
     in_flight_.pop_front();
     ++frames_sent_;
   }
-  return done;
+}
+
+std::int64_t CanBusModel::NextEventNs() const {
+  // Schedule(t) starts nothing while max(bus free, earliest ready) >= t.
+  std::int64_t ready = std::numeric_limits<std::int64_t>::max();
+  for (const Node& n : nodes_) ready = std::min(ready, EarliestReady(n));
+  const std::int64_t sof =
+      ready == std::numeric_limits<std::int64_t>::max() ? ready : std::max(bus_free_ns_, ready);
+  const std::int64_t complete = in_flight_.empty() ? std::numeric_limits<std::int64_t>::max()
+                                                   : in_flight_.front().complete_ns;
+  return std::min(sof, complete);
 }
 
 std::vector<WireFrame> CanBusModel::Drain() {
