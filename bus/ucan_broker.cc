@@ -993,15 +993,19 @@ struct UcanBroker::Impl {
       more_pending = !pending.empty();
     }
     events.resize(std::max<std::size_t>(events.size(), kBatch));
-    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()),
-                         more_pending ? 0 : timeout_ms);
-    if (n < 0 && errno != EINTR) return false;
+    // The wait only waits: its set is taken again after T0, so with nothing to wait for
+    // (local frames pending, or a zero timeout) it is skipped.
+    if (!more_pending && timeout_ms != 0) {
+      const int n =
+          ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), timeout_ms);
+      if (n < 0 && errno != EINTR) return false;
+    }
     std::lock_guard lk(mu);
     if (stop_requested) return false;
     pass_start_ns = MonotonicNs();
     // The wait above may predate T0; the level-triggered set is taken again after it.
     events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
-    n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
+    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
     if (n < 0) n = 0;
     for (int i = 0; i < n; ++i) {
       const std::uint64_t tag = events[i].data.u64;
