@@ -47,83 +47,73 @@ struct StuffCounter {
   }
 };
 
-// The data field a byte at a time. There the run state is prev in {0, 1} and run in 1..4 (a run
-// of 5 has just been stuffed and restarted at 1): 8 states. For each state and byte: the stuff
-// bits inserted, the state after, and the CRC-15 of the byte from a zero register (the register
-// is linear, so crc' = (crc << 8) ^ crc_of[(crc >> 7) ^ byte]). Built by StuffCounter::Bit, bit
-// by bit, at compile time.
-struct ByteTables {
-  std::uint8_t stuffed[8][256] = {};
-  std::uint8_t next[8][256] = {};
-  std::uint16_t crc_of[256] = {};
+// The stream a chunk of k = 1..8 bits at a time. After the SOF bit the run state is prev in
+// {0, 1} and run in 1..4 (a run of 5 has just been stuffed and restarted at 1): 8 states. For
+// each k, state and k-bit value: the stuff bits inserted, the state after, and the CRC-15 of
+// the chunk from a zero register (the register is linear, so crc' = (crc << k) ^
+// crc_of[(crc >> (15 - k)) ^ value]). Built by StuffCounter::Bit, bit by bit, at compile time.
+// Entries of k bits start at 8 * (2^k - 2) (stuff tables) and 2^k - 2 (CRC table).
+struct ChunkTables {
+  std::uint8_t stuffed[8 * 510] = {};
+  std::uint8_t next[8 * 510] = {};
+  std::uint16_t crc_of[510] = {};
 };
 
-constexpr ByteTables MakeByteTables() {
-  ByteTables t;
-  for (unsigned s = 0; s < 8; ++s) {
-    for (unsigned d = 0; d < 256; ++d) {
-      StuffCounter c;
-      c.crc_on = false;
-      c.prev = s >> 2;
-      c.run = static_cast<int>(s & 3u) + 1;
-      c.Push(d, 8);
-      t.stuffed[s][d] = static_cast<std::uint8_t>(c.stuffed);
-      t.next[s][d] = static_cast<std::uint8_t>(c.prev << 2 | static_cast<unsigned>(c.run - 1));
+constexpr ChunkTables MakeChunkTables() {
+  ChunkTables t;
+  for (unsigned k = 1; k <= 8; ++k) {
+    const unsigned values = 1u << k;
+    for (unsigned s = 0; s < 8; ++s) {
+      for (unsigned d = 0; d < values; ++d) {
+        StuffCounter c;
+        c.crc_on = false;
+        c.prev = s >> 2;
+        c.run = static_cast<int>(s & 3u) + 1;
+        c.Push(d, static_cast<int>(k));
+        const unsigned i = 8 * (values - 2) + s * values + d;
+        t.stuffed[i] = static_cast<std::uint8_t>(c.stuffed);
+        t.next[i] = static_cast<std::uint8_t>(c.prev << 2 | static_cast<unsigned>(c.run - 1));
+      }
     }
-  }
-  for (unsigned d = 0; d < 256; ++d) {
-    StuffCounter c;
-    c.Push(d, 8);
-    t.crc_of[d] = c.crc;
+    for (unsigned d = 0; d < values; ++d) {
+      StuffCounter c;
+      c.Push(d, static_cast<int>(k));
+      t.crc_of[values - 2 + d] = c.crc;
+    }
   }
   return t;
 }
 
-constexpr ByteTables kByteTables = MakeByteTables();
+constexpr ChunkTables kChunkTables = MakeChunkTables();
 
 // The stream SOF .. CRC through the tables: after the SOF bit the run state is always one of
-// the 8 table states, so every whole byte (at any bit position) is one lookup for the stuff
-// bits and one for the CRC; only the bits of a field beyond its whole bytes go bit by bit.
+// the 8 table states, so every chunk of bits (at any position) is one lookup for the stuff
+// bits and one for the CRC: a field goes as its leading count % 8 bits, then whole bytes.
 struct TableStuffCounter {
   std::uint16_t crc = 0;
   unsigned bits = 0;
   unsigned stuffed = 0;
   unsigned state = 0;  // prev << 2 | (run - 1), valid after the SOF bit
-  void Bit(unsigned b, bool crc_on) {
+  void Chunk(unsigned d, unsigned k, bool crc_on) {
+    const unsigned values = 1u << k;
     if (crc_on) {
-      const bool crc_next = (b != 0) != ((crc & 0x4000u) != 0);
-      crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
-      if (crc_next) crc ^= 0x4599;
+      crc = static_cast<std::uint16_t>(
+          ((crc << k) & 0x7FFF) ^
+          kChunkTables.crc_of[values - 2 + (((crc >> (15 - k)) ^ d) & (values - 1))]);
     }
-    ++bits;
-    const unsigned prev = state >> 2;
-    unsigned run = (state & 3u) + 1;
-    if (b == prev) {
-      ++run;
-    } else {
-      run = 1;
-    }
-    if (run == 5) {
-      ++stuffed;
-      state = (b ^ 1u) << 2;  // the stuff bit starts a new run of one
-    } else {
-      state = b << 2 | (run - 1);
-    }
+    bits += k;
+    const unsigned i = 8 * (values - 2) + state * values + d;
+    stuffed += kChunkTables.stuffed[i];
+    state = kChunkTables.next[i];
   }
-  void Byte(unsigned d, bool crc_on) {
-    if (crc_on) {
-      crc = static_cast<std::uint16_t>(((crc << 8) & 0x7FFF) ^
-                                       kByteTables.crc_of[((crc >> 7) ^ d) & 0xFF]);
+  // `count` bits of `value`, MSB first.
+  void Push(std::uint64_t value, unsigned count, bool crc_on) {
+    unsigned i = count;
+    if (i % 8 != 0) {
+      i -= i % 8;
+      Chunk(static_cast<unsigned>(value >> i) & ((1u << (count % 8)) - 1), count % 8, crc_on);
     }
-    bits += 8;
-    stuffed += kByteTables.stuffed[state][d];
-    state = kByteTables.next[state][d];
-  }
-  // `count` bits of `value`, MSB first: the leading count % 8 bit by bit, then whole bytes.
-  void Push(std::uint64_t value, int count, bool crc_on) {
-    int i = count;
-    for (; i % 8 != 0; --i) Bit(static_cast<unsigned>(value >> (i - 1)) & 1u, crc_on);
-    for (; i > 0; i -= 8) Byte(static_cast<unsigned>(value >> (i - 8)) & 0xFFu, crc_on);
+    for (; i > 0; i -= 8) Chunk(static_cast<unsigned>(value >> (i - 8)) & 0xFFu, 8, crc_on);
   }
 };
 
@@ -147,7 +137,7 @@ unsigned ExactBits(const bus::CanFrame& f) {
     b.Push(h, 18, true);
   }
   if (!f.rtr) {
-    for (std::size_t i = 0; i < f.len; ++i) b.Byte(f.data[i], true);
+    for (std::size_t i = 0; i < f.len; ++i) b.Chunk(f.data[i], 8, true);
   }
   b.Push(b.crc, 15, false);
   return b.bits + b.stuffed + kTrailerBits;
