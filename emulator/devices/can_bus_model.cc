@@ -263,7 +263,11 @@ void CanBusModel::Schedule(std::int64_t limit_ns) {
     }
     Node& n = nodes_[static_cast<std::size_t>(winner)];
     const Pending p = n.queue[static_cast<std::size_t>(winner_idx)];
-    n.queue.erase(n.queue.begin() + winner_idx);
+    if (winner_idx == 0) {
+      n.queue.pop_front();  // a FIFO's head, and most of the time a priority queue's
+    } else {
+      n.queue.erase(n.queue.begin() + winner_idx);
+    }
     WireFrame w;
     w.frame = p.frame;
     w.node = winner;
@@ -298,14 +302,14 @@ void CanBusModel::AdvanceTo(std::int64_t t_ns, std::vector<WireFrame>& done) {
 }
 
 std::int64_t CanBusModel::NextEventNs() const {
+  // A frame in flight completes before the bus is free again, and no SOF comes before that.
+  if (!in_flight_.empty()) return in_flight_.front().complete_ns;
   // Schedule(t) starts nothing while max(bus free, earliest ready) >= t.
   std::int64_t ready = std::numeric_limits<std::int64_t>::max();
   for (const Node& n : nodes_) ready = std::min(ready, EarliestReady(n));
   const std::int64_t sof =
       ready == std::numeric_limits<std::int64_t>::max() ? ready : std::max(bus_free_ns_, ready);
-  const std::int64_t complete = in_flight_.empty() ? std::numeric_limits<std::int64_t>::max()
-                                                   : in_flight_.front().complete_ns;
-  return std::min(sof, complete);
+  return sof;
 }
 
 std::vector<WireFrame> CanBusModel::Drain() {
