@@ -591,6 +591,9 @@ bool Run::EnqueueOnBus(int bus_node, const bus::CanFrame& f, std::int64_t ready_
 }
 
 void Run::SubmitDeviceFrames(int bus_node, std::vector<NodeFrame> frames, bool from_poll) {
+  // No frames and no frame filter (which may release delayed frames) for the node: nothing to do
+  // (every node is called with its Poll/OnFrame output, most of the time empty).
+  if (frames.empty() && !frame_filters_.contains(bus_node)) return;
   // Device faults of the node (encoders: the Encoder's injector; gyro/accel4: node_faults_).
   DeviceFaultInjector* dev = nullptr;
   for (auto& e : encoders_) {
