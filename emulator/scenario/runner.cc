@@ -257,13 +257,21 @@ class Run {
     physics::BodyTruth body;
     std::vector<physics::WheelTruth> wheels;
     std::vector<json> events;  // physical fault events of the step
+    // The accel4 sensor readings (Accel4Node::SampleSensors) of the sample instants that fall
+    // due with this step, in order: they depend on the body kinematics and the sensors' own
+    // noise streams only, so the worker takes them off the run's thread.
+    std::vector<std::array<double, 4>> accel;
   };
+  /// The run's body kinematics as the accelerometers see them (body frame).
+  static BodyKinematics AccelKinematics(const physics::BodyTruth& b);
+  std::int64_t worker_accel_next_ns_ = 0;  // the worker's next accel4 sample instant
   MotionStepState start_state_;  // the vehicle at the motion start, when a worker steps it
   std::unique_ptr<StepPipeline<MotionStepState>> pipeline_;
   bool physics_thread_used_ = false;
   // The vehicle's state after the latest step: the vehicle's own, or a pipeline slot.
   const physics::BodyTruth* body_ = nullptr;
   const std::vector<physics::WheelTruth>* wheels_ = nullptr;
+  const std::vector<std::array<double, 4>>* accel_samples_ = nullptr;  // the slot's, with a worker
   std::int64_t step_ns_ = 1'000'000;
   std::int64_t t_ns_ = 0;
 
@@ -990,6 +998,9 @@ void Run::StartPhysicsPipeline(std::int64_t steps) {
   // (the truth row of the motion start) is a copy.
   start_state_.body = vehicle_->body_truth();
   start_state_.wheels = vehicle_->wheel_truth();
+  // From here the worker also owns the accelerometers' sensor models (their noise streams);
+  // the run's thread still encodes every sample (counter, next instant).
+  if (accel4_) worker_accel_next_ns_ = accel4_->next_sample_ns();
   body_ = &start_state_.body;
   wheels_ = &start_state_.wheels;
   pipeline_ = std::make_unique<StepPipeline<MotionStepState>>(
@@ -999,9 +1010,26 @@ void Run::StartPhysicsPipeline(std::int64_t steps) {
         PhysicsStep(t0_ns + step * step_ns_, true, out.events);
         out.body = vehicle_->body_truth();
         out.wheels = vehicle_->wheel_truth();
+        out.accel.clear();
+        if (accel4_) {
+          // The instants the run's thread samples after this step: those <= its t_ns_ then.
+          const std::int64_t t_after = t0_ns + (step + 1) * step_ns_;
+          for (; worker_accel_next_ns_ <= t_after; worker_accel_next_ns_ += accel4_->period_ns()) {
+            out.accel.push_back(accel4_->SampleSensors(AccelKinematics(out.body)));
+          }
+        }
       },
       cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
   physics_thread_used_ = true;
+}
+
+BodyKinematics Run::AccelKinematics(const physics::BodyTruth& b) {
+  BodyKinematics k;
+  k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
+  k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
+  k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
+  k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
+  return k;
 }
 
 void Run::Step(bool motion) {
@@ -1016,6 +1044,7 @@ void Run::Step(bool motion) {
     for (const json& e : st->events) events_.push_back(e);
     body_ = &st->body;
     wheels_ = &st->wheels;
+    accel_samples_ = &st->accel;
   } else {
     PhysicsStep(t_ns_, motion, events_);
     body_ = &vehicle_->body_truth();
@@ -1100,15 +1129,20 @@ void Run::Step(bool motion) {
   }
   if (accel4_) {
     // The four accelerometers at each sample instant, from the body kinematics of this step.
+    const bool from_worker = motion && pipeline_;
+    std::size_t taken = 0;
     while (accel4_->next_sample_ns() <= t_ns_) {
       const std::int64_t ts = accel4_->next_sample_ns();
-      const auto& b = *body_;
-      BodyKinematics k;
-      k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
-      k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
-      k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
-      k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
-      std::array<double, 4> a = accel4_->SampleSensors(k);
+      std::array<double, 4> a{};
+      if (!from_worker) {
+        a = accel4_->SampleSensors(AccelKinematics(*body_));
+      } else if (taken < accel_samples_->size()) {
+        a = (*accel_samples_)[taken++];
+      } else {
+        // Cannot happen (the worker walks the same instants); fail loudly rather than differ.
+        if (failure_.empty()) failure_ = "internal: accel4 sample missing from the physics worker";
+        break;
+      }
       bool dropped = false;
       for (std::size_t c = 0; c < 4; ++c) {
         if (!accel_fault_[c]) continue;
