@@ -43,6 +43,7 @@
 #include "emulator/faults/sensor_faults.h"
 #include "emulator/physics/physics_world.h"
 #include "emulator/scenario/artefacts.h"
+#include "emulator/scenario/background_candump.h"
 #include "emulator/scenario/metrics.h"
 #include "emulator/scenario/step_pipeline.h"
 #include "emulator/sensors/encoder_model.h"
@@ -249,6 +250,9 @@ class Run {
   std::optional<bus::SocketCanTransport> can_;
   Firmware firmware_;
   std::unique_ptr<bus::CandumpWriter> log_;
+  // can.log through a thread of its own on the physics worker's CPUs while the worker runs
+  // (declared after log_: stopped, its queue written, before log_ goes).
+  std::unique_ptr<BackgroundCandump> background_log_;
 
   std::unique_ptr<physics::PhysicsWorld> world_;
   physics::RollerVehicle* vehicle_ = nullptr;
@@ -862,7 +866,11 @@ void Run::OnWire(const WireFrame& w) {
   const bool injected = faulty_bus_ && (w.node == faulty_bus_->flood_node() ||
                                         w.node == faulty_bus_->error_node() || w.frame.error);
   if (!injected) ++completed_;
-  (void)log_->Write(w.complete_ns, iface_, w.frame);
+  if (background_log_) {
+    background_log_->Write(w.complete_ns, w.frame);
+  } else {
+    (void)log_->Write(w.complete_ns, iface_, w.frame);
+  }
   if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)
   if (w.node != bus_firmware_) {
     if (pumped_) {
@@ -1021,6 +1029,11 @@ void Run::StartPhysicsPipeline(std::int64_t steps) {
       },
       cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
   physics_thread_used_ = true;
+  // The lines of the frames from here on are formatted there as well.
+  if (log_) {
+    background_log_ = std::make_unique<BackgroundCandump>(
+        *log_, iface_, cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
+  }
 }
 
 BodyKinematics Run::AccelKinematics(const physics::BodyTruth& b) {
@@ -1559,7 +1572,8 @@ RunResult Run::Execute() {
       }
     }
   }
-  pipeline_.reset();  // stops the worker (a failed run leaves it steps ahead)
+  pipeline_.reset();        // stops the worker (a failed run leaves it steps ahead)
+  background_log_.reset();  // its queue written: what follows goes to log_ directly, in order
   Progress(true);
   for (const auto& w : bus_->Drain()) {
     ++completed_;
