@@ -1011,8 +1011,11 @@ void Run::StartPhysicsPipeline(std::int64_t steps) {
   if (accel4_) worker_accel_next_ns_ = accel4_->next_sample_ns();
   body_ = &start_state_.body;
   wheels_ = &start_state_.wheels;
+  // 2048 steps of look-ahead (~2 s of motion at 1 kHz, ~1.5 MB): either side may lose its CPU
+  // to another process for a time slice (a few ms) without the other running dry or blocking
+  // (with 256, on a machine busy with a build, paper000_slip went 164x against 258x now).
   pipeline_ = std::make_unique<StepPipeline<MotionStepState>>(
-      256, steps,
+      2048, steps,
       [this, t0_ns](std::int64_t step, MotionStepState& out) {
         out.events.clear();
         PhysicsStep(t0_ns + step * step_ns_, true, out.events);
