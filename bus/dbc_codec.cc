@@ -21,13 +21,18 @@ constexpr int MotorolaLinear(int sawtooth_bit) noexcept {
 }
 
 std::uint64_t LoadLe(std::span<const std::uint8_t> p) noexcept {
-  std::uint8_t buf[8] = {};
-  std::memcpy(buf, p.data(), std::min<std::size_t>(p.size(), 8));
   if constexpr (std::endian::native == std::endian::little) {
-    std::uint64_t v;
-    std::memcpy(&v, buf, 8);
+    // A whole 8-byte window (every classic frame's data array): one load, no staging copy.
+    std::uint64_t v = 0;
+    if (p.size() >= 8) {
+      std::memcpy(&v, p.data(), 8);
+    } else {
+      std::memcpy(&v, p.data(), p.size());
+    }
     return v;
   } else {
+    std::uint8_t buf[8] = {};
+    std::memcpy(buf, p.data(), std::min<std::size_t>(p.size(), 8));
     std::uint64_t v = 0;
     for (int i = 7; i >= 0; --i) v = v << 8 | buf[i];
     return v;
@@ -35,6 +40,12 @@ std::uint64_t LoadLe(std::span<const std::uint8_t> p) noexcept {
 }
 
 void StoreLe(std::uint64_t v, std::span<std::uint8_t> p) noexcept {
+  if constexpr (std::endian::native == std::endian::little) {
+    if (p.size() >= 8) {
+      std::memcpy(p.data(), &v, 8);
+      return;
+    }
+  }
   const std::size_t n = std::min<std::size_t>(p.size(), 8);
   for (std::size_t i = 0; i < n; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
 }
@@ -124,9 +135,15 @@ bool InsertRaw(const DbcSignal& sig, std::uint64_t raw, std::span<std::uint8_t> 
   return true;
 }
 
-double DecodeSignal(const DbcSignal& sig, std::span<const std::uint8_t> payload) noexcept {
-  std::int64_t raw = 0;
-  if (!ExtractRawSigned(sig, payload, raw)) return std::numeric_limits<double>::quiet_NaN();
+namespace {
+
+// The physical value of the raw bits ExtractRaw gave (sign-extended as ExtractRawSigned does).
+double PhysicalOfRaw(const DbcSignal& sig, std::uint64_t u) noexcept {
+  if (sig.is_signed && sig.value_type == DbcValueType::kInteger && sig.length < 64 &&
+      (u >> (sig.length - 1)) & 1u) {
+    u |= ~Mask(sig.length);
+  }
+  const auto raw = static_cast<std::int64_t>(u);
   double value = 0.0;
   switch (sig.value_type) {
     case DbcValueType::kFloat32:
@@ -141,6 +158,14 @@ double DecodeSignal(const DbcSignal& sig, std::span<const std::uint8_t> payload)
       break;
   }
   return value * sig.factor + sig.offset;
+}
+
+}  // namespace
+
+double DecodeSignal(const DbcSignal& sig, std::span<const std::uint8_t> payload) noexcept {
+  std::uint64_t raw = 0;
+  if (!ExtractRaw(sig, payload, raw)) return std::numeric_limits<double>::quiet_NaN();
+  return PhysicalOfRaw(sig, raw);
 }
 
 bool EncodeSignal(const DbcSignal& sig, double physical, std::span<std::uint8_t> payload) noexcept {
@@ -282,7 +307,7 @@ bool DecodeSignalIfPresent(const DbcMessage& msg, const DbcSignal& sig, const Ca
   }
   std::uint64_t raw = 0;
   if (!ExtractRaw(sig, payload, raw)) return false;
-  *out = DecodeSignal(sig, payload);
+  *out = PhysicalOfRaw(sig, raw);  // the bits once: what DecodeSignal would give
   return true;
 }
 

@@ -19,6 +19,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <system_error>
@@ -332,6 +333,26 @@ struct UcanBroker::Impl {
   std::thread thread;
   bool handover_requested = false;  // UseCallerThread(): the thread leaves its loop
   std::vector<epoll_event> pump_events;
+
+  /// ReadData's recvmmsg vectors, set up once: recvmmsg only writes msg_len and the header's
+  /// msg_flags / msg_namelen / msg_controllen (no name, no control: they stay 0), so no batch
+  /// needs them cleared again. Used under `mu` by the one thread that runs passes.
+  struct ReadBuffers {
+    std::array<std::array<std::uint8_t, kClientMsgBuf>, kBatch> bufs;
+    std::array<iovec, kBatch> iovs;
+    std::array<mmsghdr, kBatch> msgs;
+    ReadBuffers() {
+      for (int i = 0; i < kBatch; ++i) {
+        iovs[i] = {bufs[i].data(), bufs[i].size()};
+        msgs[i] = {};
+        msgs[i].msg_hdr.msg_iov = &iovs[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+      }
+    }
+    ReadBuffers(const ReadBuffers&) = delete;
+    ReadBuffers& operator=(const ReadBuffers&) = delete;
+  };
+  std::unique_ptr<ReadBuffers> read_buffers = std::make_unique<ReadBuffers>();
 
   explicit Impl(UcanBrokerOptions opts) : options(std::move(opts)) {
     dir = options.runtime_dir.empty() ? ResolveUcanRuntimeDir() : options.runtime_dir;
@@ -722,16 +743,9 @@ struct UcanBroker::Impl {
   /// Reads `c`'s frames into `pending`, up to and including the first batch holding a frame
   /// stamped at or after `stop_ns` (later frames wait in the socket for the next pass).
   void ReadData(Client* c, int max_batches, std::int64_t stop_ns) {
-    std::array<std::array<std::uint8_t, kClientMsgBuf>, kBatch> bufs;
-    std::array<iovec, kBatch> iovs;
-    std::array<mmsghdr, kBatch> msgs;
+    auto& bufs = read_buffers->bufs;
+    auto& msgs = read_buffers->msgs;
     for (int batch = 0; batch < max_batches && !c->dead; ++batch) {
-      for (int i = 0; i < kBatch; ++i) {
-        iovs[i] = {bufs[i].data(), bufs[i].size()};
-        msgs[i] = {};
-        msgs[i].msg_hdr.msg_iov = &iovs[i];
-        msgs[i].msg_hdr.msg_iovlen = 1;
-      }
       const int n = ::recvmmsg(c->fd.get(), msgs.data(), kBatch, MSG_DONTWAIT, nullptr);
       if (n < 0) {
         if (errno != EAGAIN && errno != EINTR) Kill(c);
@@ -993,15 +1007,19 @@ struct UcanBroker::Impl {
       more_pending = !pending.empty();
     }
     events.resize(std::max<std::size_t>(events.size(), kBatch));
-    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()),
-                         more_pending ? 0 : timeout_ms);
-    if (n < 0 && errno != EINTR) return false;
+    // The wait only waits: its set is taken again after T0, so with nothing to wait for
+    // (local frames pending, or a zero timeout) it is skipped.
+    if (!more_pending && timeout_ms != 0) {
+      const int n =
+          ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), timeout_ms);
+      if (n < 0 && errno != EINTR) return false;
+    }
     std::lock_guard lk(mu);
     if (stop_requested) return false;
     pass_start_ns = MonotonicNs();
     // The wait above may predate T0; the level-triggered set is taken again after it.
     events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
-    n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
+    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
     if (n < 0) n = 0;
     for (int i = 0; i < n; ++i) {
       const std::uint64_t tag = events[i].data.u64;

@@ -107,15 +107,18 @@ REAL_FN(if_indextoname, char*, (unsigned, char*))
 
 /// The shared-memory rings of a bound socket (bus/ucan_protocol.h "Rings"); refcounted because
 /// a data call keeps using them outside the table lock while another thread may rebind/close.
+/// `refs` is atomic: references are taken under the table lock (from a socket, which holds one
+/// while the rings are attached) but may be dropped without it.
 struct MappedRings {
   int refs = 1;
   ucan::RingHeader* header = nullptr;
   std::size_t bytes = 0;
 };
 
-/// Lock held.
+/// With or without the lock. The last reference unmaps: by then no socket in the table points
+/// to the rings, so no one can take a new reference.
 void ReleaseRings(MappedRings* m) {
-  if (m != nullptr && --m->refs == 0) {
+  if (m != nullptr && __atomic_sub_fetch(&m->refs, 1, __ATOMIC_ACQ_REL) == 0) {
     ::munmap(m->header, m->bytes);
     delete m;
   }
@@ -152,13 +155,7 @@ struct View {
   View() = default;
   View(const View&) = delete;
   View& operator=(const View&) = delete;
-  ~View() {
-    if (rings != nullptr) {
-      LockTable();
-      ReleaseRings(rings);
-      UnlockTable();
-    }
-  }
+  ~View() { ReleaseRings(rings); }  // no table lock: one less lock round per data call
 };
 
 pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -228,7 +225,7 @@ bool GetView(int fd, View* v) {
     v->rxq_ovfl = s->rxq_ovfl;
     std::memcpy(v->name, s->name, sizeof(v->name));
     if (s->rings != nullptr) {
-      ++s->rings->refs;
+      __atomic_add_fetch(&s->rings->refs, 1, __ATOMIC_RELAXED);
       v->rings = s->rings;
     }
     ok = true;

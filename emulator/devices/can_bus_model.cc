@@ -47,73 +47,99 @@ struct StuffCounter {
   }
 };
 
-// The data field a byte at a time. There the run state is prev in {0, 1} and run in 1..4 (a run
-// of 5 has just been stuffed and restarted at 1): 8 states. For each state and byte: the stuff
-// bits inserted, the state after, and the CRC-15 of the byte from a zero register (the register
-// is linear, so crc' = (crc << 8) ^ crc_of[(crc >> 7) ^ byte]). Built by StuffCounter::Bit, bit
-// by bit, at compile time.
-struct ByteTables {
-  std::uint8_t stuffed[8][256] = {};
-  std::uint8_t next[8][256] = {};
-  std::uint16_t crc_of[256] = {};
+// The stream a chunk of k = 1..8 bits at a time. After the SOF bit the run state is prev in
+// {0, 1} and run in 1..4 (a run of 5 has just been stuffed and restarted at 1): 8 states. For
+// each k, state and k-bit value: the stuff bits inserted, the state after, and the CRC-15 of
+// the chunk from a zero register (the register is linear, so crc' = (crc << k) ^
+// crc_of[(crc >> (15 - k)) ^ value]). Built by StuffCounter::Bit, bit by bit, at compile time.
+// Entries of k bits start at 8 * (2^k - 2) (stuff tables) and 2^k - 2 (CRC table).
+struct ChunkTables {
+  std::uint8_t stuffed[8 * 510] = {};
+  std::uint8_t next[8 * 510] = {};
+  std::uint16_t crc_of[510] = {};
 };
 
-constexpr ByteTables MakeByteTables() {
-  ByteTables t;
-  for (unsigned s = 0; s < 8; ++s) {
-    for (unsigned d = 0; d < 256; ++d) {
-      StuffCounter c;
-      c.crc_on = false;
-      c.prev = s >> 2;
-      c.run = static_cast<int>(s & 3u) + 1;
-      c.Push(d, 8);
-      t.stuffed[s][d] = static_cast<std::uint8_t>(c.stuffed);
-      t.next[s][d] = static_cast<std::uint8_t>(c.prev << 2 | static_cast<unsigned>(c.run - 1));
+constexpr ChunkTables MakeChunkTables() {
+  ChunkTables t;
+  for (unsigned k = 1; k <= 8; ++k) {
+    const unsigned values = 1u << k;
+    for (unsigned s = 0; s < 8; ++s) {
+      for (unsigned d = 0; d < values; ++d) {
+        StuffCounter c;
+        c.crc_on = false;
+        c.prev = s >> 2;
+        c.run = static_cast<int>(s & 3u) + 1;
+        c.Push(d, static_cast<int>(k));
+        const unsigned i = 8 * (values - 2) + s * values + d;
+        t.stuffed[i] = static_cast<std::uint8_t>(c.stuffed);
+        t.next[i] = static_cast<std::uint8_t>(c.prev << 2 | static_cast<unsigned>(c.run - 1));
+      }
     }
-  }
-  for (unsigned d = 0; d < 256; ++d) {
-    StuffCounter c;
-    c.Push(d, 8);
-    t.crc_of[d] = c.crc;
+    for (unsigned d = 0; d < values; ++d) {
+      StuffCounter c;
+      c.Push(d, static_cast<int>(k));
+      t.crc_of[values - 2 + d] = c.crc;
+    }
   }
   return t;
 }
 
-constexpr ByteTables kByteTables = MakeByteTables();
+constexpr ChunkTables kChunkTables = MakeChunkTables();
+
+// The stream SOF .. CRC through the tables: after the SOF bit the run state is always one of
+// the 8 table states, so every chunk of bits (at any position) is one lookup for the stuff
+// bits and one for the CRC: a field goes as its leading count % 8 bits, then whole bytes.
+struct TableStuffCounter {
+  std::uint16_t crc = 0;
+  unsigned bits = 0;
+  unsigned stuffed = 0;
+  unsigned state = 0;  // prev << 2 | (run - 1), valid after the SOF bit
+  void Chunk(unsigned d, unsigned k, bool crc_on) {
+    const unsigned values = 1u << k;
+    if (crc_on) {
+      crc = static_cast<std::uint16_t>(
+          ((crc << k) & 0x7FFF) ^
+          kChunkTables.crc_of[values - 2 + (((crc >> (15 - k)) ^ d) & (values - 1))]);
+    }
+    bits += k;
+    const unsigned i = 8 * (values - 2) + state * values + d;
+    stuffed += kChunkTables.stuffed[i];
+    state = kChunkTables.next[i];
+  }
+  // `count` bits of `value`, MSB first.
+  void Push(std::uint64_t value, unsigned count, bool crc_on) {
+    unsigned i = count;
+    if (i % 8 != 0) {
+      i -= i % 8;
+      Chunk(static_cast<unsigned>(value >> i) & ((1u << (count % 8)) - 1), count % 8, crc_on);
+    }
+    for (; i > 0; i -= 8) Chunk(static_cast<unsigned>(value >> (i - 8)) & 0xFFu, 8, crc_on);
+  }
+};
 
 unsigned ExactBits(const bus::CanFrame& f) {
-  StuffCounter b;
-  b.Push(0, 1);  // SOF, dominant
+  TableStuffCounter b;
+  // SOF (dominant): the first bit starts the first run, so the state is prev 0, run 1, and
+  // the CRC register (init 0) stays 0.
+  b.bits = 1;
+  b.state = 0;
+  const std::uint64_t rtr = f.rtr ? 1 : 0;
   if (f.extended) {
-    b.Push(f.id >> 18, 11);  // base id
-    b.Push(1, 1);            // SRR, recessive
-    b.Push(1, 1);            // IDE, recessive
-    b.Push(f.id & 0x3FFFF, 18);
-    b.Push(f.rtr ? 1 : 0, 1);
-    b.Push(0, 2);  // r1, r0
+    // base id (11), SRR and IDE (recessive), extension (18), RTR, r1 r0 (dominant), DLC (4)
+    const std::uint64_t h = static_cast<std::uint64_t>(f.id >> 18 & 0x7FFu) << 27 | 0x3u << 25 |
+                            static_cast<std::uint64_t>(f.id & 0x3FFFFu) << 7 | rtr << 6 |
+                            (f.len & 0xFu);
+    b.Push(h, 38, true);
   } else {
-    b.Push(f.id, 11);
-    b.Push(f.rtr ? 1 : 0, 1);
-    b.Push(0, 2);  // IDE (dominant), r0
+    // id (11), RTR, IDE and r0 (dominant), DLC (4)
+    const std::uint64_t h =
+        static_cast<std::uint64_t>(f.id & 0x7FFu) << 7 | rtr << 6 | (f.len & 0xFu);
+    b.Push(h, 18, true);
   }
-  b.Push(f.len, 4);  // DLC
-  if (!f.rtr && f.len > 0) {
-    unsigned state = b.prev << 2 | static_cast<unsigned>(b.run - 1);
-    std::uint16_t crc = b.crc;
-    for (std::size_t i = 0; i < f.len; ++i) {
-      const std::uint8_t d = f.data[i];
-      crc = static_cast<std::uint16_t>(((crc << 8) & 0x7FFF) ^
-                                       kByteTables.crc_of[((crc >> 7) ^ d) & 0xFF]);
-      b.stuffed += kByteTables.stuffed[state][d];
-      state = kByteTables.next[state][d];
-    }
-    b.crc = crc;
-    b.bits += 8u * f.len;
-    b.prev = state >> 2;
-    b.run = static_cast<int>(state & 3u) + 1;
+  if (!f.rtr) {
+    for (std::size_t i = 0; i < f.len; ++i) b.Chunk(f.data[i], 8, true);
   }
-  b.crc_on = false;
-  b.Push(b.crc, 15);
+  b.Push(b.crc, 15, false);
   return b.bits + b.stuffed + kTrailerBits;
 }
 
@@ -237,7 +263,11 @@ void CanBusModel::Schedule(std::int64_t limit_ns) {
     }
     Node& n = nodes_[static_cast<std::size_t>(winner)];
     const Pending p = n.queue[static_cast<std::size_t>(winner_idx)];
-    n.queue.erase(n.queue.begin() + winner_idx);
+    if (winner_idx == 0) {
+      n.queue.pop_front();  // a FIFO's head, and most of the time a priority queue's
+    } else {
+      n.queue.erase(n.queue.begin() + winner_idx);
+    }
     WireFrame w;
     w.frame = p.frame;
     w.node = winner;
@@ -255,7 +285,13 @@ void CanBusModel::Schedule(std::int64_t limit_ns) {
 
 std::vector<WireFrame> CanBusModel::AdvanceTo(std::int64_t t_ns) {
   std::vector<WireFrame> done;
-  if (t_ns < now_ns_) return done;
+  AdvanceTo(t_ns, done);
+  return done;
+}
+
+void CanBusModel::AdvanceTo(std::int64_t t_ns, std::vector<WireFrame>& done) {
+  done.clear();
+  if (t_ns < now_ns_) return;
   Schedule(t_ns);
   now_ns_ = t_ns;
   while (!in_flight_.empty() && in_flight_.front().complete_ns <= t_ns) {
@@ -263,7 +299,17 @@ std::vector<WireFrame> CanBusModel::AdvanceTo(std::int64_t t_ns) {
     in_flight_.pop_front();
     ++frames_sent_;
   }
-  return done;
+}
+
+std::int64_t CanBusModel::NextEventNs() const {
+  // A frame in flight completes before the bus is free again, and no SOF comes before that.
+  if (!in_flight_.empty()) return in_flight_.front().complete_ns;
+  // Schedule(t) starts nothing while max(bus free, earliest ready) >= t.
+  std::int64_t ready = std::numeric_limits<std::int64_t>::max();
+  for (const Node& n : nodes_) ready = std::min(ready, EarliestReady(n));
+  const std::int64_t sof =
+      ready == std::numeric_limits<std::int64_t>::max() ? ready : std::max(bus_free_ns_, ready);
+  return sof;
 }
 
 std::vector<WireFrame> CanBusModel::Drain() {

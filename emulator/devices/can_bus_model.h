@@ -90,6 +90,14 @@ class CanBusModel {
   /// completion order. Frames whose SOF would be at or after t_ns stay queued (a frame queued
   /// later for the same instant can still take part in that arbitration).
   std::vector<WireFrame> AdvanceTo(std::int64_t t_ns);
+  /// The same into `done` (cleared first): a caller that advances often keeps one buffer.
+  void AdvanceTo(std::int64_t t_ns, std::vector<WireFrame>& done);
+
+  /// The earliest instant at which the bus changes state other than its clock: the next SOF
+  /// of a queued frame (with nothing enqueued meanwhile) or the next completion; INT64_MAX
+  /// when idle with empty queues. AdvanceTo(t) with now < t < NextEventNs() only moves the
+  /// clock to t (no frame starts, none is returned).
+  std::int64_t NextEventNs() const;
 
   /// Runs until every queue is empty; returns all remaining frames.
   std::vector<WireFrame> Drain();

@@ -8,6 +8,52 @@
 #include <fmt/format.h>
 
 namespace wheelhil::emulator::physics {
+namespace {
+
+// Every chassis is added with collision mask 0 and the terrain lives in a collision world of
+// its own, so Bullet's collision detection in this world never finds a pair: per step it only
+// refreshes broadphase AABBs nobody reads. Its one effect on the dynamics is the guard in
+// btCollisionWorld::updateSingleAabb, which disables a body whose swept AABB is not finite or
+// longer than 1e6 m (a blown-up state). The pass is skipped only while every object is a
+// mask-0 rigid body whose state keeps that guard far away (finite, swept extent under 1e5 m);
+// otherwise Bullet's own pass runs, so the results are those of Bullet's pass either way.
+class NoPairsDynamicsWorld : public btDiscreteDynamicsWorld {
+ public:
+  using btDiscreteDynamicsWorld::btDiscreteDynamicsWorld;
+
+  void performDiscreteCollisionDetection() override {
+    if (!CollisionPassChangesNothing())
+      btDiscreteDynamicsWorld::performDiscreteCollisionDetection();
+  }
+
+ private:
+  bool CollisionPassChangesNothing() {
+    const btScalar dt = getDispatchInfo().m_timeStep;
+    for (int i = 0; i < m_collisionObjects.size(); ++i) {
+      const btCollisionObject* o = m_collisionObjects[i];
+      const btRigidBody* b = btRigidBody::upcast(o);
+      if (b == nullptr || o->getBroadphaseHandle() == nullptr ||
+          o->getBroadphaseHandle()->m_collisionFilterMask != 0) {
+        return false;
+      }
+      const btTransform& X = o->getWorldTransform();
+      const btVector3& v = b->getLinearVelocity();
+      const btVector3& w = b->getAngularVelocity();
+      btVector3 lo, hi;
+      o->getCollisionShape()->getAabb(btTransform::getIdentity(), lo, hi);
+      const btScalar size = (hi - lo).length();
+      const btScalar reach = 2 * size + v.length() * dt;
+      if (!(std::isfinite(X.getOrigin().length2()) && std::isfinite(X.getBasis()[0].length2()) &&
+            std::isfinite(X.getBasis()[1].length2()) && std::isfinite(X.getBasis()[2].length2()) &&
+            std::isfinite(w.length2()) && std::isfinite(reach) && reach < btScalar(1e5))) {
+        return false;
+      }
+    }
+    return true;
+  }
+};
+
+}  // namespace
 
 PhysicsWorld::PhysicsWorld(const WorldOptions& options)
     : step_s_(options.step_s), gravity_W_(options.gravity_W) {
@@ -21,8 +67,8 @@ PhysicsWorld::PhysicsWorld(const WorldOptions& options)
   dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
   broadphase_ = std::make_unique<btDbvtBroadphase>();
   solver_ = std::make_unique<btSequentialImpulseConstraintSolver>();
-  world_ = std::make_unique<btDiscreteDynamicsWorld>(dispatcher_.get(), broadphase_.get(),
-                                                     solver_.get(), config_.get());
+  world_ = std::make_unique<NoPairsDynamicsWorld>(dispatcher_.get(), broadphase_.get(),
+                                                  solver_.get(), config_.get());
   world_->setGravity(btVector3(0, 0, 0));  // vehicles apply gravity with their contacts
   world_->setInternalTickCallback(&PhysicsWorld::PreTick, this, /*isPreTick=*/true);
 }

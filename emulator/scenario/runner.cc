@@ -43,6 +43,7 @@
 #include "emulator/faults/sensor_faults.h"
 #include "emulator/physics/physics_world.h"
 #include "emulator/scenario/artefacts.h"
+#include "emulator/scenario/background_candump.h"
 #include "emulator/scenario/metrics.h"
 #include "emulator/scenario/step_pipeline.h"
 #include "emulator/sensors/encoder_model.h"
@@ -249,6 +250,9 @@ class Run {
   std::optional<bus::SocketCanTransport> can_;
   Firmware firmware_;
   std::unique_ptr<bus::CandumpWriter> log_;
+  // can.log through a thread of its own on the physics worker's CPUs while the worker runs
+  // (declared after log_: stopped, its queue written, before log_ goes).
+  std::unique_ptr<BackgroundCandump> background_log_;
 
   std::unique_ptr<physics::PhysicsWorld> world_;
   physics::RollerVehicle* vehicle_ = nullptr;
@@ -257,13 +261,21 @@ class Run {
     physics::BodyTruth body;
     std::vector<physics::WheelTruth> wheels;
     std::vector<json> events;  // physical fault events of the step
+    // The accel4 sensor readings (Accel4Node::SampleSensors) of the sample instants that fall
+    // due with this step, in order: they depend on the body kinematics and the sensors' own
+    // noise streams only, so the worker takes them off the run's thread.
+    std::vector<std::array<double, 4>> accel;
   };
+  /// The run's body kinematics as the accelerometers see them (body frame).
+  static BodyKinematics AccelKinematics(const physics::BodyTruth& b);
+  std::int64_t worker_accel_next_ns_ = 0;  // the worker's next accel4 sample instant
   MotionStepState start_state_;  // the vehicle at the motion start, when a worker steps it
   std::unique_ptr<StepPipeline<MotionStepState>> pipeline_;
   bool physics_thread_used_ = false;
   // The vehicle's state after the latest step: the vehicle's own, or a pipeline slot.
   const physics::BodyTruth* body_ = nullptr;
   const std::vector<physics::WheelTruth>* wheels_ = nullptr;
+  const std::vector<std::array<double, 4>>* accel_samples_ = nullptr;  // the slot's, with a worker
   std::int64_t step_ns_ = 1'000'000;
   std::int64_t t_ns_ = 0;
 
@@ -305,6 +317,7 @@ class Run {
   bool library_faults_ = false;
   std::int64_t motion0_ns_ = 0;
   std::uint64_t enqueued_ = 0, completed_ = 0, silenced_ = 0, enqueue_failures_ = 0;
+  std::vector<WireFrame> wire_scratch_;  ///< AdvanceBus: the frames of one slice.
   std::vector<std::size_t> drive_wheels_;
 
   // Lockstep bookkeeping.
@@ -607,6 +620,9 @@ bool Run::EnqueueOnBus(int bus_node, const bus::CanFrame& f, std::int64_t ready_
 }
 
 void Run::SubmitDeviceFrames(int bus_node, std::vector<NodeFrame> frames, bool from_poll) {
+  // No frames and no frame filter (which may release delayed frames) for the node: nothing to do
+  // (every node is called with its Poll/OnFrame output, most of the time empty).
+  if (frames.empty() && !frame_filters_.contains(bus_node)) return;
   // Device faults of the node (encoders: the Encoder's injector; gyro/accel4: node_faults_).
   DeviceFaultInjector* dev = nullptr;
   for (auto& e : encoders_) {
@@ -867,7 +883,11 @@ void Run::OnWire(const WireFrame& w) {
   const bool injected = faulty_bus_ && (w.node == faulty_bus_->flood_node() ||
                                         w.node == faulty_bus_->error_node() || w.frame.error);
   if (!injected) ++completed_;
-  (void)log_->Write(w.complete_ns, iface_, w.frame);
+  if (background_log_) {
+    background_log_->Write(w.complete_ns, w.frame);
+  } else {
+    (void)log_->Write(w.complete_ns, iface_, w.frame);
+  }
   if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)
   if (w.node != bus_firmware_) {
     if (pumped_) {
@@ -909,8 +929,23 @@ void Run::AdvanceBus(std::int64_t t_ns) {
   constexpr std::int64_t kSlice = 20'000;
   while (bus_->now_ns() < t_ns) {
     const bool busy = enqueued_ > completed_;
-    const std::int64_t to = busy ? std::min(t_ns, bus_->now_ns() + kSlice) : t_ns;
-    for (const auto& w : faulty_bus_ ? faulty_bus_->AdvanceTo(to) : bus_->AdvanceTo(to)) OnWire(w);
+    std::int64_t to = busy ? std::min(t_ns, bus_->now_ns() + kSlice) : t_ns;
+    if (faulty_bus_) {
+      for (const auto& w : faulty_bus_->AdvanceTo(to)) OnWire(w);
+      continue;
+    }
+    if (busy && to < t_ns) {
+      // Slices that end before the bus's next event only move its clock (no frame reaches
+      // OnWire, so nothing is enqueued in between and `busy` stays): go straight to the first
+      // slice boundary at or after that event. The boundaries stay those of the slice-by-slice
+      // walk, so the bus sees the same calls where anything happens.
+      const std::int64_t until = std::min(t_ns, bus_->NextEventNs());
+      if (until > to) to = std::min(t_ns, to + (until - to + kSlice - 1) / kSlice * kSlice);
+    }
+    bus_->AdvanceTo(to, wire_scratch_);
+    if (wire_scratch_.empty()) continue;
+    // OnWire enqueues into the bus model but never advances it: the buffer stays as it is.
+    for (const auto& w : wire_scratch_) OnWire(w);
   }
 }
 
@@ -988,18 +1023,46 @@ void Run::StartPhysicsPipeline(std::int64_t steps) {
   // (the truth row of the motion start) is a copy.
   start_state_.body = vehicle_->body_truth();
   start_state_.wheels = vehicle_->wheel_truth();
+  // From here the worker also owns the accelerometers' sensor models (their noise streams);
+  // the run's thread still encodes every sample (counter, next instant).
+  if (accel4_) worker_accel_next_ns_ = accel4_->next_sample_ns();
   body_ = &start_state_.body;
   wheels_ = &start_state_.wheels;
+  // 2048 steps of look-ahead (~2 s of motion at 1 kHz, ~1.5 MB): either side may lose its CPU
+  // to another process for a time slice (a few ms) without the other running dry or blocking
+  // (with 256, on a machine busy with a build, paper000_slip went 164x against 258x now).
   pipeline_ = std::make_unique<StepPipeline<MotionStepState>>(
-      256, steps,
+      2048, steps,
       [this, t0_ns](std::int64_t step, MotionStepState& out) {
         out.events.clear();
         PhysicsStep(t0_ns + step * step_ns_, true, out.events);
         out.body = vehicle_->body_truth();
         out.wheels = vehicle_->wheel_truth();
+        out.accel.clear();
+        if (accel4_) {
+          // The instants the run's thread samples after this step: those <= its t_ns_ then.
+          const std::int64_t t_after = t0_ns + (step + 1) * step_ns_;
+          for (; worker_accel_next_ns_ <= t_after; worker_accel_next_ns_ += accel4_->period_ns()) {
+            out.accel.push_back(accel4_->SampleSensors(AccelKinematics(out.body)));
+          }
+        }
       },
       cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
   physics_thread_used_ = true;
+  // The lines of the frames from here on are formatted there as well.
+  if (log_) {
+    background_log_ = std::make_unique<BackgroundCandump>(
+        *log_, iface_, cpu_ >= 0 || o_.physics_thread == PT::kOn ? &allowed : nullptr);
+  }
+}
+
+BodyKinematics Run::AccelKinematics(const physics::BodyTruth& b) {
+  BodyKinematics k;
+  k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
+  k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
+  k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
+  k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
+  return k;
 }
 
 void Run::Step(bool motion) {
@@ -1014,6 +1077,7 @@ void Run::Step(bool motion) {
     for (const json& e : st->events) events_.push_back(e);
     body_ = &st->body;
     wheels_ = &st->wheels;
+    accel_samples_ = &st->accel;
   } else {
     PhysicsStep(t_ns_, motion, events_);
     body_ = &vehicle_->body_truth();
@@ -1098,15 +1162,20 @@ void Run::Step(bool motion) {
   }
   if (accel4_) {
     // The four accelerometers at each sample instant, from the body kinematics of this step.
+    const bool from_worker = motion && pipeline_;
+    std::size_t taken = 0;
     while (accel4_->next_sample_ns() <= t_ns_) {
       const std::int64_t ts = accel4_->next_sample_ns();
-      const auto& b = *body_;
-      BodyKinematics k;
-      k.a_WBo_B = b.q_WB.conjugate() * b.a_WB_W;
-      k.omega_WB_B = b.q_WB.conjugate() * b.omega_WB_W;
-      k.alpha_WB_B = b.q_WB.conjugate() * b.alpha_WB_W;
-      k.g_B = b.q_WB.conjugate() * Eigen::Vector3d(0.0, 0.0, -9.80665);
-      std::array<double, 4> a = accel4_->SampleSensors(k);
+      std::array<double, 4> a{};
+      if (!from_worker) {
+        a = accel4_->SampleSensors(AccelKinematics(*body_));
+      } else if (taken < accel_samples_->size()) {
+        a = (*accel_samples_)[taken++];
+      } else {
+        // Cannot happen (the worker walks the same instants); fail loudly rather than differ.
+        if (failure_.empty()) failure_ = "internal: accel4 sample missing from the physics worker";
+        break;
+      }
       bool dropped = false;
       for (std::size_t c = 0; c < 4; ++c) {
         if (!accel_fault_[c]) continue;
@@ -1523,7 +1592,8 @@ RunResult Run::Execute() {
       }
     }
   }
-  pipeline_.reset();  // stops the worker (a failed run leaves it steps ahead)
+  pipeline_.reset();        // stops the worker (a failed run leaves it steps ahead)
+  background_log_.reset();  // its queue written: what follows goes to log_ directly, in order
   Progress(true);
   for (const auto& w : bus_->Drain()) {
     ++completed_;

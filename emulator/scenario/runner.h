@@ -46,8 +46,9 @@ struct RunOptions {
   /// side does not preempt the one still writing its frames.
   std::optional<int> cpu;
   /// Lockstep only: step the physics of the motion phase on a worker thread on another allowed
-  /// CPU, ahead of the run's thread (results are the same bits either way). kAuto: when the
-  /// run may use more than one CPU.
+  /// CPU, ahead of the run's thread (results are the same bits either way); the accel4 sensor
+  /// readings and the can.log formatting go to that CPU too. kAuto: when the run may use more
+  /// than one CPU.
   enum class PhysicsThread { kAuto, kOn, kOff };
   PhysicsThread physics_thread = PhysicsThread::kAuto;
   /// Environment a child needs on a private userspace bus in `runtime_dir` (LD_PRELOAD ...).

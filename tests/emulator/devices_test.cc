@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <fstream>
 #include <initializer_list>
+#include <limits>
 #include <memory>
 #include <random>
 #include <string>
@@ -250,6 +251,57 @@ TEST(CanBusModel, FramesQueuedForTheSameInstantStillArbitrate) {
   EXPECT_EQ(frames[0].complete_ns, 1'000 + 44 * 4'000);
   // A frame cannot be queued in the past.
   EXPECT_FALSE(bus.Enqueue(a, Std(0x200, {}), 0));
+}
+
+// NextEventNs is what lets a caller skip the slices of a slice-by-slice walk in which nothing
+// happens: the same walk with and without skipping gives the same frames at the same instants,
+// also when every completed frame is answered 20 us later (what the runner's nodes do).
+TEST(CanBusModel, NextEventNsBoundsTheQuietPartOfAWalk) {
+  auto walk = [](bool skip) {
+    CanBusModel bus({.bitrate_bps = 500'000, .stuffing = StuffingMode::kExact});
+    const int a = bus.AddNode("a"), b = bus.AddNode("b", CanBusModel::QueueOrder::kPriority);
+    std::mt19937 rng(3);
+    std::vector<WireFrame> out, done;
+    std::int64_t t = 0;
+    for (int step = 0; step < 400; ++step) {
+      if (step % 3 == 0) (void)bus.Enqueue(a, Std(0x100 + rng() % 64, {1, 2, 3}), t);
+      const std::int64_t until = t + 250'000;
+      while (bus.now_ns() < until) {
+        std::int64_t to = std::min(until, bus.now_ns() + 20'000);
+        if (skip && to < until) {
+          const std::int64_t next = std::min(until, bus.NextEventNs());
+          if (next > to) to = std::min(until, to + (next - to + 19'999) / 20'000 * 20'000);
+        }
+        bus.AdvanceTo(to, done);
+        for (const WireFrame& w : done) {
+          out.push_back(w);
+          if (w.node == a)
+            (void)bus.Enqueue(b, Std(0x080 + rng() % 8, {9}), w.complete_ns + 20'000);
+        }
+      }
+      t = until;
+    }
+    return out;
+  };
+  const auto plain = walk(false), skipped = walk(true);
+  ASSERT_GT(plain.size(), 200u);
+  ASSERT_EQ(plain.size(), skipped.size());
+  for (std::size_t i = 0; i < plain.size(); ++i) {
+    EXPECT_EQ(plain[i].frame, skipped[i].frame) << i;
+    EXPECT_EQ(plain[i].start_ns, skipped[i].start_ns) << i;
+    EXPECT_EQ(plain[i].complete_ns, skipped[i].complete_ns) << i;
+  }
+  CanBusModel idle({});
+  EXPECT_EQ(idle.NextEventNs(), std::numeric_limits<std::int64_t>::max());
+  const int n = idle.AddNode("n");
+  ASSERT_TRUE(idle.Enqueue(n, Std(0x123, {}), 5'000));
+  EXPECT_EQ(idle.NextEventNs(), 5'000);  // its SOF
+  EXPECT_TRUE(idle.AdvanceTo(5'001).empty());
+  const std::int64_t completes = idle.NextEventNs();  // started at 5000, now in flight
+  EXPECT_TRUE(idle.AdvanceTo(completes - 1).empty());
+  const auto done = idle.AdvanceTo(completes);
+  ASSERT_EQ(done.size(), 1u);
+  EXPECT_EQ(done[0].complete_ns, completes);
 }
 
 // 1 Mbit/s, 1 kHz: five sensor nodes with one 8-byte frame each per ms fit (~600 us busy per
