@@ -6,25 +6,12 @@
 #include <fstream>
 #include <sstream>
 
+#include "emulator/scoring/expectations.h"
+
 namespace wheelhil::emulator::campaign {
 namespace {
 
 using nlohmann::json;
-
-void Flatten(const json& node, const std::string& prefix, std::map<std::string, double>& out) {
-  if (node.is_number()) {
-    const double v = node.get<double>();
-    if (std::isfinite(v)) out[prefix] = v;
-  } else if (node.is_boolean()) {
-    out[prefix] = node.get<bool>() ? 1.0 : 0.0;
-  } else if (node.is_object()) {
-    for (const auto& [k, v] : node.items()) Flatten(v, prefix.empty() ? k : prefix + "." + k, out);
-  } else if (node.is_array()) {
-    for (std::size_t i = 0; i < node.size(); ++i) {
-      Flatten(node[i], fmt::format("{}[{}]", prefix, i), out);
-    }
-  }
-}
 
 std::string Text(const json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
 
@@ -66,7 +53,12 @@ std::optional<RunReport> ParseRunReport(const std::string& json_text, std::strin
   if (const auto f = doc.find("failure"); f != doc.end() && f->is_string()) {
     r.failure = f->get<std::string>();
   }
-  if (const auto m = doc.find("metrics"); m != doc.end()) Flatten(*m, "", r.metrics);
+  if (const auto m = doc.find("metrics"); m != doc.end()) {
+    // A non-finite value is stored as absent (SQLite REAL, campaign statistics).
+    for (const auto& [name, v] : scoring::FlattenMetrics(*m)) {
+      if (std::isfinite(v)) r.metrics[name] = v;
+    }
+  }
   if (const auto ex = doc.find("expectations"); ex != doc.end() && ex->is_array()) {
     std::size_t i = 0;
     for (const auto& e : *ex) {

@@ -68,17 +68,4 @@ struct RunResult {
 /// input errors (bad DBC directory, unwritable out_dir) throw std::invalid_argument.
 RunResult RunScenario(const Scenario& scenario, const RunOptions& options);
 
-/// Flattens report["metrics"] into "stream.metric" -> value (numbers and booleans only).
-std::vector<std::pair<std::string, double>> FlattenMetrics(const nlohmann::json& metrics);
-
-/// Evaluates the expectations against flattened metrics; fills report["expectations"] and
-/// returns true when all hold (a missing metric fails its expectation).
-bool EvaluateExpectations(const std::vector<Expectation>& expectations,
-                          const nlohmann::json& metrics, nlohmann::json& out);
-
-/// The firmware config the run hands to the firmware: the scenario's firmware.config with its
-/// overrides merged in, sync.produce forced to false (the emulator produces SYNC) and
-/// sync.period_s set to the scenario's timing.sync_period_s. YAML text.
-std::string DerivedFirmwareConfig(const FirmwareSpec& firmware, const TimingSpec& timing);
-
 }  // namespace wheelhil::emulator::scenario

@@ -11,7 +11,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
-#include "emulator/scenario/metrics.h"
+#include "emulator/scoring/metrics.h"
 
 namespace wheelhil::emulator::scenario {
 
@@ -251,7 +251,7 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
       const double c = std::cos(pose.z()), sn = std::sin(pose.z());
       m.direction = Eigen::Vector3d(c * d_W.x() + sn * d_W.y(), -sn * d_W.x() + c * d_W.y(), 0);
     } else {
-      const double turn = WrapAngle(std::atan2(d_W.y(), d_W.x()) - pose.z());
+      const double turn = scoring::WrapAngle(std::atan2(d_W.y(), d_W.x()) - pose.z());
       if (std::abs(turn) > 1e-9) {
         MotionSegment t;
         t.kind = MotionSegment::Kind::kTrapezoid;

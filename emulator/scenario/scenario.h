@@ -20,6 +20,7 @@
 #include "emulator/faults/frame_faults.h"
 #include "emulator/faults/sensor_faults.h"
 #include "emulator/platforms/platform.h"
+#include "emulator/scoring/expectations.h"
 #include "emulator/terrain.h"
 
 namespace wheelhil::emulator::scenario {
@@ -166,14 +167,7 @@ struct TimingSpec {
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
 };
 
-/// `metric OP value`, or `metric < other_metric`.
-struct Expectation {
-  std::string metric;  ///< e.g. "pose.final_position_error_m".
-  std::string op;      ///< "<", "<=", ">", ">=".
-  std::optional<double> value;
-  std::string other_metric;  ///< When set, compare against this metric instead of value.
-  std::string where;         ///< file:line:column, for messages.
-};
+using Expectation = scoring::Expectation;
 
 struct Scenario {
   std::string source_path;
@@ -188,6 +182,9 @@ struct Scenario {
   FirmwareSpec firmware;
   TimingSpec timing;
   std::vector<Expectation> expectations;
+  /// The metric components that score the run (scoring.metrics; emulator/scoring/
+  /// metric_components.h); empty: all of them.
+  std::vector<std::string> metric_components;
   /// Ground-truth slip for scoring: a drive wheel slips while its contact slip speed exceeds
   /// this (m/s); unset: the platform's solver.slip_threshold_m_s flag.
   std::optional<double> slip_threshold_m_s;

@@ -1,4 +1,4 @@
-// Metrics (emulator/scenario/metrics.h) against analytic cases, and expectation evaluation.
+// Metrics (emulator/scoring/metrics.h) against analytic cases, and expectation evaluation.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -6,10 +6,10 @@
 #include <numbers>
 #include <random>
 
-#include "emulator/scenario/metrics.h"
-#include "emulator/scenario/runner.h"
+#include "emulator/scoring/metrics.h"
+#include "emulator/scoring/expectations.h"
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 namespace {
 
 std::vector<PoseSample> Straight(double v, double t_end, double dt) {
@@ -138,4 +138,4 @@ TEST(Expectations, CompareAgainstValuesAndMetrics) {
 }
 
 }  // namespace
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

@@ -1,4 +1,4 @@
-// HtmlReport (emulator/scenario/artefacts.h): every metric of report["metrics"] becomes one table
+// HtmlReport (emulator/scoring/artefacts.h): every metric of report["metrics"] becomes one table
 // row. Regression for the `wheelhil run` SIGSEGV: the metrics loop iterated items() of the
 // temporary returned by report.value(...), i.e. a destroyed std::map (ASan: heap-use-after-free).
 
@@ -10,9 +10,9 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "emulator/scenario/artefacts.h"
+#include "emulator/scoring/artefacts.h"
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 namespace {
 
 nlohmann::json ReportWithMetrics(int streams, int keys) {
@@ -61,4 +61,4 @@ TEST(ScenarioArtefacts, HtmlReportWithoutMetricsHasAnEmptyTable) {
 }
 
 }  // namespace
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

@@ -33,7 +33,7 @@
 #include <thread>
 #include <vector>
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::sim {
 
 template <typename Slot>
 class StepPipeline {
@@ -172,4 +172,4 @@ class StepPipeline {
   std::thread worker_;
 };
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::sim

@@ -1,8 +1,8 @@
-// BackgroundCandump (emulator/scenario/background_candump.h): the lines come out exactly as the
+// BackgroundCandump (emulator/sim/background_candump.h): the lines come out exactly as the
 // writer would have written them in the producer's order, also when the queue is far smaller
 // than the stream (the producer waits for the thread) and when the thread sleeps between
 // bursts; Stop() writes what is still queued; a frame the writer refuses is left out as before.
-#include "emulator/scenario/background_candump.h"
+#include "emulator/sim/background_candump.h"
 
 #include <gtest/gtest.h>
 
@@ -13,7 +13,7 @@
 #include <string>
 #include <thread>
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::sim {
 namespace {
 
 bus::CanFrame FrameNo(int k) {
@@ -59,4 +59,4 @@ TEST(BackgroundCandump, DestructionWritesWhatIsQueued) {
 }
 
 }  // namespace
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::sim

@@ -9,7 +9,7 @@
 #include <optional>
 #include <vector>
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 
 struct PoseSample {
   double t_s = 0;
@@ -102,4 +102,4 @@ struct NormalityResult {
 };
 NormalityResult NormalityTest(const std::vector<double>& x, double z = 1.96);
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

@@ -1,4 +1,4 @@
-#include "emulator/scenario/artefacts.h"
+#include "emulator/scoring/artefacts.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@
 
 #include "emulator/xml_escape.h"
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 
 namespace {
 
@@ -181,4 +181,4 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
   return h;
 }
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

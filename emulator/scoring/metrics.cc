@@ -1,10 +1,10 @@
-#include "emulator/scenario/metrics.h"
+#include "emulator/scoring/metrics.h"
 
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 
 double WrapAngle(double a_rad) {
   const double two_pi = 2.0 * std::numbers::pi;
@@ -189,4 +189,4 @@ NormalityResult NormalityTest(const std::vector<double>& x, double z) {
   return r;
 }
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

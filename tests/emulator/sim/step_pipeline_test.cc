@@ -1,9 +1,9 @@
-// StepPipeline (emulator/scenario/step_pipeline.h): every step reaches the consumer once, in
+// StepPipeline (emulator/sim/step_pipeline.h): every step reaches the consumer once, in
 // order, with the producer's data, whatever the timing of the two sides (random pauses on
 // both, a ring far smaller than the run, sleeps long enough that both sides block); a
 // throwing step function ends the stream with its message; destruction in the middle of a
 // run stops the worker even while it sleeps on a full ring.
-#include "emulator/scenario/step_pipeline.h"
+#include "emulator/sim/step_pipeline.h"
 
 #include <gtest/gtest.h>
 
@@ -16,7 +16,7 @@
 #include <thread>
 #include <vector>
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::sim {
 namespace {
 
 struct Slot {
@@ -98,4 +98,4 @@ TEST(StepPipeline, DestructionStopsAWorkerAsleepOnAFullRing) {
 }
 
 }  // namespace
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::sim

@@ -9,9 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "emulator/scenario/metrics.h"
+#include "emulator/scoring/metrics.h"
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::scoring {
 
 /// One ground-truth row (world frame W relative to the start pose; body velocity in B).
 struct TruthRow {
@@ -52,4 +52,4 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
 /// The HTML report: title, the report's summary table (from report.json) and the plots.
 std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots);
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::scoring

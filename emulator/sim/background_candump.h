@@ -24,7 +24,7 @@
 #include "bus/can_frame.h"
 #include "bus/candump_log.h"
 
-namespace wheelhil::emulator::scenario {
+namespace wheelhil::emulator::sim {
 
 class BackgroundCandump {
  public:
@@ -102,4 +102,4 @@ class BackgroundCandump {
   std::thread thread_;
 };
 
-}  // namespace wheelhil::emulator::scenario
+}  // namespace wheelhil::emulator::sim

@@ -1,0 +1,94 @@
+#include "emulator/devices/cia406_encoder_device.h"
+
+#include <cmath>
+#include <numbers>
+
+#include <fmt/format.h>
+
+#include "emulator/faults/device_faults.h"
+#include "emulator/faults/sensor_faults.h"
+
+namespace wheelhil::emulator {
+
+namespace {
+
+EncoderParams WithDirection(EncoderParams p, int direction) {
+  p.direction = direction;
+  return p;
+}
+
+}  // namespace
+
+Device::~Device() = default;
+
+Cia406EncoderDevice::Cia406EncoderDevice(const Cia406EncoderDeviceConfig& config,
+                                         std::shared_ptr<const Cia406Codec> codec)
+    : config_(config),
+      name_(fmt::format("encoder{}", config.node.node_id)),
+      channel_("encoder." + config.wheel_name),
+      codec_(std::move(codec)),
+      model_(WithDirection(config.encoder, config.direction)),
+      node_(std::make_unique<CanopenEncoderNode>(config.node, codec_, 0)) {
+  model_.Reset(config.initial_angle_rad, 0);
+}
+
+Cia406EncoderDevice::~Cia406EncoderDevice() = default;
+
+double Cia406EncoderDevice::channel_noise_std(const std::string&) const {
+  return 1.0 / std::sqrt(12.0);
+}
+
+void Cia406EncoderDevice::ArmFaults(DeviceFaults faults) {
+  device_fault_ = std::move(faults.device);
+  for (auto& [channel, injector] : faults.sensors) {
+    if (channel == channel_) sensor_fault_ = std::move(injector);
+  }
+}
+
+std::uint64_t Cia406EncoderDevice::suppressed_frames() const {
+  return device_fault_ ? device_fault_->suppressed_frames() : 0;
+}
+
+std::int64_t Cia406EncoderDevice::missed_counts() const {
+  return sensor_fault_ ? sensor_fault_->missed_counts() : 0;
+}
+
+void Cia406EncoderDevice::Send(std::vector<NodeFrame> frames, bool from_poll, DevicePort& port) {
+  if (silent()) {
+    port.CountSilenced(frames.size());
+    return;
+  }
+  if (device_fault_ && !frames.empty()) device_fault_->FilterOutputs(frames);
+  port.Send(std::move(frames), from_poll);
+}
+
+void Cia406EncoderDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
+  const physics::WheelTruth& wheel = (*world.wheels)[config_.wheel_index];
+  std::optional<std::uint32_t> counts = model_.Sample(wheel.angle_rad);
+  if (sensor_fault_) counts = sensor_fault_->ApplyCounts(*counts, t_ns);
+  const double speed = wheel.omega_rad_s * model_.counts_per_rev() / (2.0 * std::numbers::pi) *
+                       config_.direction;
+  // A dropped sample (dropout) leaves the node's last measurement in place.
+  if (counts) node_->SetMeasurement(*counts, speed);
+  if (device_fault_) {
+    if (device_fault_->NextActionNs() <= t_ns) {
+      (void)device_fault_->ApplyTo(*node_, config_.node, codec_, t_ns);
+    }
+    device_fault_->AdvanceTo(t_ns);
+  }
+  Send(node_->Poll(t_ns), true, port);
+  if (node_->state() != last_state_) {
+    last_state_ = node_->state();
+    port.Event(nlohmann::json{{"t_s", port.MotionSeconds(t_ns)},
+                              {"event", "node_state"},
+                              {"node_id", config_.node.node_id},
+                              {"state", static_cast<int>(last_state_)}});
+  }
+}
+
+void Cia406EncoderDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
+                                  DevicePort& port) {
+  Send(node_->OnFrame(frame, t_ns), false, port);
+}
+
+}  // namespace wheelhil::emulator

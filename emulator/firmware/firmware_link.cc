@@ -1,0 +1,187 @@
+#include "emulator/firmware/firmware_link.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "bus/ucan_runtime_dir.h"
+
+namespace wheelhil::emulator::firmware {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double WallSeconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+}  // namespace
+
+int CountKernelCanReceivers(const std::string& iface) {
+  int count = -1;
+  for (const char* list : {"all", "fil", "inv", "sff", "eff", "err"}) {
+    std::ifstream in(std::string("/proc/net/can/rcvlist_") + list);
+    if (!in) continue;
+    count = std::max(count, 0);
+    std::string line, first;
+    while (std::getline(in, line)) {
+      std::istringstream words(line);
+      if (words >> first && first == iface) ++count;
+    }
+  }
+  return count;
+}
+
+FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::RunContext& run)
+    : run_(run) {
+  bus::CanTransportOptions opt;
+  opt.receive_own = false;
+  if (can_iface.empty()) {
+    runtime_dir_ = bus::CreateTempUcanRuntimeDir("wheelhil-run-");
+    bus::UcanBrokerOptions bo;
+    bo.runtime_dir = runtime_dir_;
+    bo.remove_runtime_dir = true;
+    broker_ = std::make_unique<bus::UcanBroker>(bo);
+    iface_ = "ucan0";
+    broker_->AddBus(iface_);
+    ::setenv("WHEELHIL_UCAN_DIR", runtime_dir_.c_str(), 1);
+  } else {
+    iface_ = can_iface;
+  }
+  if (broker_ && lockstep) {
+    broker_->UseCallerThread();
+    local_port_ = broker_->OpenLocalPort(iface_);
+    pumped_ = true;
+  } else {
+    can_.emplace(bus::SocketCanTransport::Open(iface_, opt));
+  }
+}
+
+FirmwareLink::~FirmwareLink() { Close(); }
+
+void FirmwareLink::Close() {
+  if (broker_) {
+    can_.reset();
+    broker_.reset();
+  }
+}
+
+void FirmwareLink::BeforeFirmwareStarts() {
+  if (!broker_) kernel_receivers_before_ = CountKernelCanReceivers(iface_);
+}
+
+bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
+                                     std::string& why) {
+  if (!broker_) {
+    // A kernel bus has no broker to see the other side, but the kernel's receive lists show a
+    // socket bound to the interface: wait (up to the timeout) for one more receiver than before
+    // the firmware started, else (lists unreadable) give it 300 ms. Frames sent before it binds
+    // are lost to it (a boot-up in the user-mode-linux guest was). A firmware command that never
+    // binds here (a real board's flasher, exit status 0) only costs the wait.
+    if (kernel_receivers_before_ < 0) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      return true;
+    }
+    const auto t0 = Clock::now();
+    while (WallSeconds(t0) < timeout_s &&
+           CountKernelCanReceivers(iface_) <= kernel_receivers_before_) {
+      if (auto code = process.Exited(); code && *code != 0) {
+        why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
+                          *code, iface_);
+        return false;
+      } else if (code) {
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return true;
+  }
+  const auto t0 = Clock::now();
+  while (WallSeconds(t0) < timeout_s) {
+    for (const auto& st : broker_->Stats()) {
+      if (st.name == iface_ && st.clients >= 2) return true;
+    }
+    if (auto code = process.Exited()) {
+      why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
+                        *code, iface_);
+      return false;
+    }
+    if (pumped_) {
+      broker_->Pump(2);  // its connection and its requests need a broker pass
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  }
+  why = fmt::format("the firmware did not open {} within {} s", iface_, timeout_s);
+  return false;
+}
+
+bool FirmwareLink::Send(const bus::CanFrame& frame) {
+  if (pumped_) {
+    const bool ok = broker_->SendLocal(local_port_, frame);
+    // A pumped broker moves nothing on its own: hand the firmware what piled up between two
+    // waits for it before its socket fills.
+    if (++unpumped_frames_ >= kMaxUnpumpedFrames) Pump(0);
+    return ok;
+  }
+  return !can_->Send(frame);
+}
+
+void FirmwareLink::Pump(int timeout_ms) {
+  unpumped_frames_ = 0;
+  if (!broker_->Pump(timeout_ms)) run_.Fail("the userspace bus stopped");
+}
+
+void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
+  bus::ReceivedFrame rx;
+  int wait = timeout_ms;
+  while (!can_->Receive(rx, wait)) {
+    on_frame(rx.frame);
+    wait = 0;
+  }
+}
+
+bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
+                           FirmwareProcess& process, const FrameFn& on_frame) {
+  const auto t0 = Clock::now();
+  while (!done()) {
+    const double left = timeout_s - WallSeconds(t0);
+    if (left <= 0) return false;
+    bus::ReceivedFrame rx;
+    const int wait_ms = std::max(1, std::min(50, static_cast<int>(left * 1000)));
+    if (pumped_) {
+      // Frames already routed to us first; else one broker pass, which hands the firmware what
+      // the emulator sent since the last one and then sleeps until the firmware writes.
+      if (broker_->ReceiveLocal(local_port_, &rx.frame)) {
+        on_frame(rx.frame);
+        continue;
+      }
+      Pump(wait_ms);
+      if (run_.failed()) return false;
+      // waitpid costs a system call: look at most every 20 ms (a pass ends on any traffic).
+      if (process.running() && WallSeconds(last_exit_check_) > 0.02) {
+        last_exit_check_ = Clock::now();
+        if (process.Exited()) {
+          run_.Fail("the firmware exited during the run (see firmware.log)");
+          return false;
+        }
+      }
+      continue;
+    }
+    const auto ec = can_->Receive(rx, wait_ms);
+    if (!ec) {
+      on_frame(rx.frame);
+    } else if (process.running() && process.Exited()) {
+      run_.Fail("the firmware exited during the run (see firmware.log)");
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace wheelhil::emulator::firmware

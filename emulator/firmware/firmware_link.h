@@ -1,0 +1,80 @@
+#pragma once
+/// The run's connection to the firmware's CAN interface. By default a private userspace bus:
+/// a UcanBroker on "ucan0" in a fresh runtime directory (exported as WHEELHIL_UCAN_DIR; the
+/// firmware reaches it through the SocketCAN interposition library). In lockstep the run's own
+/// thread routes that bus (UcanBroker::Pump) through an in-process port, so a cycle costs two
+/// context switches (to the firmware and back) rather than one per hop through a broker thread;
+/// otherwise, and on a kernel interface (--can vcan0), a SocketCAN socket.
+/// Frames to the firmware go out with Send; the firmware's frames come in only while the run
+/// waits for it (WaitFor) or drains it (Drain, real time), handed to the frame callback.
+/// Run-time failures (the bus stopped, the firmware exited) go to the RunContext.
+/// Thread-compatible (one run per process: it sets WHEELHIL_UCAN_DIR in this process).
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "bus/can_frame.h"
+#include "bus/socketcan_transport.h"
+#include "bus/ucan_broker.h"
+#include "emulator/firmware/firmware_process.h"
+#include "emulator/sim/run_context.h"
+
+namespace wheelhil::emulator::firmware {
+
+class FirmwareLink {
+ public:
+  using FrameFn = std::function<void(const bus::CanFrame&)>;
+
+  /// `can_iface` empty: the private userspace bus. Throws what the transport throws for a
+  /// kernel interface that cannot be opened.
+  FirmwareLink(const std::string& can_iface, bool lockstep, sim::RunContext& run);
+  ~FirmwareLink();
+
+  const std::string& interface() const { return iface_; }
+  bool private_bus() const { return broker_ != nullptr; }
+  const std::string& runtime_dir() const { return runtime_dir_; }
+
+  /// Remembers what a kernel bus had before the firmware starts (see WaitForConnection).
+  void BeforeFirmwareStarts();
+  /// Waits (wall clock, up to timeout_s) until the firmware opened the interface; false with
+  /// `why` when it exited before or never did.
+  bool WaitForConnection(FirmwareProcess& process, double timeout_s, std::string& why);
+
+  /// A frame for the firmware; false when it could not be handed over.
+  bool Send(const bus::CanFrame& frame);
+  /// Hands the firmware's frames to `on_frame` until `done()` or timeout_s of wall time; false
+  /// on timeout or a failure (in the RunContext).
+  bool WaitFor(const std::function<bool()>& done, double timeout_s, FirmwareProcess& process,
+               const FrameFn& on_frame);
+  /// Real time: hands over what the firmware sent so far, waiting at most timeout_ms for it.
+  void Drain(int timeout_ms, const FrameFn& on_frame);
+  /// Closes the transport and the private bus (its runtime directory goes with it).
+  void Close();
+
+ private:
+  void Pump(int timeout_ms);
+
+  sim::RunContext& run_;
+  std::string iface_;
+  std::string runtime_dir_;
+  std::unique_ptr<bus::UcanBroker> broker_;
+  std::optional<bus::SocketCanTransport> can_;
+  bool pumped_ = false;
+  int local_port_ = -1;  // the emulator's port on the pumped bus
+  static constexpr int kMaxUnpumpedFrames = 32;
+  int unpumped_frames_ = 0;
+  int kernel_receivers_before_ = -1;
+  std::chrono::steady_clock::time_point last_exit_check_{};
+};
+
+/// CAN receivers the kernel has registered on `iface` (one per filter of every bound CAN
+/// socket), from /proc/net/can/rcvlist_*; -1 when none of those lists can be read.
+int CountKernelCanReceivers(const std::string& iface);
+
+}  // namespace wheelhil::emulator::firmware

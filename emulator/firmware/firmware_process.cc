@@ -1,0 +1,76 @@
+#include "emulator/firmware/firmware_process.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <stdexcept>
+#include <thread>
+
+namespace wheelhil::emulator::firmware {
+
+void FirmwareProcess::Start(const std::string& command,
+                            const std::vector<std::pair<std::string, std::string>>& env,
+                            const std::string& log_path) {
+  const int log_fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  pid_ = ::fork();
+  if (pid_ < 0) {
+    if (log_fd >= 0) ::close(log_fd);
+    throw std::runtime_error("fork failed");
+  }
+  if (pid_ == 0) {
+    ::setpgid(0, 0);
+    for (const auto& [k, v] : env) ::setenv(k.c_str(), v.c_str(), 1);
+    if (log_fd >= 0) {
+      ::dup2(log_fd, 1);
+      ::dup2(log_fd, 2);
+    }
+    const std::string sh = "exec " + command;
+    ::execl("/bin/sh", "sh", "-c", sh.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Also here: the group exists before the parent may signal it, whichever runs first.
+  (void)::setpgid(pid_, pid_);
+  started_ = true;
+  if (log_fd >= 0) ::close(log_fd);
+}
+
+std::optional<int> FirmwareProcess::Exited() {
+  if (pid_ <= 0) return std::nullopt;
+  int status = 0;
+  if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+    // Helpers it left in its group go with it.
+    (void)::kill(-pid_, SIGKILL);
+    pid_ = -1;
+    exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    return exit_status_;
+  }
+  return std::nullopt;
+}
+
+void FirmwareProcess::Stop() {
+  if (pid_ <= 0) return;
+  const pid_t group = pid_;
+  (void)::kill(-group, SIGTERM);
+  for (int i = 0; i < 200; ++i) {
+    if (Exited()) return;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  (void)::kill(-group, SIGKILL);
+  int status = 0;
+  ::waitpid(pid_, &status, 0);
+  pid_ = -1;
+}
+
+std::string Substitute(std::string s, const std::string& key, const std::string& value) {
+  for (std::size_t pos = s.find(key); pos != std::string::npos; pos = s.find(key, pos)) {
+    s.replace(pos, key.size(), value);
+    pos += value.size();
+  }
+  return s;
+}
+
+}  // namespace wheelhil::emulator::firmware

@@ -1,0 +1,96 @@
+#include "emulator/firmware/lockstep_handshake.h"
+
+#include "bus/dbc_codec.h"
+
+namespace wheelhil::emulator::firmware {
+
+namespace {
+
+// CiA 301 COB-IDs the handshake reads.
+namespace co {
+constexpr std::uint32_t kNmtId = 0x000;
+constexpr std::uint32_t kSyncId = 0x080;
+constexpr bool IsHeartbeat(std::uint32_t id) { return id >= 0x701 && id <= 0x77F; }
+constexpr bool IsSdoResponse(std::uint32_t id) { return id >= 0x581 && id <= 0x5FF; }
+constexpr bool IsSdoRequest(std::uint32_t id) { return id >= 0x601 && id <= 0x67F; }
+constexpr std::uint32_t NodeOf(std::uint32_t id) { return id & 0x7F; }
+constexpr std::uint8_t kBootUp = 0x00;
+}  // namespace co
+
+constexpr std::uint32_t kFwStatusId = 0x686;
+
+std::vector<const bus::DbcSignal*> SignalsNamed(const bus::DbcMessage* msg, const char* name) {
+  std::vector<const bus::DbcSignal*> out;
+  if (msg == nullptr) return out;
+  for (const auto& sg : msg->signals) {
+    if (sg.name == name) out.push_back(&sg);
+  }
+  return out;
+}
+
+}  // namespace
+
+LockstepHandshake::LockstepHandshake(std::shared_ptr<const bus::DbcDatabase> firmware_dbc,
+                                     const sim::BusHub& hub, sim::RunContext& run)
+    : dbc_(std::move(firmware_dbc)), hub_(hub), run_(run) {
+  status_msg_ = dbc_->FindMessage(kFwStatusId, false);
+  status_cycle_ = SignalsNamed(status_msg_, "Status_Cycle");
+  status_state_ = SignalsNamed(status_msg_, "Status_State");
+}
+
+void LockstepHandshake::ExpectSyncAnswers(std::vector<SyncAnswer> answers) {
+  answers_ = std::move(answers);
+  all_answers_ = answers_.empty() ? 0u : static_cast<std::uint32_t>((1ull << answers_.size()) - 1);
+}
+
+void LockstepHandshake::OnEmulatorFrame(const WireFrame& w, int device) {
+  if (w.frame.extended) return;
+  const std::uint32_t id = w.frame.id;
+  if (id == co::kSyncId && device == -1) {
+    answers_since_sync_ = 0;
+    ++syncs_on_wire_;
+  }
+  for (std::size_t i = 0; i < answers_.size(); ++i) {
+    if (device == answers_[i].device && id == answers_[i].id && w.frame.len == answers_[i].len) {
+      answers_since_sync_ |= 1u << i;
+    }
+  }
+  // Boot-ups and SDO answers: the firmware reacts to each.
+  if ((co::IsHeartbeat(id) && w.frame.len == 1 &&
+       w.frame.data[0] == co::kBootUp) ||
+      co::IsSdoResponse(id)) {
+    awaiting_nodes_.insert(static_cast<int>(co::NodeOf(id)));
+  }
+}
+
+void LockstepHandshake::OnFirmwareFrame(const bus::CanFrame& f) {
+  if (f.extended) return;
+  // Reactions the start-up waits for: SDO requests and NMT commands.
+  if (co::IsSdoRequest(f.id)) awaiting_nodes_.erase(static_cast<int>(co::NodeOf(f.id)));
+  if (f.id == co::kNmtId && f.len >= 2) {
+    if (f.data[1] == 0) {
+      awaiting_nodes_.clear();
+    } else {
+      awaiting_nodes_.erase(f.data[1]);
+    }
+  }
+  if (status_msg_ == nullptr || f.id != kFwStatusId) return;
+  auto get = [&](const std::vector<const bus::DbcSignal*>& sigs) {
+    double value = 0.0;
+    for (const bus::DbcSignal* sig : sigs) {
+      if (bus::DecodeSignalIfPresent(*status_msg_, *sig, f, &value)) return value;
+    }
+    return 0.0;
+  };
+  ++status_frames_;
+  last_status_cycle_ = static_cast<int>(get(status_cycle_));
+  const int state = static_cast<int>(get(status_state_));
+  if (state != last_state_) {
+    last_state_ = state;
+    const double t = static_cast<double>(hub_.now_ns()) * 1e-9 - run_.motion0_s;
+    run_.events.push_back(
+        nlohmann::json{{"t_s", t}, {"event", "firmware_state"}, {"state", state}});
+  }
+}
+
+}  // namespace wheelhil::emulator::firmware

@@ -1,0 +1,56 @@
+#include "emulator/firmware/wheelhil_fw_config.h"
+
+#include <filesystem>
+#include <stdexcept>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+namespace wheelhil::emulator::firmware {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+void Merge(YAML::Node base, const YAML::Node& over) {
+  for (const auto& kv : over) {
+    const std::string key = kv.first.as<std::string>();
+    if (kv.second.IsMap() && base[key] && base[key].IsMap()) {
+      Merge(base[key], kv.second);
+    } else {
+      base[key] = kv.second;
+    }
+  }
+}
+
+}  // namespace
+
+std::string DerivedWheelhilFwConfig(const std::string& config_path,
+                                    const std::string& overrides_yaml,
+                                    const WheelhilFwRunSettings& run) {
+  YAML::Node cfg;
+  try {
+    cfg = YAML::LoadFile(config_path);
+    if (!overrides_yaml.empty()) Merge(cfg, YAML::Load(overrides_yaml));
+  } catch (const YAML::Exception& e) {
+    throw std::invalid_argument(fmt::format("{}: firmware config: {}", config_path, e.what()));
+  }
+  if (cfg["dbc_dir"] && cfg["dbc_dir"].IsScalar()) {
+    const fs::path p(cfg["dbc_dir"].Scalar());
+    if (p.is_relative()) {
+      cfg["dbc_dir"] = (fs::path(config_path).parent_path() / p).lexically_normal().string();
+    }
+  }
+  cfg["sync"]["produce"] = false;
+  cfg["sync"]["period_s"] = run.sync_period_s;
+  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames. In
+  // lockstep there is none: the firmware would apply it on its own clock, which is not the
+  // virtual time of the frames, so whether a frame counts as in time would depend on how the
+  // host scheduled the run. The next SYNC closes an incomplete cycle instead (docs/firmware.md).
+  cfg["sync"]["deadline_s"] = run.lockstep ? 0.0 : run.sync_period_s;
+  YAML::Emitter e;
+  e << cfg;
+  return std::string("# Derived by wheelhil run from ") + config_path + "\n" + e.c_str() + "\n";
+}
+
+}  // namespace wheelhil::emulator::firmware

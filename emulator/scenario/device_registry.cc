@@ -1,0 +1,106 @@
+#include "emulator/scenario/device_registry.h"
+
+#include <cmath>
+#include <functional>
+#include <random>
+
+#include "bus/dbc.h"
+#include "emulator/devices/accel4_device.h"
+#include "emulator/devices/cia406_encoder_device.h"
+#include "emulator/devices/dbc_cia406_codec.h"
+#include "emulator/devices/mm5_gyro_device.h"
+
+namespace wheelhil::emulator::scenario {
+
+namespace {
+
+using Devices = std::vector<std::unique_ptr<Device>>;
+using Builder = std::function<void(const DeviceBuildContext&, Devices&)>;
+
+void BuildEncoders(const DeviceBuildContext& c, Devices& out) {
+  const SensorsSpec& sensors = c.scenario.sensors;
+  if (sensors.encoders.empty()) return;
+  const auto codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
+  std::uint64_t k = 0;
+  for (const auto& e : sensors.encoders) {
+    Cia406EncoderDeviceConfig dc;
+    dc.wheel_name = e.wheel;
+    dc.wheel_index = c.scenario.platform.wheel_index(e.wheel);
+    dc.direction = e.direction;
+    EncoderParams& ep = dc.encoder;
+    ep.lines_per_rev = sensors.encoder_lines_per_rev;
+    ep.quadrature_x4 = sensors.encoder_quadrature_x4;
+    ep.missed_count_prob = sensors.encoder_missed_count_prob;
+    ep.glitch_prob = sensors.encoder_glitch_prob;
+    ep.seed = c.seed * 1000003ull + (++k);
+    // A disc is mounted at no particular angle: an edge right at the start angle would make a
+    // wheel that only settles there flip a count back and forth. Drawn apart from ep.seed's
+    // stream so that the encoder's own imperfections keep their draws.
+    std::mt19937_64 phase_rng(ep.seed ^ 0xD15C0FFull);
+    ep.disc_phase_counts = std::uniform_real_distribution<double>(0.0, 1.0)(phase_rng);
+    dc.initial_angle_rad = c.wheels[dc.wheel_index].angle_rad;
+    dc.node.node_id = static_cast<std::uint8_t>(e.node_id);
+    dc.node.heartbeat_ms = static_cast<std::uint16_t>(sensors.heartbeat_ms);
+    const bus::DbcMessage* tpdo1 =
+        codec->database().FindMessage(0x180u + static_cast<std::uint32_t>(e.node_id), false);
+    dc.tpdo1_len = tpdo1 != nullptr ? static_cast<std::uint8_t>(tpdo1->length) : 0;
+    out.push_back(std::make_unique<Cia406EncoderDevice>(dc, codec));
+  }
+}
+
+void BuildMm5Gyro(const DeviceBuildContext& c, Devices& out) {
+  const SensorsSpec& sensors = c.scenario.sensors;
+  if (!sensors.gyro) return;
+  GyroParams gp;
+  gp.rate_hz = sensors.gyro_rate_hz;
+  gp.noise_density_rad_s_sqrt_hz = sensors.gyro_noise_density_rad_s_sqrt_hz;
+  gp.bias_rad_s = sensors.gyro_bias_rad_s;
+  gp.bias_random_walk_rad_s_sqrt_s = sensors.gyro_bias_random_walk_rad_s_sqrt_s;
+  gp.seed = c.seed * 7919ull + 17;
+  auto dbc = std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(c.dbc_dir + "/bosch_mm5_10.dbc"));
+  out.push_back(std::make_unique<Mm5GyroDevice>(dbc, gp, std::llround(1e9 / gp.rate_hz)));
+}
+
+void BuildAccel4(const DeviceBuildContext& c, Devices& out) {
+  const SensorsSpec& sensors = c.scenario.sensors;
+  if (!sensors.accel4) return;
+  auto params =
+      Paper002AccelParams(sensors.accel4_radius_m, sensors.accel4_rate_hz, c.seed * 104729ull + 31);
+  for (std::size_t i = 0; i < 4; ++i) {
+    params[i].noise_density_m_s2_sqrt_hz = sensors.accel4_noise_density_m_s2_sqrt_hz;
+    if (!sensors.accel4_bias_m_s2.empty()) params[i].bias_m_s2 = {sensors.accel4_bias_m_s2[i]};
+    if (!sensors.accel4_scale_error.empty()) {
+      params[i].scale_error = {sensors.accel4_scale_error[i]};
+    }
+  }
+  auto dbc = std::make_shared<const bus::DbcDatabase>(
+      bus::DbcDatabase::LoadFile(c.dbc_dir + "/wheelhil_accel4.dbc"));
+  out.push_back(
+      std::make_unique<Accel4Device>(dbc, params, std::llround(1e9 / sensors.accel4_rate_hz)));
+}
+
+const std::vector<std::pair<std::string, Builder>>& Builders() {
+  static const std::vector<std::pair<std::string, Builder>> builders{
+      {"cia406_encoder", BuildEncoders}, {"mm5_10", BuildMm5Gyro}, {"accel4", BuildAccel4}};
+  return builders;
+}
+
+}  // namespace
+
+const std::vector<std::string>& DeviceKinds() {
+  static const std::vector<std::string> kinds = [] {
+    std::vector<std::string> k;
+    for (const auto& [name, builder] : Builders()) k.push_back(name);
+    return k;
+  }();
+  return kinds;
+}
+
+std::vector<std::unique_ptr<Device>> BuildScenarioDevices(const DeviceBuildContext& context) {
+  Devices devices;
+  for (const auto& [name, build] : Builders()) build(context, devices);
+  return devices;
+}
+
+}  // namespace wheelhil::emulator::scenario

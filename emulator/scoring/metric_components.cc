@@ -1,0 +1,206 @@
+#include "emulator/scoring/metric_components.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+namespace wheelhil::emulator::scoring {
+
+namespace {
+
+using nlohmann::json;
+
+class PoseComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "pose"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    for (const auto& [name, est] : run.estimates.pose_streams()) {
+      const PoseMetrics m = ComputePoseMetrics(run.truth.poses(), est);
+      metrics[name] = json{{"final_position_error_m", m.final_position_error_m},
+                           {"final_heading_error_rad", m.final_heading_error_rad},
+                           {"ape_rmse_m", m.ape_rmse_m},
+                           {"distance_m", m.distance_m},
+                           {"rotation_rad", m.rotation_rad},
+                           {"samples", m.samples}};
+      if (m.distance_m > 0) {
+        metrics[name]["final_position_error_pct_of_distance"] =
+            100.0 * m.final_position_error_m / m.distance_m;
+      }
+    }
+  }
+};
+
+// Paper 000, Table 2: the corrected stream ("pose") against the uncorrected one ("pose_raw").
+class CorrectionRatioComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "correction_ratio"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    const auto& streams = run.estimates.pose_streams();
+    const auto corrected = streams.find("pose");
+    const auto uncorrected = streams.find("pose_raw");
+    if (corrected == streams.end() || uncorrected == streams.end()) return;
+    const double c =
+        ComputePoseMetrics(run.truth.poses(), corrected->second).final_position_error_m;
+    const double u =
+        ComputePoseMetrics(run.truth.poses(), uncorrected->second).final_position_error_m;
+    metrics["correction"] = json{{"uncorrected_over_corrected", c > 0 ? u / c : 0.0},
+                                 {"corrected_below_uncorrected", c < u}};
+  }
+};
+
+class VelocityComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "velocity"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    for (const auto& [name, est] : run.estimates.velocity_streams()) {
+      metrics[name]["velocity_rmse_m_s"] = VelocityRmse(run.truth.velocities(), est);
+      metrics[name]["samples"] = est.size();
+    }
+  }
+};
+
+class TruthComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "truth"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>& events) const override {
+    double slip_time = 0;
+    for (const auto& iv : run.slip_intervals) {
+      events.push_back(json{
+          {"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s}, {"end_s", iv.end_s}});
+      slip_time += iv.end_s - iv.start_s;
+    }
+    metrics["truth"] = json{{"slip_intervals", run.slip_intervals.size()},
+                            {"slip_time_s", slip_time},
+                            {"distance_m", PathLength(run.truth.poses())},
+                            {"rotation_rad", TotalRotation(run.truth.poses())}};
+  }
+};
+
+// Episodes are merged over regained contact shorter than 10 ms, so a wheel chattering over a
+// bump is one episode; the time is the steps off the floor.
+class ContactComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "contact"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>& events) const override {
+    json contact = json::object();
+    int wheels_losing_contact = 0;
+    std::size_t all_episodes = 0;
+    const double step_s = run.truth.step_s();
+    const auto& airborne = run.truth.airborne();
+    for (std::size_t w = 0; w < airborne.size(); ++w) {
+      const auto episodes = FlagsToIntervals(run.truth.step_t_s(), airborne[w], step_s, 0.01, 0.0);
+      if (episodes.empty()) continue;
+      const std::string& wheel = run.wheel_names[w];
+      double longest = 0;
+      for (const auto& iv : episodes) {
+        longest = std::max(longest, iv.end_s - iv.start_s);
+        events.push_back(json{{"t_s", iv.start_s},
+                              {"event", "contact_lost"},
+                              {"wheel", wheel},
+                              {"start_s", iv.start_s},
+                              {"end_s", iv.end_s}});
+      }
+      const auto steps = std::count(airborne[w].begin(), airborne[w].end(), true);
+      ++wheels_losing_contact;
+      all_episodes += episodes.size();
+      contact[wheel + "_episodes"] = episodes.size();
+      contact[wheel + "_time_s"] = static_cast<double>(steps) * step_s;
+      contact[wheel + "_longest_s"] = longest;
+    }
+    contact["wheels_losing_contact"] = wheels_losing_contact;
+    contact["episodes"] = all_episodes;
+    metrics["contact"] = contact;
+  }
+};
+
+// Paper 000: the firmware's per-cycle slip flags against the ground-truth intervals. Without
+// flags, the block only counts the truth intervals.
+class SlipDetectionComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "slip_detection"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    const auto& detections = run.estimates.detections();
+    if (detections.empty()) {
+      if (!run.slip_intervals.empty()) {
+        metrics["slip"] = json{{"truth_intervals", run.slip_intervals.size()}};
+      }
+      return;
+    }
+    const SlipMetrics sm = ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
+    json j{{"precision", sm.precision},
+           {"recall", sm.recall},
+           {"true_positive", sm.true_positive},
+           {"false_positive", sm.false_positive},
+           {"false_negative", sm.false_negative},
+           {"true_negative", sm.true_negative},
+           {"truth_intervals", sm.intervals},
+           {"intervals_detected", sm.intervals_detected},
+           {"detections", std::count_if(detections.begin(), detections.end(),
+                                        [](const DetectionSample& d) { return d.detected; })}};
+    if (sm.mean_latency_s) j["mean_latency_s"] = *sm.mean_latency_s;
+    if (sm.max_latency_s) j["max_latency_s"] = *sm.max_latency_s;
+    metrics["slip"] = j;
+  }
+};
+
+// Paper 000: is the firmware's calibrated residual normal (its band assumes it is)?
+class ResidualNormalityComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "residual_normality"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    const auto& residual = run.estimates.residual().residual_rad;
+    if (run.estimates.detections().empty() || residual.empty()) return;
+    const NormalityResult n = NormalityTest(residual);
+    metrics["residual"] = json{{"samples", n.n},
+                               {"mean_rad", n.mean},
+                               {"sigma_rad", n.sigma},
+                               {"skewness_g1", n.g1},
+                               {"excess_kurtosis_g2", n.g2},
+                               {"u1", n.u1},
+                               {"u2", n.u2},
+                               {"normality_accepted", n.accepted}};
+  }
+};
+
+}  // namespace
+
+const std::vector<std::string>& MetricComponentNames() {
+  // The canonical order: the events of "truth" (slip) come before those of "contact" at one
+  // instant.
+  static const std::vector<std::string> names{"pose",    "correction_ratio", "velocity",
+                                              "truth",   "contact",          "slip_detection",
+                                              "residual_normality"};
+  return names;
+}
+
+std::unique_ptr<MetricComponent> MakeMetricComponent(std::string_view name) {
+  if (name == "pose") return std::make_unique<PoseComponent>();
+  if (name == "correction_ratio") return std::make_unique<CorrectionRatioComponent>();
+  if (name == "velocity") return std::make_unique<VelocityComponent>();
+  if (name == "truth") return std::make_unique<TruthComponent>();
+  if (name == "contact") return std::make_unique<ContactComponent>();
+  if (name == "slip_detection") return std::make_unique<SlipDetectionComponent>();
+  if (name == "residual_normality") return std::make_unique<ResidualNormalityComponent>();
+  throw std::invalid_argument(fmt::format("unknown metric component '{}' (known: {})", name,
+                                          fmt::join(MetricComponentNames(), ", ")));
+}
+
+std::vector<Interval> SlipIntervals(const TruthRecorder& truth) {
+  return FlagsToIntervals(truth.step_t_s(), truth.slipping(), truth.step_s(), 0.02, 0.0);
+}
+
+void ScoreRun(const RecordedRun& run, const std::vector<std::string>& selected, json& metrics,
+              std::vector<json>& events) {
+  for (const std::string& name : MetricComponentNames()) {
+    if (!selected.empty() && std::find(selected.begin(), selected.end(), name) == selected.end()) {
+      continue;
+    }
+    MakeMetricComponent(name)->Compute(run, metrics, events);
+  }
+  std::stable_sort(events.begin(), events.end(), [](const json& a, const json& b) {
+    return a["t_s"].get<double>() < b["t_s"].get<double>();
+  });
+}
+
+}  // namespace wheelhil::emulator::scoring

@@ -1,0 +1,91 @@
+#include "emulator/scoring/run_artefacts.h"
+
+#include <cmath>
+
+#include "emulator/scoring/artefacts.h"
+#include "emulator/scoring/metrics.h"
+
+namespace wheelhil::emulator::scoring {
+
+void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
+                       const TruthRecorder& truth, const EstimateDecoder& estimates,
+                       const std::vector<nlohmann::json>& events) {
+  const auto& truth_pose = truth.poses();
+  const auto& truth_vel = truth.velocities();
+  const auto& pose_streams = estimates.pose_streams();
+  const auto& vel_streams = estimates.velocity_streams();
+  const ResidualTrace& residual = estimates.residual();
+  WriteTruthCsv(out + "/truth.csv", truth.rows());
+  WriteEstimateCsv(out + "/estimate.csv", estimates.rows());
+  WriteTum(out + "/truth.tum", truth_pose);
+  if (const auto it = pose_streams.find("pose"); it != pose_streams.end()) {
+    WriteTum(out + "/estimate.tum", it->second);
+  }
+  if (const auto it = pose_streams.find("pose_raw"); it != pose_streams.end()) {
+    WriteTum(out + "/estimate_raw.tum", it->second);
+  }
+  WriteJsonLines(out + "/events.jsonl", events);
+  WriteText(out + "/report.json", report.dump(2) + "\n");
+
+  const char* colors[] = {"#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"};
+  std::vector<std::string> plots;
+  {
+    std::vector<Series> ss;
+    Series t{"truth", "#1f77b4", {}, {}};
+    for (const auto& p : truth_pose) t.x.push_back(p.x_m), t.y.push_back(p.y_m);
+    ss.push_back(t);
+    int c = 0;
+    for (const auto& [name, est] : pose_streams) {
+      Series e{name, colors[c++ % 5], {}, {}, true};
+      for (const auto& p : est) e.x.push_back(p.x_m), e.y.push_back(p.y_m);
+      ss.push_back(e);
+    }
+    plots.push_back(SvgPlot("Trajectory: truth vs estimates", "x [m]", "y [m]", ss, false));
+  }
+  if (!residual.residual_rad.empty()) {
+    std::vector<Series> ss{{"residual r", "#1f77b4", residual.t_s, residual.residual_rad},
+                           {"band lower", "#d62728", residual.t_s, residual.band_lower_rad, true},
+                           {"band upper", "#d62728", residual.t_s, residual.band_upper_rad, true}};
+    plots.push_back(
+        SvgPlot("Paper 000 residual against its band (cf. fig 8)", "t [s]", "r [rad]", ss));
+  }
+  if (!vel_streams.empty()) {
+    std::vector<Series> ss;
+    Series t{"truth vx", "#1f77b4", {}, {}};
+    for (const auto& v : truth_vel) t.x.push_back(v.t_s), t.y.push_back(v.vx_m_s);
+    ss.push_back(t);
+    int c = 0;
+    for (const auto& [name, est] : vel_streams) {
+      Series e{name + " vx", colors[c++ % 5], {}, {}, true};
+      for (const auto& v : est) e.x.push_back(v.t_s), e.y.push_back(v.vx_m_s);
+      ss.push_back(e);
+    }
+    plots.push_back(SvgPlot("Forward velocity (cf. paper 002 figs 2-4)", "t [s]", "vx [m/s]", ss));
+  }
+  if (!pose_streams.empty() && !truth_pose.empty()) {
+    std::vector<Series> ss;
+    int c = 0;
+    for (const auto& [name, est] : pose_streams) {
+      Series e{name, colors[c++ % 5], {}, {}};
+      // Distance travelled (truth) at each estimate sample vs the position error there.
+      std::size_t j = 0;
+      double dist = 0;
+      for (const auto& p : est) {
+        while (j + 1 < truth_pose.size() && truth_pose[j + 1].t_s <= p.t_s) {
+          dist += std::hypot(truth_pose[j + 1].x_m - truth_pose[j].x_m,
+                             truth_pose[j + 1].y_m - truth_pose[j].y_m);
+          ++j;
+        }
+        const PoseSample t = InterpolatePose(truth_pose, p.t_s);
+        e.x.push_back(dist);
+        e.y.push_back(std::hypot(p.x_m - t.x_m, p.y_m - t.y_m));
+      }
+      ss.push_back(e);
+    }
+    plots.push_back(
+        SvgPlot("Position error over distance travelled", "distance [m]", "error [m]", ss));
+  }
+  WriteText(out + "/report.html", HtmlReport(report, plots));
+}
+
+}  // namespace wheelhil::emulator::scoring
