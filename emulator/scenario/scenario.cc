@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "emulator/scoring/metric_components.h"
 #include "emulator/scoring/metrics.h"
 
 namespace wheelhil::emulator::scenario {
@@ -834,6 +835,31 @@ platforms::BodyTwist TwistAt(const std::vector<MotionSegment>& motion, double t_
   return {};
 }
 
+// `scoring: {metrics: [name, ...]}`: the metric components that score the run (default: the
+// generic ones).
+std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
+  if (!n.IsDefined() || n.IsNull()) return scoring::DefaultMetricComponents();
+  r.CheckKeys(n, "scoring", {"metrics"});
+  const YAML::Node m = n["metrics"];
+  if (!m.IsDefined() || m.IsNull()) return scoring::DefaultMetricComponents();
+  if (!m.IsSequence()) r.Fail(m, "scoring.metrics", "must be a list of metric component names");
+  const auto& known = scoring::MetricComponentNames();
+  std::vector<std::string> names;
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    const std::string f = fmt::format("scoring.metrics[{}]", i);
+    if (!m[i].IsScalar()) r.Fail(m[i], f, "must be a metric component name");
+    const std::string name = m[i].Scalar();
+    if (std::find(known.begin(), known.end(), name) == known.end()) {
+      r.Fail(m[i], f, fmt::format("'{}' is not one of {}", name, fmt::join(known, ", ")));
+    }
+    if (std::find(names.begin(), names.end(), name) != names.end()) {
+      r.Fail(m[i], f, fmt::format("'{}' is listed twice", name));
+    }
+    names.push_back(name);
+  }
+  return names;
+}
+
 Scenario ParseScenario(const std::string& text, const std::string& file) {
   Reader r(file);
   YAML::Node root;
@@ -846,7 +872,7 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
   r.CheckKeys(root, "",
               {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "faults",
-               "firmware", "timing", "expectations", "slip_threshold_m_s"});
+               "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s"});
   Scenario s;
   s.source_path = file;
   s.name = r.String(root, "name", "", std::nullopt);
@@ -883,6 +909,7 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   s.firmware = ReadFirmware(r, root["firmware"]);
   s.timing = ReadTiming(r, root["timing"], MotionDuration(s.motion));
   s.expectations = ReadExpectations(r, root["expectations"]);
+  s.metric_components = ReadScoring(r, root["scoring"]);
   if (root["slip_threshold_m_s"]) {
     s.slip_threshold_m_s = r.Number(root, "slip_threshold_m_s", "", 1e-6, 10, std::nullopt);
   }

@@ -70,6 +70,11 @@ class TruthComponent final : public MetricComponent {
           {"t_s", iv.start_s}, {"event", "slip"}, {"start_s", iv.start_s}, {"end_s", iv.end_s}});
       slip_time += iv.end_s - iv.start_s;
     }
+    // The slip block counts the truth intervals; slip_detection, when selected and the firmware
+    // flags slips, replaces it with its scores (which count them too).
+    if (!run.slip_intervals.empty()) {
+      metrics["slip"] = json{{"truth_intervals", run.slip_intervals.size()}};
+    }
     metrics["truth"] = json{{"slip_intervals", run.slip_intervals.size()},
                             {"slip_time_s", slip_time},
                             {"distance_m", PathLength(run.truth.poses())},
@@ -114,19 +119,13 @@ class ContactComponent final : public MetricComponent {
   }
 };
 
-// Paper 000: the firmware's per-cycle slip flags against the ground-truth intervals. Without
-// flags, the block only counts the truth intervals.
+// Paper 000: the firmware's per-cycle slip flags against the ground-truth intervals.
 class SlipDetectionComponent final : public MetricComponent {
  public:
   std::string_view name() const override { return "slip_detection"; }
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
     const auto& detections = run.estimates.detections();
-    if (detections.empty()) {
-      if (!run.slip_intervals.empty()) {
-        metrics["slip"] = json{{"truth_intervals", run.slip_intervals.size()}};
-      }
-      return;
-    }
+    if (detections.empty()) return;
     const SlipMetrics sm = ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
     json j{{"precision", sm.precision},
            {"recall", sm.recall},
@@ -186,6 +185,10 @@ std::unique_ptr<MetricComponent> MakeMetricComponent(std::string_view name) {
                                           fmt::join(MetricComponentNames(), ", ")));
 }
 
+std::vector<std::string> DefaultMetricComponents() {
+  return {"pose", "velocity", "truth", "contact"};
+}
+
 std::vector<Interval> SlipIntervals(const TruthRecorder& truth) {
   return FlagsToIntervals(truth.step_t_s(), truth.slipping(), truth.step_s(), 0.02, 0.0);
 }
@@ -193,7 +196,7 @@ std::vector<Interval> SlipIntervals(const TruthRecorder& truth) {
 void ScoreRun(const RecordedRun& run, const std::vector<std::string>& selected, json& metrics,
               std::vector<json>& events) {
   for (const std::string& name : MetricComponentNames()) {
-    if (!selected.empty() && std::find(selected.begin(), selected.end(), name) == selected.end()) {
+    if (std::find(selected.begin(), selected.end(), name) == selected.end()) {
       continue;
     }
     MakeMetricComponent(name)->Compute(run, metrics, events);

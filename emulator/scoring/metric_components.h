@@ -46,13 +46,15 @@ class MetricComponent {
 
 /// Every component name, in the canonical order.
 const std::vector<std::string>& MetricComponentNames();
+/// What a scenario gets without `scoring.metrics`: the generic components.
+std::vector<std::string> DefaultMetricComponents();
 /// Throws std::invalid_argument naming the known components for an unknown name.
 std::unique_ptr<MetricComponent> MakeMetricComponent(std::string_view name);
 
 /// The run's slip intervals from its per-step flags (merged over gaps < 20 ms).
 std::vector<Interval> SlipIntervals(const TruthRecorder& truth);
 
-/// Runs the selected components (all when `selected` is empty) in the canonical order on
+/// Runs the selected components in the canonical order on
 /// `metrics`, then sorts `events` by time (stable: events of one instant keep their order).
 void ScoreRun(const RecordedRun& run, const std::vector<std::string>& selected,
               nlohmann::json& metrics, std::vector<nlohmann::json>& events);

@@ -42,6 +42,23 @@ TEST(ScenarioLoader, MinimalLoadsWithDefaults) {
   EXPECT_DOUBLE_EQ(s.timing.physics_rate_hz, 1000.0);
 }
 
+TEST(ScenarioLoader, ScoringSelectsMetricComponentsGenericByDefault) {
+  EXPECT_EQ(ParseScenario(Minimal(), kFile).metric_components,
+            (std::vector<std::string>{"pose", "velocity", "truth", "contact"}));
+  const Scenario s =
+      ParseScenario(Minimal("scoring: {metrics: [pose, correction_ratio]}\n"), kFile);
+  EXPECT_EQ(s.metric_components, (std::vector<std::string>{"pose", "correction_ratio"}));
+}
+
+TEST(ScenarioLoader, UnknownOrRepeatedMetricComponentIsNamed) {
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("scoring: {metrics: [pose, ratio]}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("inline.yaml:10:27: scoring.metrics[1]: 'ratio' is not one of"),
+                        HasSubstr("residual_normality"))));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("scoring: {metrics: [pose, pose]}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("'pose' is listed twice")));
+}
+
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
   EXPECT_THAT(
       [] { (void)ParseScenario(Minimal("speed: 3\n"), kFile); },
