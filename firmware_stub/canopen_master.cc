@@ -7,19 +7,17 @@
 #include <set>
 #include <stdexcept>
 
+#include "bus/canopen.h"
+
 namespace wheelhil::fw {
 namespace {
 
-constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
-constexpr std::uint8_t kNmtStart = 0x01;
-constexpr std::uint8_t kNmtResetCommunication = 0x82;
-constexpr std::uint8_t kStateBootUp = 0x00;
-constexpr std::uint8_t kStatePreOperational = 0x7F;
+namespace canopen = bus::canopen;
+namespace od = bus::canopen::od;
+using canopen::nmt_state::kBootUp;
+using canopen::nmt_state::kPreOperational;
 
-/// Expedited download command byte for `size` data bytes (CiA 301: 0x23/0x27/0x2B/0x2F).
-std::uint8_t DownloadCommand(std::uint8_t size) {
-  return static_cast<std::uint8_t>(0x23 | ((4 - size) << 2));
-}
+constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
 
 }  // namespace
 
@@ -27,7 +25,7 @@ CanopenMaster::CanopenMaster(const CanopenMasterConfig& config, const FwProtocol
     : config_(config), protocol_(protocol) {
   std::set<std::uint8_t> seen;
   for (std::uint8_t id : config_.node_ids) {
-    if (id < 1 || id > 127) {
+    if (!canopen::IsValidNodeId(id)) {
       throw std::invalid_argument(fmt::format("node_id ({}) must be in [1, 127]", id));
     }
     if (!seen.insert(id).second) {
@@ -51,10 +49,11 @@ CanopenMaster::CanopenMaster(const CanopenMasterConfig& config, const FwProtocol
     nodes_.push_back(s);
     NodeRun r;
     if (config_.tpdo_transmission_type != 0) {
-      r.steps.push_back({0x1800, 2, config_.tpdo_transmission_type, 1});
+      r.steps.push_back(
+          {od::kTpdo1Communication, od::kPdoTransmissionType, config_.tpdo_transmission_type, 1});
     }
     if (config_.heartbeat_producer_ms != 0) {
-      r.steps.push_back({0x1017, 0, config_.heartbeat_producer_ms, 2});
+      r.steps.push_back({od::kProducerHeartbeatTime, 0, config_.heartbeat_producer_ms, 2});
     }
     runs_.push_back(r);
   }
@@ -79,7 +78,7 @@ void CanopenMaster::Boot(std::size_t i, std::int64_t t_ns) {
   ++s.boot_count;
   s.lost = false;
   s.last_heartbeat_ns = t_ns;  // The boot-up restarts the consumer timer.
-  s.last_heartbeat_state = kStatePreOperational;
+  s.last_heartbeat_state = kPreOperational;
   r.next_step = 0;
   r.sdo_pending = false;
   r.sdo_attempts = 0;
@@ -110,7 +109,7 @@ void CanopenMaster::SendStep(std::size_t i, std::vector<bus::CanFrame>& out) {
   NodeRun& r = runs_[i];
   const SdoStep& step = r.steps[r.next_step];
   SdoFrame sdo;
-  sdo.command = DownloadCommand(step.size);
+  sdo.command = canopen::sdo::ExpeditedDownloadRequest(step.size);
   sdo.index = step.index;
   sdo.subindex = step.subindex;
   sdo.data = step.value;
@@ -140,7 +139,7 @@ bool CanopenMaster::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns) {
         ++bad_frames_;
         return true;
       }
-      if (state == kStateBootUp) {
+      if (state == kBootUp) {
         Boot(i, t_ns);
         return true;
       }
@@ -151,8 +150,7 @@ bool CanopenMaster::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns) {
         // Booted before we listened: configure it now (a heartbeat proves it is there).
         Boot(i, t_ns);
         s.last_heartbeat_state = state;
-      } else if (s.state == NodeState::kOperational && state == kStatePreOperational &&
-                 !r.start_now) {
+      } else if (s.state == NodeState::kOperational && state == kPreOperational && !r.start_now) {
         r.start_now = true;  // It fell back to pre-operational: start it again.
       }
       return true;
@@ -177,11 +175,11 @@ bool CanopenMaster::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns) {
       if (!r.sdo_pending || r.next_step >= r.steps.size()) return true;  // Stale answer.
       const SdoStep& step = r.steps[r.next_step];
       if (sdo.index != step.index || sdo.subindex != step.subindex) return true;
-      if (sdo.command == 0x80) {
+      if (sdo.command == canopen::sdo::kAbort) {
         ++s.sdo_failures;
         sdo_fault_ = true;
         NextStep(i);
-      } else if (sdo.command == 0x60) {
+      } else if (sdo.command == canopen::sdo::kDownloadResponse) {
         NextStep(i);
       }
       return true;
@@ -196,7 +194,7 @@ CanopenMaster::PollResult CanopenMaster::Poll(std::int64_t t_ns) {
   if (!running_) return out;
   if (reset_pending_) {
     bus::CanFrame f;
-    if (protocol_.EncodeNmt(kNmtResetCommunication, 0, f)) out.frames.push_back(f);
+    if (protocol_.EncodeNmt(canopen::nmt::kResetCommunication, 0, f)) out.frames.push_back(f);
     reset_pending_ = false;
   }
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
@@ -222,7 +220,7 @@ CanopenMaster::PollResult CanopenMaster::Poll(std::int64_t t_ns) {
     }
     if (r.start_now) {
       bus::CanFrame f;
-      if (protocol_.EncodeNmt(kNmtStart, s.node_id, f)) out.frames.push_back(f);
+      if (protocol_.EncodeNmt(canopen::nmt::kStart, s.node_id, f)) out.frames.push_back(f);
       r.start_now = false;
     }
     if (config_.heartbeat_timeout_ns > 0 && s.state == NodeState::kOperational && !s.lost &&

@@ -7,6 +7,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "bus/canopen.h"
+
 namespace wheelhil::fw {
 namespace {
 
@@ -141,7 +143,7 @@ void FwApp::Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out) {
 void FwApp::HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
                              std::vector<bus::CanFrame>& out) {
   for (const auto& f : r.frames) {
-    if (r.sync_sent && !f.extended && f.id == 0x080) {
+    if (r.sync_sent && !f.extended && f.id == bus::canopen::kSyncCobId) {
       // Close the previous cycle (its outputs go out first), then the SYNC of the next one.
       if (auto closed = assembler_.OnSync(t_ns)) OnCycle(*closed, out);
       out.push_back(f);

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <stdexcept>
 
+#include "bus/canopen.h"
 #include "bus/dbc_codec.h"
 
 namespace wheelhil::fw {
@@ -18,6 +19,8 @@ using bus::CanFrame;
 using bus::DbcDatabase;
 using bus::DbcMessage;
 using bus::DbcSignal;
+namespace canopen = bus::canopen;
+using canopen::Function;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kStandardGravity = 9.80665;
@@ -37,15 +40,15 @@ const DbcSignal* SignalAt(const DbcMessage& m, int start, int len) {
   return found;
 }
 
-/// A message for the CANopen function at `base` + node: the exact id of one of `nodes` if the
-/// DBC lists it, else any message in (base, base + 0x7F].
-const DbcMessage* FindFunction(const DbcDatabase& db, std::uint32_t base,
-                               const std::vector<int>& nodes) {
+/// A message for the CANopen function `f`: the exact id of one of `nodes` if the DBC lists it,
+/// else any message of that function for some node 1..127.
+const DbcMessage* FindFunction(const DbcDatabase& db, Function f, const std::vector<int>& nodes) {
   for (int n : nodes) {
-    if (const auto* m = db.FindMessage(base + static_cast<std::uint32_t>(n), false)) return m;
+    const std::uint32_t id = canopen::FunctionCode(f) + static_cast<std::uint32_t>(n);
+    if (const auto* m = db.FindMessage(id, false)) return m;
   }
   for (const auto& m : db.messages()) {
-    if (!m.extended && m.id > base && m.id <= base + 0x7F) return &m;
+    if (!m.extended && canopen::Is(f, m.id)) return &m;
   }
   return nullptr;
 }
@@ -220,26 +223,28 @@ FwProtocol::FwProtocol(Sources sources, const std::vector<int>& node_ids, std::u
           l.msg->name, l.msg->id, what, start, len));
     }
   };
-  nmt_.msg = need_msg(co.FindMessage(0x000, false), "NMT module control (0x000)");
+  nmt_.msg = need_msg(co.FindMessage(canopen::kNmtCobId, false), "NMT module control (0x000)");
   need_sig(nmt_, 0, 0, 8, "command specifier");
   need_sig(nmt_, 1, 8, 8, "node id");
-  sync_.msg = need_msg(co.FindMessage(0x080, false), "SYNC (0x080)");
-  emcy_.msg = need_msg(FindFunction(co, 0x080, node_ids), "EMCY (0x080+id)");
+  sync_.msg = need_msg(co.FindMessage(canopen::kSyncCobId, false), "SYNC (0x080)");
+  emcy_.msg = need_msg(FindFunction(co, Function::kEmcy, node_ids), "EMCY (0x080+id)");
   need_sig(emcy_, 0, 0, 16, "EMCY error code");
   need_sig(emcy_, 1, 16, 8, "EMCY error register");
-  tpdo_.msg = need_msg(FindFunction(co, 0x180, node_ids), "TPDO1 (0x180+id)");
+  tpdo_.msg = need_msg(FindFunction(co, Function::kTpdo1, node_ids), "TPDO1 (0x180+id)");
   need_sig(tpdo_, 0, 0, 32, "position value 0x6004");
   need_sig(tpdo_, 1, 32, 16, "speed value 0x6030");
   for (Layout* l : {&sdo_rx_, &sdo_tx_}) {
     const bool response = l == &sdo_rx_;
-    l->msg = need_msg(FindFunction(co, response ? 0x580 : 0x600, node_ids),
-                      response ? "SDO response (0x580+id)" : "SDO request (0x600+id)");
+    l->msg = need_msg(
+        FindFunction(co, response ? Function::kSdoResponse : Function::kSdoRequest, node_ids),
+        response ? "SDO response (0x580+id)" : "SDO request (0x600+id)");
     need_sig(*l, 0, 0, 8, "SDO command");
     need_sig(*l, 1, 8, 16, "SDO index");
     need_sig(*l, 2, 24, 8, "SDO subindex");
     need_sig(*l, 3, 32, 32, "SDO data");
   }
-  errctl_.msg = need_msg(FindFunction(co, 0x700, node_ids), "NMT error control (0x700+id)");
+  errctl_.msg =
+      need_msg(FindFunction(co, Function::kErrorControl, node_ids), "NMT error control (0x700+id)");
   need_sig(errctl_, 0, 0, 8, "NMT state");
 
   if (imu_yaw_id_ != 0) {
@@ -355,22 +360,21 @@ FrameKind FwProtocol::Classify(const CanFrame& f, std::uint8_t& node_id) const n
   for (const auto& o : outputs_) {
     if (o.msg && o.msg->id == id) return FrameKind::kOwnOutput;
   }
-  const std::uint32_t fn = id & 0x780;
-  const std::uint8_t node = static_cast<std::uint8_t>(id & 0x7F);
-  if (id == 0x000) return FrameKind::kNmt;
-  if (id == 0x080) return FrameKind::kSync;
+  const std::uint8_t node = canopen::NodeOf(id);
+  if (id == canopen::kNmtCobId) return FrameKind::kNmt;
+  if (id == canopen::kSyncCobId) return FrameKind::kSync;
   if (node == 0) return FrameKind::kUnknown;
   node_id = node;
-  switch (fn) {
-    case 0x080:
+  switch (static_cast<Function>(canopen::FunctionCodeOf(id))) {
+    case Function::kEmcy:
       return FrameKind::kEmcy;
-    case 0x180:
+    case Function::kTpdo1:
       return FrameKind::kTpdo1;
-    case 0x580:
+    case Function::kSdoResponse:
       return FrameKind::kSdoResponse;
-    case 0x600:
+    case Function::kSdoRequest:
       return FrameKind::kSdoRequest;
-    case 0x700:
+    case Function::kErrorControl:
       return FrameKind::kErrorControl;
     default:
       break;
@@ -381,20 +385,20 @@ FrameKind FwProtocol::Classify(const CanFrame& f, std::uint8_t& node_id) const n
 
 bool FwProtocol::EncodeNmt(std::uint8_t command, std::uint8_t node_id,
                            CanFrame& out) const noexcept {
-  out = Blank(0x000, *nmt_.msg);
+  out = Blank(canopen::kNmtCobId, *nmt_.msg);
   return bus::InsertRaw(*nmt_.sig[0], command, out.data) &&
          bus::InsertRaw(*nmt_.sig[1], node_id, out.data);
 }
 
 bool FwProtocol::EncodeSync(CanFrame& out) const noexcept {
-  out = Blank(0x080, *sync_.msg);
+  out = Blank(canopen::kSyncCobId, *sync_.msg);
   out.len = 0;  // SYNC without counter (CiA 301 0x1019 = 0).
   return true;
 }
 
 bool FwProtocol::EncodeSdoRequest(std::uint8_t node_id, const SdoFrame& sdo,
                                   CanFrame& out) const noexcept {
-  out = Blank(0x600u + node_id, *sdo_tx_.msg);
+  out = Blank(canopen::CobId(Function::kSdoRequest, node_id), *sdo_tx_.msg);
   return bus::InsertRaw(*sdo_tx_.sig[0], sdo.command, out.data) &&
          bus::InsertRaw(*sdo_tx_.sig[1], sdo.index, out.data) &&
          bus::InsertRaw(*sdo_tx_.sig[2], sdo.subindex, out.data) &&

@@ -7,39 +7,17 @@
 #include <limits>
 #include <stdexcept>
 
+#include "bus/canopen.h"
+
 namespace wheelhil::emulator {
 namespace {
 
+namespace canopen = bus::canopen;
+namespace sdo = bus::canopen::sdo;
+namespace od = bus::canopen::od;
+
 constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
 constexpr std::int64_t kNsPerMs = 1'000'000;
-
-// CiA 301 function codes and NMT command specifiers.
-constexpr std::uint32_t kNmtId = 0x000;
-constexpr std::uint32_t kSyncId = 0x080;
-constexpr std::uint32_t kSdoRxBase = 0x600;
-constexpr std::uint32_t kTpdo1Base = 0x180;
-constexpr std::uint32_t kCobIdInvalid = 0x80000000u;
-constexpr std::uint8_t kNmtStart = 0x01;
-constexpr std::uint8_t kNmtStop = 0x02;
-constexpr std::uint8_t kNmtPreOperational = 0x80;
-constexpr std::uint8_t kNmtResetNode = 0x81;
-constexpr std::uint8_t kNmtResetCommunication = 0x82;
-
-// SDO abort codes (CiA 301 table 22).
-constexpr std::uint32_t kAbortCommand = 0x05040001;
-constexpr std::uint32_t kAbortReadOnly = 0x06010002;
-constexpr std::uint32_t kAbortNoObject = 0x06020000;
-constexpr std::uint32_t kAbortLength = 0x06070010;
-constexpr std::uint32_t kAbortNoSubindex = 0x06090011;
-constexpr std::uint32_t kAbortValue = 0x06090030;
-
-// SDO command bytes: client command specifier in bits 7..5.
-constexpr std::uint8_t kCcsDownloadInitiate = 1;
-constexpr std::uint8_t kCcsUploadInitiate = 2;
-constexpr std::uint8_t kCcsAbort = 4;
-constexpr std::uint8_t kScsDownloadResponse = 0x60;
-constexpr std::uint8_t kScsUploadExpedited = 0x43;  // e = 1, s = 1; n in bits 3..2
-constexpr std::uint8_t kSdoAbort = 0x80;
 
 // Fixed TPDO1 mapping entries: index << 16 | sub << 8 | bit length.
 constexpr std::uint32_t kMapPosition = 0x60040020;
@@ -53,7 +31,7 @@ CanopenEncoderNode::CanopenEncoderNode(const Cia406NodeConfig& config,
                                        std::shared_ptr<const Cia406Codec> codec,
                                        std::int64_t power_on_ns)
     : config_(config), codec_(std::move(codec)), now_ns_(power_on_ns) {
-  if (config.node_id < 1 || config.node_id > 127) {
+  if (!canopen::IsValidNodeId(config.node_id)) {
     throw std::invalid_argument(
         fmt::format("encoder_node.node_id ({}) must be in 1..127", config.node_id));
   }
@@ -87,7 +65,7 @@ void CanopenEncoderNode::ResetApplication() {
 
 void CanopenEncoderNode::ResetCommunication() {
   heartbeat_ms_ = config_.heartbeat_ms;
-  tpdo1_cob_id_ = kTpdo1Base + config_.node_id;
+  tpdo1_cob_id_ = canopen::CobId(canopen::Function::kTpdo1, config_.node_id);
   tpdo1_type_ = config_.tpdo1_transmission_type;
   cyclic_timer_ms_ = config_.cyclic_timer_ms;
 }
@@ -135,7 +113,7 @@ void CanopenEncoderNode::Emit(bool ok, const bus::CanFrame& frame, std::int64_t 
 }
 
 void CanopenEncoderNode::EmitTpdo(std::int64_t due_ns, std::vector<NodeFrame>& out) {
-  if (tpdo1_cob_id_ & kCobIdInvalid) return;
+  if (tpdo1_cob_id_ & canopen::kPdoCobIdInvalid) return;
   bus::CanFrame f;
   const std::uint32_t position = ReportedPosition();
   Emit(codec_->EncodeTpdo1(config_.node_id, tpdo1_cob_id_ & 0x7FF, position, ReportedSpeed(), f), f,
@@ -152,16 +130,16 @@ std::vector<NodeFrame> CanopenEncoderNode::OnFrame(const bus::CanFrame& frame, s
     std::vector<NodeFrame> timed = Poll(t_ns);
     pending_.insert(pending_.begin(), timed.begin(), timed.end());
   }
-  if (frame.id == kNmtId) {
+  if (frame.id == canopen::kNmtCobId) {
     std::uint8_t command = 0, node = 0;
     if (!codec_->DecodeNmt(frame, command, node)) {
       ++rejected_frames_;
       return out;
     }
     if (node == 0 || node == config_.node_id) HandleNmt(command, t_ns);
-  } else if (frame.id == kSyncId) {
+  } else if (frame.id == canopen::kSyncCobId) {
     HandleSync(t_ns, out);
-  } else if (frame.id == kSdoRxBase + config_.node_id) {
+  } else if (frame.id == canopen::CobId(canopen::Function::kSdoRequest, config_.node_id)) {
     if (state_ != NmtState::kPreOperational && state_ != NmtState::kOperational) return out;
     SdoFields request;
     if (!codec_->DecodeSdoRequest(frame, request)) {
@@ -176,23 +154,23 @@ std::vector<NodeFrame> CanopenEncoderNode::OnFrame(const bus::CanFrame& frame, s
 void CanopenEncoderNode::HandleNmt(std::uint8_t command, std::int64_t t_ns) {
   if (state_ == NmtState::kOff) return;  // still initialising
   switch (command) {
-    case kNmtStart:
+    case canopen::nmt::kStart:
       if (state_ != NmtState::kOperational) EnterOperational(t_ns);
       break;
-    case kNmtStop:
+    case canopen::nmt::kStop:
       state_ = NmtState::kStopped;
       next_tpdo_ns_ = kNever;
       break;
-    case kNmtPreOperational:
+    case canopen::nmt::kEnterPreOperational:
       state_ = NmtState::kPreOperational;
       next_tpdo_ns_ = kNever;
       break;
-    case kNmtResetNode:
+    case canopen::nmt::kResetNode:
       ResetApplication();
       ResetCommunication();
       ScheduleBoot(t_ns + config_.reset_delay_ns);
       break;
-    case kNmtResetCommunication:
+    case canopen::nmt::kResetCommunication:
       ResetCommunication();
       ScheduleBoot(t_ns + config_.reset_delay_ns);
       break;
@@ -218,34 +196,33 @@ void CanopenEncoderNode::HandleSync(std::int64_t t_ns, std::vector<NodeFrame>& o
 
 void CanopenEncoderNode::HandleSdo(const SdoFields& request, std::int64_t t_ns,
                                    std::vector<NodeFrame>& out) {
-  const std::uint8_t ccs = request.command >> 5;
+  const std::uint8_t ccs = sdo::CommandSpecifier(request.command);
   SdoFields response;
   response.index = request.index;
   response.subindex = request.subindex;
   std::uint32_t abort = 0;
-  if (ccs == kCcsAbort) return;  // client abort: nothing to answer
-  if (ccs == kCcsUploadInitiate) {
+  if (ccs == sdo::kCsAbort) return;  // client abort: nothing to answer
+  if (ccs == sdo::kCcsInitiateUpload) {
     const SdoResult r = Read(request.index, request.subindex);
     abort = r.abort;
     if (!abort) {
-      response.command = static_cast<std::uint8_t>(kScsUploadExpedited | ((4 - r.size) << 2));
+      response.command = sdo::ExpeditedUploadResponse(r.size);
       response.data = r.value;
     }
-  } else if (ccs == kCcsDownloadInitiate && (request.command & 0x02)) {  // expedited
+  } else if (ccs == sdo::kCcsInitiateDownload && (request.command & sdo::kExpedited)) {
     // With s = 1, n (bits 3..2) counts the unused bytes; with s = 0 the size is unspecified.
-    const bool sized = request.command & 0x01;
-    const std::uint8_t size =
-        sized ? static_cast<std::uint8_t>(4 - ((request.command >> 2) & 3)) : std::uint8_t{0};
+    const bool sized = request.command & sdo::kSizeIndicated;
+    const std::uint8_t size = sized ? sdo::ExpeditedSize(request.command) : std::uint8_t{0};
     std::uint32_t value = request.data;
     if (sized && size < 4) value &= (1u << (8 * size)) - 1u;
     // The new value takes effect when the node answers (timers restart from there).
     abort = Write(request.index, request.subindex, value, size, t_ns + config_.response_delay_ns);
-    if (!abort) response.command = kScsDownloadResponse;
+    if (!abort) response.command = sdo::kDownloadResponse;
   } else {
-    abort = kAbortCommand;  // segmented/block transfers and unknown specifiers
+    abort = sdo::kAbortCommand;  // segmented/block transfers and unknown specifiers
   }
   if (abort) {
-    response.command = kSdoAbort;
+    response.command = sdo::kAbort;
     response.data = abort;
   }
   bus::CanFrame f;
@@ -256,15 +233,15 @@ void CanopenEncoderNode::HandleSdo(const SdoFields& request, std::int64_t t_ns,
 CanopenEncoderNode::SdoResult CanopenEncoderNode::Read(std::uint16_t index,
                                                        std::uint8_t sub) const {
   auto value = [](std::uint32_t v, std::uint8_t size) { return SdoResult{0, v, size}; };
-  auto no_sub = SdoResult{kAbortNoSubindex, 0, 0};
+  auto no_sub = SdoResult{sdo::kAbortNoSubindex, 0, 0};
   switch (index) {
-    case 0x1000:
+    case od::kDeviceType:
       return sub == 0 ? value(config_.device_type, 4) : no_sub;
-    case 0x1001:
+    case od::kErrorRegister:
       return sub == 0 ? value(error_register_, 1) : no_sub;
-    case 0x1017:
+    case od::kProducerHeartbeatTime:
       return sub == 0 ? value(heartbeat_ms_, 2) : no_sub;
-    case 0x1018:
+    case od::kIdentity:
       switch (sub) {
         case 0:
           return value(4, 1);
@@ -279,20 +256,20 @@ CanopenEncoderNode::SdoResult CanopenEncoderNode::Read(std::uint16_t index,
         default:
           return no_sub;
       }
-    case 0x1800:
+    case od::kTpdo1Communication:
       switch (sub) {
         case 0:
           return value(5, 1);
-        case 1:
+        case od::kPdoCobId:
           return value(tpdo1_cob_id_, 4);
-        case 2:
+        case od::kPdoTransmissionType:
           return value(tpdo1_type_, 1);
-        case 5:
+        case od::kPdoEventTimer:
           return value(cyclic_timer_ms_, 2);
         default:
           return no_sub;
       }
-    case 0x1A00:
+    case od::kTpdo1Mapping:
       switch (sub) {
         case 0:
           return value(2, 1);
@@ -314,7 +291,7 @@ CanopenEncoderNode::SdoResult CanopenEncoderNode::Read(std::uint16_t index,
     case 0x6200:
       return sub == 0 ? value(cyclic_timer_ms_, 2) : no_sub;
     default:
-      return SdoResult{kAbortNoObject, 0, 0};
+      return SdoResult{sdo::kAbortNoObject, 0, 0};
   }
 }
 
@@ -323,49 +300,51 @@ std::uint32_t CanopenEncoderNode::Write(std::uint16_t index, std::uint8_t sub, s
   // Existence, then access rights, then the length of the data.
   const SdoResult exists = Read(index, sub);
   if (exists.abort) return exists.abort;
-  const bool writable = (index == 0x1017 && sub == 0) ||
-                        (index == 0x1800 && (sub == 1 || sub == 2 || sub == 5)) ||
-                        (index == 0x6000 && sub == 0) || (index == 0x6200 && sub == 0);
-  if (!writable) return kAbortReadOnly;
-  if (size != 0 && size != exists.size) return kAbortLength;
+  const bool writable =
+      (index == od::kProducerHeartbeatTime && sub == 0) ||
+      (index == od::kTpdo1Communication &&
+       (sub == od::kPdoCobId || sub == od::kPdoTransmissionType || sub == od::kPdoEventTimer)) ||
+      (index == 0x6000 && sub == 0) || (index == 0x6200 && sub == 0);
+  if (!writable) return sdo::kAbortReadOnly;
+  if (size != 0 && size != exists.size) return sdo::kAbortLength;
   auto restart_cyclic = [&] {
     const bool cyclic =
         state_ == NmtState::kOperational && tpdo1_type_ >= 254 && cyclic_timer_ms_ > 0;
     next_tpdo_ns_ = cyclic ? t_ns + cyclic_timer_ms_ * kNsPerMs : kNever;
   };
   switch (index) {
-    case 0x1017:
+    case od::kProducerHeartbeatTime:
       heartbeat_ms_ = static_cast<std::uint16_t>(value);
       if (state_ != NmtState::kOff) {
         next_heartbeat_ns_ = heartbeat_ms_ > 0 ? t_ns + heartbeat_ms_ * kNsPerMs : kNever;
       }
       return 0;
-    case 0x1800:
-      if (sub == 1) {
+    case od::kTpdo1Communication:
+      if (sub == od::kPdoCobId) {
         // CiA 301: the CAN-ID of a valid PDO cannot change; set bit 31 first. 29-bit ids and
         // RTR (bit 30 clear = RTR allowed) are accepted as values but only the 11-bit id is used.
-        const bool was_valid = !(tpdo1_cob_id_ & kCobIdInvalid);
-        const bool stays_valid = !(value & kCobIdInvalid);
+        const bool was_valid = !(tpdo1_cob_id_ & canopen::kPdoCobIdInvalid);
+        const bool stays_valid = !(value & canopen::kPdoCobIdInvalid);
         if (was_valid && stays_valid && (value & 0x7FF) != (tpdo1_cob_id_ & 0x7FF)) {
-          return kAbortValue;
+          return sdo::kAbortValue;
         }
-        if (value & 0x20000000u) return kAbortValue;  // 29-bit COB-ID not supported
+        if (value & canopen::kPdoCobIdExtended) return sdo::kAbortValue;  // 29-bit: not supported
         tpdo1_cob_id_ = value;
         return 0;
       }
-      if (sub == 2) {
-        if (!ValidTransmissionType(value)) return kAbortValue;
+      if (sub == od::kPdoTransmissionType) {
+        if (!ValidTransmissionType(value)) return sdo::kAbortValue;
         tpdo1_type_ = static_cast<std::uint8_t>(value);
         sync_count_ = 0;
         restart_cyclic();
         return 0;
       }
-      if (sub == 5) {
+      if (sub == od::kPdoEventTimer) {
         cyclic_timer_ms_ = static_cast<std::uint16_t>(value);
         restart_cyclic();
         return 0;
       }
-      return kAbortReadOnly;
+      return sdo::kAbortReadOnly;
     case 0x6000:
       operating_parameters_ = static_cast<std::uint16_t>(value);
       return 0;
@@ -374,7 +353,7 @@ std::uint32_t CanopenEncoderNode::Write(std::uint16_t index, std::uint8_t sub, s
       restart_cyclic();
       return 0;
     default:
-      return kAbortReadOnly;
+      return sdo::kAbortReadOnly;
   }
 }
 
@@ -389,7 +368,7 @@ std::vector<NodeFrame> CanopenEncoderNode::Poll(std::int64_t t_ns) {
     if (next == boot_due_ns_) {
       boot_due_ns_ = kNever;
       state_ = NmtState::kPreOperational;
-      Emit(codec_->EncodeNmtState(config_.node_id, 0x00, f), f, next, out);
+      Emit(codec_->EncodeNmtState(config_.node_id, canopen::nmt_state::kBootUp, f), f, next, out);
       next_heartbeat_ns_ = heartbeat_ms_ > 0 ? next + heartbeat_ms_ * kNsPerMs : kNever;
     } else if (next == next_heartbeat_ns_) {
       Emit(codec_->EncodeNmtState(config_.node_id, static_cast<std::uint8_t>(state_), f), f, next,
@@ -413,7 +392,7 @@ std::int64_t CanopenEncoderNode::NextEventNs() const {
 
 void CanopenEncoderNode::RaiseFault(std::uint16_t error_code, std::uint8_t error_register,
                                     std::int64_t t_ns) {
-  error_register_ = static_cast<std::uint8_t>(error_register | 0x01);  // bit 0: generic error
+  error_register_ = static_cast<std::uint8_t>(error_register | canopen::kErrorRegisterGeneric);
   if (state_ != NmtState::kPreOperational && state_ != NmtState::kOperational) return;
   bus::CanFrame f;
   Emit(codec_->EncodeEmcy(config_.node_id, error_code, error_register_, f), f, t_ns, pending_);
@@ -423,7 +402,7 @@ void CanopenEncoderNode::ClearFault(std::int64_t t_ns) {
   error_register_ = 0;
   if (state_ != NmtState::kPreOperational && state_ != NmtState::kOperational) return;
   bus::CanFrame f;
-  Emit(codec_->EncodeEmcy(config_.node_id, 0x0000, 0, f), f, t_ns, pending_);
+  Emit(codec_->EncodeEmcy(config_.node_id, canopen::kEmcyErrorReset, 0, f), f, t_ns, pending_);
 }
 
 }  // namespace wheelhil::emulator

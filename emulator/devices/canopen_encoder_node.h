@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "bus/can_frame.h"
+#include "bus/canopen.h"
 #include "emulator/devices/cia406_codec.h"
 
 namespace wheelhil::emulator {
@@ -71,10 +72,10 @@ struct NodeFrame {
 class CanopenEncoderNode {
  public:
   enum class NmtState : std::uint8_t {
-    kOff = 0xFF,  ///< Powered, not yet booted (or resetting).
-    kPreOperational = 0x7F,
-    kOperational = 0x05,
-    kStopped = 0x04,
+    kOff = 0xFF,  ///< Powered, not yet booted (or resetting); never reported on the bus.
+    kPreOperational = bus::canopen::nmt_state::kPreOperational,
+    kOperational = bus::canopen::nmt_state::kOperational,
+    kStopped = bus::canopen::nmt_state::kStopped,
   };
 
   /// Powers the node on at power_on_ns. Throws std::invalid_argument on a bad configuration

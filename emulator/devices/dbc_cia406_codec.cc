@@ -7,17 +7,14 @@
 #include <stdexcept>
 #include <utility>
 
+#include "bus/canopen.h"
 #include "bus/dbc_codec.h"
 
 namespace wheelhil::emulator {
 namespace {
 
-constexpr std::uint32_t kNmtId = 0x000;
-constexpr std::uint32_t kEmcyBase = 0x080;
-constexpr std::uint32_t kTpdo1Base = 0x180;
-constexpr std::uint32_t kSdoTxBase = 0x580;
-constexpr std::uint32_t kSdoRxBase = 0x600;
-constexpr std::uint32_t kHeartbeatBase = 0x700;
+namespace canopen = bus::canopen;
+using canopen::Function;
 
 constexpr std::initializer_list<const char*> kNmtSignals = {"NMT_CommandSpecifier", "NMT_NodeId"};
 constexpr std::initializer_list<const char*> kEmcySignals = {"EMCY_ErrorCode", "EMCY_ErrorRegister",
@@ -40,16 +37,19 @@ bool ToField(double v, T& out) {
 }  // namespace
 
 DbcCia406Codec::DbcCia406Codec(bus::DbcDatabase database) : database_(std::move(database)) {
-  nmt_ = Resolve(kNmtId, kNmtSignals);
+  nmt_ = Resolve(canopen::kNmtCobId, kNmtSignals);
   if (nmt_.message == nullptr) {
     throw std::invalid_argument(
         "cia406 DBC: message 0x000 with signals NMT_CommandSpecifier and NMT_NodeId is required");
   }
-  for (std::uint32_t id = 1; id < nodes_.size(); ++id) {
-    nodes_[id] =
-        NodeLayouts{Resolve(kEmcyBase + id, kEmcySignals), Resolve(kTpdo1Base + id, kTpdoSignals),
-                    Resolve(kSdoTxBase + id, kSdoSignals), Resolve(kSdoRxBase + id, kSdoSignals),
-                    Resolve(kHeartbeatBase + id, kHeartbeatSignals)};
+  for (std::size_t i = 1; i < nodes_.size(); ++i) {
+    const auto id = static_cast<std::uint8_t>(i);
+    nodes_[i] =
+        NodeLayouts{Resolve(canopen::CobId(Function::kEmcy, id), kEmcySignals),
+                    Resolve(canopen::CobId(Function::kTpdo1, id), kTpdoSignals),
+                    Resolve(canopen::CobId(Function::kSdoResponse, id), kSdoSignals),
+                    Resolve(canopen::CobId(Function::kSdoRequest, id), kSdoSignals),
+                    Resolve(canopen::CobId(Function::kErrorControl, id), kHeartbeatSignals)};
   }
 }
 
@@ -150,7 +150,7 @@ bool DbcCia406Codec::EncodeSdoResponse(std::uint8_t node_id, const SdoFields& sd
 
 bool DbcCia406Codec::DecodeNmt(const bus::CanFrame& frame, std::uint8_t& command,
                                std::uint8_t& node_id) const {
-  if (frame.id != kNmtId || frame.extended) return false;
+  if (frame.id != canopen::kNmtCobId || frame.extended) return false;
   std::array<double, 4> v{};
   std::uint8_t cs = 0, node = 0;
   if (!Decode(nmt_, frame, v) || !ToField(v[0], cs) || !ToField(v[1], node)) return false;
@@ -160,12 +160,10 @@ bool DbcCia406Codec::DecodeNmt(const bus::CanFrame& frame, std::uint8_t& command
 }
 
 bool DbcCia406Codec::DecodeSdoRequest(const bus::CanFrame& frame, SdoFields& sdo) const {
-  if (frame.extended || frame.id <= kSdoRxBase || frame.id >= kSdoRxBase + nodes_.size()) {
-    return false;
-  }
+  if (frame.extended || !canopen::IsSdoRequest(frame.id)) return false;
   std::array<double, 4> v{};
   SdoFields s;
-  if (!Decode(nodes_[frame.id - kSdoRxBase].sdo_rx, frame, v) || !ToField(v[0], s.command) ||
+  if (!Decode(nodes_[canopen::NodeOf(frame.id)].sdo_rx, frame, v) || !ToField(v[0], s.command) ||
       !ToField(v[1], s.index) || !ToField(v[2], s.subindex) || !ToField(v[3], s.data)) {
     return false;
   }

@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 
+#include "bus/canopen.h"
+
 namespace wheelhil::emulator {
 
 std::optional<DeviceFaultKind> ParseDeviceFaultKind(std::string_view name) noexcept {
@@ -33,7 +35,7 @@ std::string_view DeviceFaultKindName(DeviceFaultKind kind) noexcept {
 DeviceFaultInjector::DeviceFaultInjector(std::string node_name, std::uint8_t node_id,
                                          std::vector<DeviceFault> faults, FaultEventLog* log)
     : node_name_(std::move(node_name)), node_id_(node_id), log_(log) {
-  if (node_id < 1 || node_id > 127) {
+  if (!bus::canopen::IsValidNodeId(node_id)) {
     throw std::invalid_argument(
         fmt::format("{}: device_faults node_id ({}) must be in 1..127", node_name_, node_id));
   }
@@ -73,12 +75,13 @@ bool DeviceFaultInjector::SilentAt(std::int64_t t_ns) const {
 }
 
 void DeviceFaultInjector::FilterOutputs(std::vector<NodeFrame>& frames) {
-  const std::uint32_t heartbeat_id = 0x700u + node_id_;
+  const std::uint32_t heartbeat_id =
+      bus::canopen::CobId(bus::canopen::Function::kErrorControl, node_id_);
   auto suppressed = [&](const NodeFrame& f) {
     Track(f.due_ns);
     if (SilentAt(f.due_ns)) return true;
     const bool heartbeat = !f.frame.extended && f.frame.id == heartbeat_id && f.frame.len >= 1 &&
-                           f.frame.data[0] != 0x00;
+                           f.frame.data[0] != bus::canopen::nmt_state::kBootUp;
     return heartbeat && std::any_of(faults_.begin(), faults_.end(), [&](const State& s) {
              return s.fault.kind == DeviceFaultKind::kHeartbeatLost &&
                     s.fault.window.Contains(f.due_ns);

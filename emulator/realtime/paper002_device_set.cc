@@ -8,6 +8,7 @@
 
 #include <fmt/format.h>
 
+#include "bus/canopen.h"
 #include "bus/dbc.h"
 #include "bus/dbc_codec.h"
 #include "emulator/devices/can_bus_model.h"
@@ -123,7 +124,7 @@ struct Paper002DeviceSet::Impl {
     imu_db = bus::DbcDatabase::LoadFile(imu_file);
     codec = std::make_shared<const DbcCia406Codec>(cia406_db);
 
-    sync = bus::EncodeMessage(NeedMessage(cia406_db, 0x080, cia_file), {});
+    sync = bus::EncodeMessage(NeedMessage(cia406_db, bus::canopen::kSyncCobId, cia_file), {});
     acc4 = &NeedMessage(accel_db, 0x170, acc_file);
     const char* channel_names[] = {"ACC4_A1", "ACC4_A2", "ACC4_A3", "ACC4_A4"};
     for (int i = 0; i < 4; ++i) acc4_channels[i] = &NeedSignal(*acc4, channel_names[i], acc_file);
@@ -175,8 +176,10 @@ struct Paper002DeviceSet::Impl {
     // Boot the encoders and start them (NMT start all) before the first cycle; these set-up
     // frames are not part of the paced stream.
     bus::CanFrame start;
-    const bus::DbcMessage& nmt = NeedMessage(cia406_db, 0x000, cia_file);
-    if (!bus::EncodeMessage(nmt, {{"NMT_CommandSpecifier", 1.0}, {"NMT_NodeId", 0.0}}, start)) {
+    const bus::DbcMessage& nmt = NeedMessage(cia406_db, bus::canopen::kNmtCobId, cia_file);
+    const double start_cs = bus::canopen::nmt::kStart;
+    if (!bus::EncodeMessage(nmt, {{"NMT_CommandSpecifier", start_cs}, {"NMT_NodeId", 0.0}},
+                            start)) {
       throw std::invalid_argument(cia_file + ": cannot encode NMT start");
     }
     for (auto& n : nodes) {
