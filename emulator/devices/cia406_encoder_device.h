@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 
+#include "bus/canopen.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/device.h"
 #include "emulator/sensors/encoder_model.h"
@@ -53,7 +54,8 @@ class Cia406EncoderDevice final : public Device {
 
   std::uint8_t canopen_node_id() const override { return config_.node.node_id; }
   std::optional<SyncAnswer> sync_answer() const override {
-    return SyncAnswer{0x180u + config_.node.node_id, config_.tpdo1_len};
+    return SyncAnswer{bus::canopen::CobId(bus::canopen::Function::kTpdo1, config_.node.node_id),
+                      config_.tpdo1_len};
   }
   std::string channel_label(const std::string&) const override {
     return "encoder " + config_.wheel_name;

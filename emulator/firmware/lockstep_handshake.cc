@@ -1,21 +1,14 @@
 #include "emulator/firmware/lockstep_handshake.h"
 
+#include "bus/canopen.h"
 #include "bus/dbc_codec.h"
 
 namespace wheelhil::emulator::firmware {
 
+namespace co = bus::canopen;
+
 namespace {
 
-// CiA 301 COB-IDs the handshake reads.
-namespace co {
-constexpr std::uint32_t kNmtId = 0x000;
-constexpr std::uint32_t kSyncId = 0x080;
-constexpr bool IsHeartbeat(std::uint32_t id) { return id >= 0x701 && id <= 0x77F; }
-constexpr bool IsSdoResponse(std::uint32_t id) { return id >= 0x581 && id <= 0x5FF; }
-constexpr bool IsSdoRequest(std::uint32_t id) { return id >= 0x601 && id <= 0x67F; }
-constexpr std::uint32_t NodeOf(std::uint32_t id) { return id & 0x7F; }
-constexpr std::uint8_t kBootUp = 0x00;
-}  // namespace co
 
 constexpr std::uint32_t kFwStatusId = 0x686;
 
@@ -46,7 +39,7 @@ void LockstepHandshake::ExpectSyncAnswers(std::vector<SyncAnswer> answers) {
 void LockstepHandshake::OnEmulatorFrame(const WireFrame& w, int device) {
   if (w.frame.extended) return;
   const std::uint32_t id = w.frame.id;
-  if (id == co::kSyncId && device == -1) {
+  if (id == co::kSyncCobId && device == -1) {
     answers_since_sync_ = 0;
     ++syncs_on_wire_;
   }
@@ -56,8 +49,8 @@ void LockstepHandshake::OnEmulatorFrame(const WireFrame& w, int device) {
     }
   }
   // Boot-ups and SDO answers: the firmware reacts to each.
-  if ((co::IsHeartbeat(id) && w.frame.len == 1 &&
-       w.frame.data[0] == co::kBootUp) ||
+  if ((co::IsErrorControl(id) && w.frame.len == 1 &&
+       w.frame.data[0] == co::nmt_state::kBootUp) ||
       co::IsSdoResponse(id)) {
     awaiting_nodes_.insert(static_cast<int>(co::NodeOf(id)));
   }
@@ -67,7 +60,7 @@ void LockstepHandshake::OnFirmwareFrame(const bus::CanFrame& f) {
   if (f.extended) return;
   // Reactions the start-up waits for: SDO requests and NMT commands.
   if (co::IsSdoRequest(f.id)) awaiting_nodes_.erase(static_cast<int>(co::NodeOf(f.id)));
-  if (f.id == co::kNmtId && f.len >= 2) {
+  if (f.id == co::kNmtCobId && f.len >= 2) {
     if (f.data[1] == 0) {
       awaiting_nodes_.clear();
     } else {

@@ -4,6 +4,7 @@
 #include <functional>
 #include <random>
 
+#include "bus/canopen.h"
 #include "bus/dbc.h"
 #include "emulator/devices/accel4_device.h"
 #include "emulator/devices/cia406_encoder_device.h"
@@ -42,7 +43,8 @@ void BuildEncoders(const DeviceBuildContext& c, Devices& out) {
     dc.node.node_id = static_cast<std::uint8_t>(e.node_id);
     dc.node.heartbeat_ms = static_cast<std::uint16_t>(sensors.heartbeat_ms);
     const bus::DbcMessage* tpdo1 =
-        codec->database().FindMessage(0x180u + static_cast<std::uint32_t>(e.node_id), false);
+        codec->database().FindMessage(
+            bus::canopen::CobId(bus::canopen::Function::kTpdo1, dc.node.node_id), false);
     dc.tpdo1_len = tpdo1 != nullptr ? static_cast<std::uint8_t>(tpdo1->length) : 0;
     out.push_back(std::make_unique<Cia406EncoderDevice>(dc, codec));
   }

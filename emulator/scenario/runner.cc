@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "bus/canopen.h"
 #include "bus/dbc.h"
 #include "emulator/devices/device.h"
 #include "emulator/firmware/firmware_link.h"
@@ -36,8 +37,6 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
-
-constexpr std::uint32_t kSyncId = 0x080;
 
 double WallSeconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
@@ -200,7 +199,7 @@ void Run::SyncProducer::Fire(std::int64_t t_ns) {
   sim::RunContext& run = r_.run_;
   r_.truth_->Record(t_ns, r_.physics_->body(), r_.physics_->wheels(), true);
   bus::CanFrame sync;
-  sync.id = kSyncId;
+  sync.id = bus::canopen::kSyncCobId;
   sync.len = 0;
   r_.hub_->EnqueueSync(sync, t_ns);
   const int want = static_cast<int>(r_.handshake_->syncs_sent() % 256);
