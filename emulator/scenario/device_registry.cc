@@ -9,6 +9,7 @@
 #include "emulator/devices/accel4_device.h"
 #include "emulator/devices/cia406_encoder_device.h"
 #include "emulator/devices/dbc_cia406_codec.h"
+#include "emulator/devices/dbc_imu_device.h"
 #include "emulator/devices/mm5_gyro_device.h"
 
 namespace wheelhil::emulator::scenario {
@@ -82,9 +83,28 @@ void BuildAccel4(const DeviceBuildContext& c, Devices& out) {
       std::make_unique<Accel4Device>(dbc, params, std::llround(1e9 / sensors.accel4_rate_hz)));
 }
 
+void BuildDbcImu(const DeviceBuildContext& c, Devices& out) {
+  const auto& spec = c.scenario.sensors.dbc_imu;
+  if (!spec) return;
+  auto dbc = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(spec->dbc));
+  DbcImuDeviceConfig dc;
+  dc.node = spec->node;
+  dc.r_BP_B = spec->mount_m;
+  dc.gyro.noise_density_rad_s_sqrt_hz = spec->gyro_noise_density_rad_s_sqrt_hz;
+  dc.gyro.bias_rad_s = spec->gyro_bias_rad_s;
+  dc.gyro.bias_random_walk_rad_s_sqrt_s = spec->gyro_bias_random_walk_rad_s_sqrt_s;
+  dc.accel.noise_density_m_s2_sqrt_hz = spec->accel_noise_density_m_s2_sqrt_hz;
+  if (spec->accel_bias_m_s2 != 0) dc.accel.bias_m_s2.assign(3, spec->accel_bias_m_s2);
+  dc.seed = c.seed * 15485863ull + 7;
+  out.push_back(std::make_unique<DbcImuDevice>(dbc, dc));
+}
+
 const std::vector<std::pair<std::string, Builder>>& Builders() {
   static const std::vector<std::pair<std::string, Builder>> builders{
-      {"cia406_encoder", BuildEncoders}, {"mm5_10", BuildMm5Gyro}, {"accel4", BuildAccel4}};
+      {"cia406_encoder", BuildEncoders},
+      {"mm5_10", BuildMm5Gyro},
+      {"accel4", BuildAccel4},
+      {"dbc_imu", BuildDbcImu}};
   return builders;
 }
 

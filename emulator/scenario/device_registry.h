@@ -3,8 +3,9 @@
 /// has a builder that reads its part of the scenario file. Today's `sensors:` block gives, in
 /// bus order, one "cia406_encoder" per `sensors.encoders` entry (CiA 406 node over
 /// bus/dbc/cia406_encoder.dbc with an incremental encoder on its wheel), the "mm5_10" yaw-rate
-/// node when `sensors.gyro` (bus/dbc/bosch_mm5_10.dbc) and the "accel4" node when
-/// `sensors.accel4` (bus/dbc/wheelhil_accel4.dbc). Every random stream is seeded from the run
+/// node when `sensors.gyro` (bus/dbc/bosch_mm5_10.dbc), the "accel4" node when
+/// `sensors.accel4` (bus/dbc/wheelhil_accel4.dbc) and a "dbc_imu" (a user's IMU from its own
+/// DBC file) for `sensors.dbc_imu`. Every random stream is seeded from the run
 /// seed. Throws std::invalid_argument naming the file for a DBC file that cannot be read.
 
 #include <cstdint>

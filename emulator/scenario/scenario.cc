@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "bus/dbc.h"
 #include "emulator/scoring/metric_components.h"
 #include "emulator/scoring/metrics.h"
 
@@ -334,10 +335,105 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
   return out;
 }
 
+// sensors.dbc_imu: the file, the bindings and the noise; the node itself checks the bindings
+// against the DBC (unknown messages or signals, units, cycle times), reported at this entry.
+DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
+  const std::string f = "sensors.dbc_imu";
+  r.CheckKeys(n, f, {"dbc", "mount_m", "channels", "messages", "gyro", "accel"});
+  DbcImuSpec d;
+  d.where = r.Where(n);
+  d.dbc = r.Path(r.String(n, "dbc", f, std::nullopt));
+  if (const auto m = n["mount_m"]) {
+    if (!m.IsSequence() || m.size() != 3) r.Fail(m, f + ".mount_m", "must be [x, y, z] in m");
+    for (int i = 0; i < 3; ++i) {
+      double x = std::nan("");
+      try {
+        x = m[i].as<double>();
+      } catch (const YAML::Exception&) {
+      }
+      if (!std::isfinite(x) || std::abs(x) > 10) {
+        r.Fail(m[i], fmt::format("{}.mount_m[{}]", f, i), "must be a number within +-10 m");
+      }
+      d.mount_m[i] = x;
+    }
+  }
+  const auto ch = n["channels"];
+  if (!ch || !ch.IsSequence() || ch.size() == 0) {
+    r.Fail(ch ? ch : n, f + ".channels", "must list at least one {quantity, message, signal}");
+  }
+  for (std::size_t i = 0; i < ch.size(); ++i) {
+    const std::string cf = fmt::format("{}.channels[{}]", f, i);
+    r.CheckKeys(ch[i], cf, {"quantity", "message", "signal"});
+    DbcImuChannel c;
+    const std::string q = r.String(ch[i], "quantity", cf, std::nullopt);
+    const auto quantity = ParseImuQuantity(q);
+    if (!quantity) {
+      r.Fail(ch[i]["quantity"], cf + ".quantity",
+             fmt::format("'{}' is not one of rate_x, rate_y, rate_z, accel_x, accel_y, accel_z", q));
+    }
+    c.quantity = *quantity;
+    c.message = r.String(ch[i], "message", cf, std::nullopt);
+    c.signal = r.String(ch[i], "signal", cf, std::nullopt);
+    d.node.channels.push_back(c);
+  }
+  if (const auto ms = n["messages"]) {
+    if (!ms.IsSequence()) r.Fail(ms, f + ".messages", "must be a list");
+    for (std::size_t i = 0; i < ms.size(); ++i) {
+      const std::string mf = fmt::format("{}.messages[{}]", f, i);
+      r.CheckKeys(ms[i], mf, {"message", "counter", "checksum", "checksum_kind"});
+      DbcImuMessageOptions o;
+      o.message = r.String(ms[i], "message", mf, std::nullopt);
+      o.counter_signal = r.String(ms[i], "counter", mf, std::string());
+      o.checksum_signal = r.String(ms[i], "checksum", mf, std::string());
+      const std::string kind = r.String(ms[i], "checksum_kind", mf, std::string("xor"));
+      const auto k = ParseChecksumKind(kind);
+      if (!k) {
+        r.Fail(ms[i]["checksum_kind"], mf + ".checksum_kind",
+               fmt::format("'{}' is not one of xor, sum, crc8_sae_j1850", kind));
+      }
+      o.checksum = *k;
+      d.node.message_options.push_back(o);
+    }
+  }
+  if (const auto g = n["gyro"]) {
+    const std::string gf = f + ".gyro";
+    r.CheckKeys(g, gf,
+                {"noise_density_rad_s_sqrt_hz", "bias_rad_s", "bias_random_walk_rad_s_sqrt_s"});
+    d.gyro_noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", gf, 0, 1, 0.0);
+    d.gyro_bias_rad_s = r.Number(g, "bias_rad_s", gf, -10, 10, 0.0);
+    d.gyro_bias_random_walk_rad_s_sqrt_s =
+        r.Number(g, "bias_random_walk_rad_s_sqrt_s", gf, 0, 1, 0.0);
+  }
+  if (const auto a = n["accel"]) {
+    const std::string af = f + ".accel";
+    r.CheckKeys(a, af, {"noise_density_m_s2_sqrt_hz", "bias_m_s2"});
+    d.accel_noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
+    d.accel_bias_m_s2 = r.Number(a, "bias_m_s2", af, -10, 10, 0.0);
+  }
+  std::shared_ptr<const bus::DbcDatabase> db;
+  try {
+    db = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
+  } catch (const std::exception& e) {
+    r.Fail(n["dbc"], f + ".dbc", e.what());
+  }
+  try {
+    (void)DbcImuNode(db, d.node, 0);
+  } catch (const std::invalid_argument& e) {
+    // "dbc_imu.channels[0].signal: problem" -> field "sensors.dbc_imu.channels[0].signal".
+    const std::string what = e.what();
+    const auto colon = what.find(": ");
+    if (what.starts_with("dbc_imu.") && colon != std::string::npos) {
+      r.Fail(n, "sensors." + what.substr(0, colon), what.substr(colon + 2));
+    }
+    r.Fail(n, f, what);
+  }
+  return d;
+}
+
 SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::Platform& platform) {
   SensorsSpec s;
   if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
-  r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4"});
+  r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4", "dbc_imu"});
   const auto e = n["encoders"];
   if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
   r.CheckKeys(e, "sensors.encoders",
@@ -426,6 +522,7 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::P
     s.accel4_bias_m_s2 = four("bias_m_s2", 10.0);
     s.accel4_scale_error = four("scale_error", 0.5);
   }
+  if (const auto d = n["dbc_imu"]) s.dbc_imu = ReadDbcImu(r, d);
   if (const auto b = n["bus"]) {
     r.CheckKeys(b, "sensors.bus", {"bitrate_bps", "heartbeat_ms"});
     s.bitrate_bps = static_cast<std::uint32_t>(

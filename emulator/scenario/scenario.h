@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 
+#include "emulator/devices/dbc_imu_node.h"
 #include "emulator/faults/bus_faults.h"
 #include "emulator/faults/device_faults.h"
 #include "emulator/faults/frame_faults.h"
@@ -81,6 +82,19 @@ struct EncoderDeviceSpec {
   int direction = 1;
 };
 
+/// A user's IMU described by its own DBC file (sensors.dbc_imu; emulator/devices/dbc_imu_device.h).
+struct DbcImuSpec {
+  std::string dbc;  ///< The DBC file (absolute after loading).
+  std::string where;  ///< file:line:column of the entry, for messages.
+  Eigen::Vector3d mount_m = Eigen::Vector3d::Zero();  ///< Mounting point in the body frame B.
+  DbcImuConfig node;  ///< Which signal carries which quantity; counters and checksums.
+  double gyro_noise_density_rad_s_sqrt_hz = 0;
+  double gyro_bias_rad_s = 0;
+  double gyro_bias_random_walk_rad_s_sqrt_s = 0;
+  double accel_noise_density_m_s2_sqrt_hz = 0;
+  double accel_bias_m_s2 = 0;
+};
+
 struct SensorsSpec {
   int encoder_lines_per_rev = 500;
   bool encoder_quadrature_x4 = true;
@@ -101,6 +115,7 @@ struct SensorsSpec {
   double accel4_noise_density_m_s2_sqrt_hz = 0;
   std::vector<double> accel4_bias_m_s2;    ///< 4 values (calibration error), empty: none.
   std::vector<double> accel4_scale_error;  ///< 4 values, empty: none.
+  std::optional<DbcImuSpec> dbc_imu;
 };
 
 /// A fault injected over a window [start_s, end_s) of motion time (end_s infinite: to the end).

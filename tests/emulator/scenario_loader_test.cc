@@ -59,6 +59,35 @@ TEST(ScenarioLoader, UnknownOrRepeatedMetricComponentIsNamed) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("'pose' is listed twice")));
 }
 
+std::string DbcImu(const std::string& signal) {
+  return "  dbc_imu:\n"
+         "    dbc: ../tests/data/dbc/user_imu.dbc\n"
+         "    mount_m: [0.1, 0, 0.05]\n"
+         "    channels:\n"
+         "      - {quantity: rate_z, message: IMU_Rates, signal: " +
+         signal +
+         "}\n"
+         "    messages:\n"
+         "      - {message: IMU_Rates, counter: IMU_Counter, checksum: IMU_Crc, "
+         "checksum_kind: crc8_sae_j1850}\n"
+         "    gyro: {noise_density_rad_s_sqrt_hz: 0.001}\n";
+}
+
+TEST(ScenarioLoader, DbcImuIsReadAndCheckedAgainstItsDbc) {
+  const Scenario s = ParseScenario(Minimal(DbcImu("IMU_RateZ")), kFile);
+  ASSERT_TRUE(s.sensors.dbc_imu.has_value());
+  EXPECT_THAT(s.sensors.dbc_imu->dbc, ::testing::EndsWith("tests/data/dbc/user_imu.dbc"));
+  EXPECT_DOUBLE_EQ(s.sensors.dbc_imu->mount_m.x(), 0.1);
+  ASSERT_EQ(s.sensors.dbc_imu->node.message_options.size(), 1u);
+  EXPECT_EQ(s.sensors.dbc_imu->node.message_options[0].checksum, ChecksumKind::kCrc8SaeJ1850);
+  EXPECT_DOUBLE_EQ(s.sensors.dbc_imu->gyro_noise_density_rad_s_sqrt_hz, 0.001);
+  // A signal the DBC does not have: the entry and the node's own reason.
+  EXPECT_THAT([] { (void)ParseScenario(Minimal(DbcImu("IMU_Yaw")), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("inline.yaml:11:5: sensors.dbc_imu.channels[0].signal: message "
+                                "'IMU_Rates' has no signal 'IMU_Yaw'")));
+}
+
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
   EXPECT_THAT(
       [] { (void)ParseScenario(Minimal("speed: 3\n"), kFile); },

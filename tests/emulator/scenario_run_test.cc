@@ -16,7 +16,11 @@
 #include <string>
 #include <vector>
 
+#include "bus/candump_log.h"
+#include "bus/dbc.h"
+#include "bus/dbc_codec.h"
 #include "bus/ucan_runtime_dir.h"
+#include "emulator/devices/frame_checksum.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 #include "tests/emulator/scenario_run_support.h"
@@ -323,6 +327,59 @@ TEST_F(ScenarioRun, DoorThresholdReportsContactLossWhereTheWheelsCrossIt) {
 // The physics of the motion phase on a worker thread (RunOptions::physics_thread, `wheelhil run
 // --physics-thread`) changes no bit of what the run leaves: faults_demo has physical faults
 // (their events come from the worker's steps) next to bus and device faults.
+// A user's IMU from its own DBC file (tests/data/dbc/user_imu.dbc) on the paper 001 robot while
+// it spins: every message at its GenMsgCycleTime, counters and CRC right, the noiseless z rate
+// reaching the spin's peak rate and the z specific force 1 g.
+TEST_F(ScenarioRun, DbcImuFromTheScenarioSendsItsOwnFrames) {
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                "/scenarios/paper001_spin_cw_T10.yaml");
+  s.expectations.clear();
+  DbcImuSpec imu;
+  imu.dbc = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/dbc/user_imu.dbc";
+  imu.node.channels = {{ImuQuantity::kRateZ, "IMU_Rates", "IMU_RateZ"},
+                       {ImuQuantity::kAccelZ, "IMU_Accel", "IMU_AccZ"}};
+  imu.node.message_options = {{"IMU_Rates", "IMU_Counter", "IMU_Crc", ChecksumKind::kCrc8SaeJ1850},
+                              {"IMU_Accel", "IMU_Cnt", "IMU_Sum", ChecksumKind::kSum}};
+  s.sensors.dbc_imu = imu;
+  const RunResult r = RunScenario(s, Options(dir_));
+  ASSERT_EQ(r.failure, "");
+  const auto db = bus::DbcDatabase::LoadFile(imu.dbc);
+  const bus::DbcMessage& rates = *db.FindMessage("IMU_Rates");
+  const bus::DbcMessage& accel = *db.FindMessage("IMU_Accel");
+  const auto log = bus::LoadCandumpFile((dir_ / "can.log").string());
+  ASSERT_TRUE(log.errors.empty());
+  std::vector<std::int64_t> t_rates;
+  double min_rate_deg_s = 0, accz_sum = 0;
+  int n_accel = 0, last_counter = -1;
+  for (const auto& rec : log.records) {
+    if (rec.frame.id == rates.id) {
+      t_rates.push_back(rec.timestamp_ns);
+      const auto v = bus::DecodeMessage(rates, rec.frame);
+      const int counter = static_cast<int>(v.at("IMU_Counter"));
+      if (last_counter >= 0) {
+        EXPECT_EQ(counter, (last_counter + 1) % 256);
+      }
+      last_counter = counter;
+      EXPECT_EQ(ComputeChecksum(ChecksumKind::kCrc8SaeJ1850, *rates.FindSignal("IMU_Crc"),
+                                {rec.frame.data.data(), rec.frame.len}),
+                static_cast<std::uint64_t>(v.at("IMU_Crc")));
+      min_rate_deg_s = std::min(min_rate_deg_s, v.at("IMU_RateZ"));
+    } else if (rec.frame.id == accel.id) {
+      accz_sum += bus::DecodeMessage(accel, rec.frame).at("IMU_AccZ");
+      ++n_accel;
+    }
+  }
+  // The whole run (boot, settle, 0.2 s hold, the spin, 0.5 s hold) at 10 ms and 20 ms.
+  ASSERT_GT(t_rates.size(), 400u);
+  EXPECT_NEAR(static_cast<double>(n_accel), t_rates.size() / 2.0, 2.0);
+  for (std::size_t i = 1; i < t_rates.size(); ++i) {
+    EXPECT_NEAR(static_cast<double>(t_rates[i] - t_rates[i - 1]), 10e6, 0.5e6);
+  }
+  // Clockwise at up to 1 rad/s (the profile's cruise rate): -57.3 deg/s.
+  EXPECT_NEAR(min_rate_deg_s, -1.0 * 180.0 / 3.141592653589793, 2.0);
+  EXPECT_NEAR(accz_sum / n_accel, 1.0, 0.01);  // g
+}
+
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {
   const Scenario s =
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml");
