@@ -3,14 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "bus/yaml_fields.h"
 #include "emulator/scenario/metrics.h"
 
 namespace wheelhil::emulator::scenario {
@@ -19,85 +18,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class Reader {
+// Scenario fields; relative paths resolve against the scenario file's folder.
+class Reader : public bus::yaml::FieldReader {
  public:
-  explicit Reader(std::string file) : file_(std::move(file)) {
-    base_dir_ = fs::path(file_).parent_path();
-  }
-
-  std::string Where(const YAML::Node& node) const {
-    if (!node.IsDefined()) return fmt::format("{}:0:0", file_);
-    return fmt::format("{}:{}:{}", file_, node.Mark().line + 1, node.Mark().column + 1);
-  }
-
-  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
-                         const std::string& problem) const {
-    throw std::invalid_argument(fmt::format("{}: {}: {}", Where(node), field, problem));
-  }
-
-  void CheckKeys(const YAML::Node& map, const std::string& field,
-                 const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) Fail(map, field, "must be a mapping");
-    for (const auto& kv : map) {
-      const auto key = kv.first.as<std::string>();
-      if (allowed.count(key) == 0) {
-        Fail(kv.first, field.empty() ? key : field + "." + key, "unknown key");
-      }
-    }
-  }
-
-  double Number(const YAML::Node& parent, const std::string& key, const std::string& field,
-                double min, double max, std::optional<double> def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    const std::string f = field.empty() ? key : field + "." + key;
-    if (!n.IsDefined() || n.IsNull()) {
-      if (def) return *def;
-      Fail(parent, f, "is required");
-    }
-    if (!n.IsScalar()) Fail(n, f, "must be a number");
-    double v = 0;
-    try {
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      Fail(n, f, fmt::format("'{}' is not a number", n.Scalar()));
-    }
-    if (!std::isfinite(v)) Fail(n, f, "must be finite");
-    if (v < min || v > max) Fail(n, f, fmt::format("{} is outside [{}, {}]", v, min, max));
-    return v;
-  }
-
-  std::string String(const YAML::Node& parent, const std::string& key, const std::string& field,
-                     std::optional<std::string> def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    const std::string f = field.empty() ? key : field + "." + key;
-    if (!n.IsDefined() || n.IsNull()) {
-      if (def) return *def;
-      Fail(parent, f, "is required");
-    }
-    if (!n.IsScalar()) Fail(n, f, "must be a string");
-    return n.Scalar();
-  }
-
-  bool Bool(const YAML::Node& parent, const std::string& key, const std::string& field,
-            bool def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    if (!n.IsDefined() || n.IsNull()) return def;
-    try {
-      return n.as<bool>();
-    } catch (const YAML::Exception&) {
-      Fail(n, field + "." + key, "must be true or false");
-    }
-  }
+  explicit Reader(std::string file)
+      : FieldReader(std::move(file)), base_dir_(fs::path(this->file()).parent_path()) {}
 
   std::string Path(const std::string& p) const {
     if (p.empty() || fs::path(p).is_absolute()) return p;
     return (base_dir_ / p).lexically_normal().string();
   }
 
-  const std::string& file() const { return file_; }
-
  private:
-  std::string file_;
   fs::path base_dir_;
 };
 
@@ -107,24 +39,24 @@ Friction ReadFriction(const Reader& r, const YAML::Node& n, const std::string& f
   f.mu_peak = r.Number(n, "mu_peak", field, 0, 10, def.mu_peak);
   f.mu_slide = r.Number(n, "mu_slide", field, 0, 10, std::min(def.mu_slide, f.mu_peak));
   if (f.mu_slide > f.mu_peak) {
-    r.Fail(n["mu_slide"], field + ".mu_slide", "must not exceed mu_peak");
+    r.FailKey(n, "mu_slide", field + ".mu_slide", "must not exceed mu_peak");
   }
   return f;
 }
 
-std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& n,
-                                         const std::string& field) {
-  if (!n.IsSequence() || n.size() < 3) r.Fail(n, field, "must be a list of >= 3 [x, y] points");
+std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& parent,
+                                         const std::string& key, const std::string& prefix) {
+  const std::string field = Reader::Join(prefix, key);
+  const YAML::Node n = Reader::Get(parent, key);
+  if (!n.IsSequence() || n.size() < 3) {
+    r.FailKey(parent, key, field, "must be a list of >= 3 [x, y] points");
+  }
   std::vector<Eigen::Vector2d> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node p = n[i];
     const std::string f = fmt::format("{}[{}]", field, i);
     if (!p.IsSequence() || p.size() != 2) r.Fail(p, f, "must be [x, y]");
-    try {
-      out.emplace_back(p[0].as<double>(), p[1].as<double>());
-    } catch (const YAML::Exception&) {
-      r.Fail(p, f, "must hold two numbers");
-    }
+    out.emplace_back(r.ToNumber(p[0], f + "[0]"), r.ToNumber(p[1], f + "[1]"));
   }
   return out;
 }
@@ -137,7 +69,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
   if (const auto m = n["meshes"]) {
     if (!m.IsSequence()) r.Fail(m, "terrain.meshes", "must be a list of files");
     for (std::size_t i = 0; i < m.size(); ++i) {
-      const std::string p = r.Path(m[i].as<std::string>());
+      const std::string p = r.Path(r.ToString(m[i], fmt::format("terrain.meshes[{}]", i)));
       if (!fs::exists(p)) r.Fail(m[i], fmt::format("terrain.meshes[{}]", i), p + " not found");
       t.meshes.push_back(p);
     }
@@ -149,7 +81,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
       r.CheckKeys(ps[i], f, {"name", "polygon_m", "mu_peak", "mu_slide"});
       PatchSpec p;
       p.name = r.String(ps[i], "name", f, fmt::format("patch{}", i));
-      p.polygon_m = ReadPolygon(r, ps[i]["polygon_m"], f + ".polygon_m");
+      p.polygon_m = ReadPolygon(r, ps[i], "polygon_m", f);
       p.friction = ReadFriction(r, ps[i], f, Friction{0.1, 0.08});
       t.patches.push_back(std::move(p));
     }
@@ -166,19 +98,22 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     s.length_min_m = r.Number(rp, "length_min_m", f, 1e-3, 100, 0.05);
     s.length_max_m = r.Number(rp, "length_max_m", f, s.length_min_m, 100, 0.2);
     s.width_m = r.Number(rp, "width_m", f, 1e-3, 10, 0.1);
-    const auto ty = rp["track_y_m"];
+    const YAML::Node ty = Reader::Get(rp, "track_y_m");
+    if (!ty.IsDefined()) r.Fail(rp, f + ".track_y_m", "is required (a list of y)");
     if (!ty.IsSequence() || ty.size() == 0) r.Fail(ty, f + ".track_y_m", "must be a list of y");
-    for (const auto& y : ty) s.track_y_m.push_back(y.as<double>());
+    for (std::size_t i = 0; i < ty.size(); ++i) {
+      s.track_y_m.push_back(r.ToNumber(ty[i], fmt::format("{}.track_y_m[{}]", f, i)));
+    }
     s.friction = ReadFriction(r, rp, f, Friction{0.05, 0.03});
     const std::string placement = r.String(rp, "placement", f, "uniform");
     if (placement == "stratified") {
       s.placement = RandomPatchesSpec::Placement::kStratified;
       const double section = s.count > 0 ? (s.x_max_m - s.x_min_m) / s.count : 0.0;
       if (s.count > 0 && s.length_max_m > section) {
-        r.Fail(rp["length_max_m"], f + ".length_max_m",
-               fmt::format("({}) must be <= the section length (x_max_m - x_min_m) / count = {} "
-                           "with placement: stratified",
-                           s.length_max_m, section));
+        r.FailKey(rp, "length_max_m", f + ".length_max_m",
+                  fmt::format("({}) must be <= the section length (x_max_m - x_min_m) / count = {} "
+                              "with placement: stratified",
+                              s.length_max_m, section));
       }
     } else if (placement != "uniform") {
       r.Fail(rp["placement"], f + ".placement",
@@ -222,9 +157,9 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
   const double accel = r.Number(s, "accel", f, 1e-6, 1e3, std::nullopt);
   const double turn_speed = r.Number(s, "turn_speed_rad_s", f, 1e-6, 50, 0.5);
   const double turn_accel = r.Number(s, "turn_accel_rad_s2", f, 1e-6, 1e3, 1.0);
-  const YAML::Node pts = s["points_m"];
+  const YAML::Node pts = Reader::Get(s, "points_m");
   if (!pts.IsSequence() || pts.size() == 0) {
-    r.Fail(pts.IsDefined() ? pts : s, f + ".points_m", "must be a non-empty list of [x, y]");
+    r.FailKey(s, "points_m", f + ".points_m", "must be a non-empty list of [x, y]");
   }
   Eigen::Vector3d pose;
   if (!NominalPoseAfter(out, &pose)) {
@@ -275,9 +210,12 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
   }
 }
 
-std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
+std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
                                       const platforms::Platform& platform) {
-  if (!n.IsSequence() || n.size() == 0) r.Fail(n, "motion", "must be a non-empty list of segments");
+  const YAML::Node n = Reader::Get(root, "motion");
+  if (!n.IsSequence() || n.size() == 0) {
+    r.FailKey(root, "motion", "motion", "must be a non-empty list of segments");
+  }
   std::vector<MotionSegment> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node s = n[i];
@@ -303,11 +241,13 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
     } else if (type == "trapezoid") {
       r.CheckKeys(s, f, {"type", "direction", "distance", "speed", "accel"});
       m.kind = MotionSegment::Kind::kTrapezoid;
-      const auto d = s["direction"];
+      const YAML::Node d = Reader::Get(s, "direction");
       if (!d.IsSequence() || d.size() != 3) {
-        r.Fail(d.IsDefined() ? d : s, f + ".direction", "must be [vx, vy, wz]");
+        r.FailKey(s, "direction", f + ".direction", "must be [vx, vy, wz]");
       }
-      m.direction = Eigen::Vector3d(d[0].as<double>(), d[1].as<double>(), d[2].as<double>());
+      for (int k = 0; k < 3; ++k) {
+        m.direction[k] = r.ToNumber(d[k], fmt::format("{}.direction[{}]", f, k));
+      }
       if (!(m.direction.norm() > 0)) r.Fail(d, f + ".direction", "must not be zero");
       m.direction.normalize();
       m.distance = r.Number(s, "distance", f, 0, 1e5, std::nullopt);
@@ -318,12 +258,14 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
       r.CheckKeys(s, f, {"type", "duration_s", "omega_rad_s"});
       m.kind = MotionSegment::Kind::kWheels;
       m.duration_s = r.Number(s, "duration_s", f, 0, 1e6, std::nullopt);
-      const auto w = s["omega_rad_s"];
+      const YAML::Node w = Reader::Get(s, "omega_rad_s");
       if (!w.IsSequence() || w.size() != wheels) {
-        r.Fail(w.IsDefined() ? w : s, f + ".omega_rad_s",
-               fmt::format("must list {} wheel speeds (platform wheel order)", wheels));
+        r.FailKey(s, "omega_rad_s", f + ".omega_rad_s",
+                  fmt::format("must list {} wheel speeds (platform wheel order)", wheels));
       }
-      for (const auto& x : w) m.wheel_speeds_rad_s.push_back(x.as<double>());
+      for (std::size_t k = 0; k < w.size(); ++k) {
+        m.wheel_speeds_rad_s.push_back(r.ToNumber(w[k], fmt::format("{}.omega_rad_s[{}]", f, k)));
+      }
     } else {
       r.Fail(s["type"], f + ".type",
              fmt::format("'{}' is not one of twist, trapezoid, hold, wheels, waypoints", type));
@@ -333,11 +275,13 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
   return out;
 }
 
-SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::Platform& platform) {
+SensorsSpec ReadSensors(const Reader& r, const YAML::Node& root,
+                        const platforms::Platform& platform) {
   SensorsSpec s;
-  if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
+  const YAML::Node n = Reader::Get(root, "sensors");
+  if (!n.IsDefined()) r.Fail(root, "sensors", "is required (encoders at least)");
   r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4"});
-  const auto e = n["encoders"];
+  const YAML::Node e = Reader::Get(n, "encoders");
   if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
   r.CheckKeys(e, "sensors.encoders",
               {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
@@ -346,10 +290,10 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::P
   s.encoder_quadrature_x4 = r.Bool(e, "quadrature_x4", "sensors.encoders", true);
   s.encoder_missed_count_prob = r.Number(e, "missed_count_prob", "sensors.encoders", 0, 1, 0.0);
   s.encoder_glitch_prob = r.Number(e, "glitch_prob", "sensors.encoders", 0, 1, 0.0);
-  const auto nodes = e["nodes"];
+  const YAML::Node nodes = Reader::Get(e, "nodes");
   if (!nodes.IsSequence() || nodes.size() == 0) {
-    r.Fail(nodes.IsDefined() ? nodes : e, "sensors.encoders.nodes",
-           "must list the encoder nodes ({wheel, node_id})");
+    r.FailKey(e, "nodes", "sensors.encoders.nodes",
+              "must list the encoder nodes ({wheel, node_id})");
   }
   std::set<int> ids;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -754,7 +698,8 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   t.sync_period_s = r.Number(n, "sync_period_s", "timing", 1e-4, 10, 0.01);
   const double steps = t.sync_period_s * t.physics_rate_hz;
   if (std::abs(steps - std::round(steps)) > 1e-6) {
-    r.Fail(n["sync_period_s"], "timing.sync_period_s", "must be a whole number of physics steps");
+    r.FailKey(n, "sync_period_s", "timing.sync_period_s",
+              "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
   return t;
@@ -834,26 +779,19 @@ platforms::BodyTwist TwistAt(const std::vector<MotionSegment>& motion, double t_
   return {};
 }
 
-Scenario ParseScenario(const std::string& text, const std::string& file) {
-  Reader r(file);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
-    throw std::invalid_argument(fmt::format("{}:{}:{}: (document): YAML syntax error: {}", file,
-                                            e.mark.line + 1, e.mark.column + 1, e.msg));
-  }
-  if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
+namespace {
+
+Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   r.CheckKeys(root, "",
               {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "faults",
                "firmware", "timing", "expectations", "slip_threshold_m_s"});
   Scenario s;
-  s.source_path = file;
+  s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);
   s.description = r.String(root, "description", "", std::string());
   s.seed = static_cast<std::uint64_t>(r.Number(root, "seed", "", 0, 9e15, 1.0));
 
-  const auto p = root["platform"];
+  const YAML::Node p = Reader::Get(root, "platform");
   if (!p.IsDefined()) r.Fail(root, "platform", "is required");
   if (p.IsScalar()) {
     const std::string path = r.Path(p.Scalar());
@@ -865,36 +803,43 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   } else {
     r.CheckKeys(p, "platform", {"file", "overrides"});
     const std::string path = r.Path(r.String(p, "file", "platform", std::nullopt));
-    const YAML::Node overrides = p["overrides"];
-    if (overrides && !overrides.IsMap()) {
+    const YAML::Node overrides = Reader::Get(p, "overrides");
+    if (overrides.IsDefined() && !overrides.IsMap()) {
       r.Fail(overrides, "platform.overrides", "must be a mapping");
     }
     try {
       s.platform = platforms::LoadPlatformFile(path, overrides);
     } catch (const std::invalid_argument& e) {
-      r.Fail(overrides ? overrides : p["file"], overrides ? "platform.overrides" : "platform.file",
-             e.what());
+      const bool over = overrides.IsDefined();
+      r.Fail(over ? overrides : p["file"], over ? "platform.overrides" : "platform.file", e.what());
     }
   }
-  s.terrain = ReadTerrain(r, root["terrain"]);
-  s.motion = ReadMotion(r, root["motion"], s.platform);
-  s.sensors = ReadSensors(r, root["sensors"], s.platform);
-  s.faults = ReadFaults(r, root["faults"], s.sensors, s.platform);
-  s.firmware = ReadFirmware(r, root["firmware"]);
-  s.timing = ReadTiming(r, root["timing"], MotionDuration(s.motion));
-  s.expectations = ReadExpectations(r, root["expectations"]);
+  s.terrain = ReadTerrain(r, Reader::Get(root, "terrain"));
+  s.motion = ReadMotion(r, root, s.platform);
+  s.sensors = ReadSensors(r, root, s.platform);
+  s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.platform);
+  s.firmware = ReadFirmware(r, Reader::Get(root, "firmware"));
+  s.timing = ReadTiming(r, Reader::Get(root, "timing"), MotionDuration(s.motion));
+  s.expectations = ReadExpectations(r, Reader::Get(root, "expectations"));
   if (root["slip_threshold_m_s"]) {
     s.slip_threshold_m_s = r.Number(root, "slip_threshold_m_s", "", 1e-6, 10, std::nullopt);
   }
   return s;
 }
 
+}  // namespace
+
+Scenario ParseScenario(const std::string& text, const std::string& file) {
+  const Reader r(file);
+  return r.Guard([&] {
+    const YAML::Node root = r.Parse(text);
+    if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
+    return ReadScenario(r, root);
+  });
+}
+
 Scenario LoadScenarioFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::invalid_argument(fmt::format("{}:0:0: (file): cannot be read", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseScenario(ss.str(), path);
+  return ParseScenario(Reader(path).ReadFile(), path);
 }
 
 }  // namespace wheelhil::emulator::scenario
