@@ -5,67 +5,54 @@
 
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <initializer_list>
 #include <set>
-#include <sstream>
 #include <stdexcept>
+
+#include "bus/yaml_fields.h"
 
 namespace wheelhil::fw {
 namespace {
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
-/// Reads one YAML mapping with located errors: "file:line:col: prefix.key: problem".
+/// One YAML mapping of the config, its fields named "prefix.key" in errors.
 class Section {
  public:
-  Section(const std::string& file, YAML::Node node, std::string prefix)
-      : file_(file), node_(std::move(node)), prefix_(std::move(prefix)) {
-    if (!node_.IsMap()) Fail(node_, "", "must be a mapping");
+  Section(const bus::yaml::FieldReader& reader, YAML::Node node, std::string prefix)
+      : reader_(reader), node_(std::move(node)), prefix_(std::move(prefix)) {
+    if (!node_.IsDefined() || !node_.IsMap()) Fail(node_, "", "must be a mapping");
   }
 
   /// Rejects keys not in `allowed` (catches typos such as `trackwidth_m`).
   void Allow(std::initializer_list<const char*> allowed) const {
-    std::set<std::string> ok(allowed.begin(), allowed.end());
-    for (const auto& kv : node_) {
-      const std::string key = kv.first.as<std::string>("");
-      if (!ok.count(key)) Fail(kv.first, key, "unknown field");
-    }
+    reader_.CheckKeys(node_, prefix_, std::set<std::string>(allowed.begin(), allowed.end()));
   }
 
   bool Has(const char* key) const { return static_cast<bool>(node_[key]); }
-  YAML::Node Node(const char* key) const { return node_[key]; }
+  YAML::Node Node(const char* key) const { return bus::yaml::FieldReader::Get(node_, key); }
   std::string Field(const std::string& key) const {
-    return prefix_.empty() ? key : prefix_ + "." + key;
+    return bus::yaml::FieldReader::Join(prefix_, key);
   }
 
   [[noreturn]] void Fail(const YAML::Node& at, const std::string& key,
                          const std::string& problem) const {
-    const YAML::Mark m = at.Mark();
-    const std::string where =
-        m.is_null() ? file_ : fmt::format("{}:{}:{}", file_, m.line + 1, m.column + 1);
     const std::string field = key.empty() ? (prefix_.empty() ? "config" : prefix_) : Field(key);
-    throw std::invalid_argument(fmt::format("{}: {}: {}", where, field, problem));
+    reader_.Fail(at, field, problem);
   }
   [[noreturn]] void FailHere(const std::string& key, const std::string& problem) const {
-    Fail(node_[key] ? node_[key] : node_, key, problem);
+    reader_.FailKey(node_, key, key.empty() ? prefix_ : Field(key), problem);
   }
 
   /// A finite number; `positive`: > 0, else >= 0 when `non_negative`.
   double Number(const char* key, double fallback, bool required, bool positive,
                 bool non_negative = false) const {
-    const YAML::Node n = node_[key];
-    if (!n) {
-      if (required) Fail(node_, key, "missing (required)");
+    const YAML::Node n = Node(key);
+    if (!n.IsDefined()) {
+      if (required) Fail(node_, key, "is required");
       return fallback;
     }
-    double v = 0.0;
-    try {
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      Fail(n, key, fmt::format("'{}' is not a number", n.as<std::string>("?")));
-    }
-    if (!std::isfinite(v)) Fail(n, key, "must be finite");
+    const double v = reader_.ToNumber(n, Field(key));
     if (positive && !(v > 0.0)) Fail(n, key, fmt::format("({}) must be > 0", v));
     if (non_negative && v < 0.0) Fail(n, key, fmt::format("({}) must be >= 0", v));
     return v;
@@ -73,35 +60,23 @@ class Section {
 
   long long Integer(const char* key, long long fallback, bool required, long long lo,
                     long long hi) const {
-    const YAML::Node n = node_[key];
-    if (!n) {
-      if (required) Fail(node_, key, "missing (required)");
+    const YAML::Node n = Node(key);
+    if (!n.IsDefined()) {
+      if (required) Fail(node_, key, "is required");
       return fallback;
     }
-    long long v = 0;
-    try {
-      v = n.as<long long>();
-    } catch (const YAML::Exception&) {
-      Fail(n, key, fmt::format("'{}' is not an integer", n.as<std::string>("?")));
-    }
-    if (v < lo || v > hi) Fail(n, key, fmt::format("({}) must be in [{}, {}]", v, lo, hi));
-    return v;
+    return reader_.ToInteger(n, Field(key), lo, hi);
   }
 
   bool Bool(const char* key, bool fallback) const {
-    const YAML::Node n = node_[key];
-    if (!n) return fallback;
-    try {
-      return n.as<bool>();
-    } catch (const YAML::Exception&) {
-      Fail(n, key, fmt::format("'{}' is not true/false", n.as<std::string>("?")));
-    }
+    const YAML::Node n = Node(key);
+    return n.IsDefined() ? reader_.ToBool(n, Field(key)) : fallback;
   }
 
   HeadingRule Heading(const char* key, HeadingRule fallback) const {
-    const YAML::Node n = node_[key];
-    if (!n) return fallback;
-    const std::string s = n.as<std::string>("");
+    const YAML::Node n = Node(key);
+    if (!n.IsDefined()) return fallback;
+    const std::string s = reader_.ToString(n, Field(key));
     if (s == "start") return HeadingRule::kStart;
     if (s == "midpoint") return HeadingRule::kMidpoint;
     if (s == "exact_arc") return HeadingRule::kExactArc;
@@ -109,16 +84,16 @@ class Section {
   }
 
   Section Child(const char* key) const {
-    const YAML::Node n = node_[key];
-    if (!n) Fail(node_, key, "missing (required)");
-    return Section(file_, n, Field(key));
+    const YAML::Node n = Node(key);
+    if (!n.IsDefined()) Fail(node_, key, "is required");
+    return Section(reader_, n, Field(key));
   }
 
-  const std::string& file() const { return file_; }
+  const bus::yaml::FieldReader& reader() const { return reader_; }
   const YAML::Node& node() const { return node_; }
 
  private:
-  std::string file_;
+  const bus::yaml::FieldReader& reader_;
   YAML::Node node_;
   std::string prefix_;
 };
@@ -140,12 +115,12 @@ EncoderNode ReadNode(const Section& s, bool with_angle, double* angle_rad) {
 void ReadThree(const Section& parent, const char* key, std::array<EncoderNode, 3>& nodes,
                std::array<double, 3>& angles_rad) {
   const YAML::Node list = parent.Node(key);
-  if (!list) parent.Fail(parent.node(), key, "missing (required): a list of three wheels");
+  if (!list.IsDefined()) parent.Fail(parent.node(), key, "is required: a list of three wheels");
   if (!list.IsSequence() || list.size() != 3) {
     parent.Fail(list, key, "must be a list of exactly three entries {node_id, sign, angle_deg}");
   }
   for (std::size_t i = 0; i < 3; ++i) {
-    const Section s(parent.file(), list[i], fmt::format("{}[{}]", parent.Field(key), i));
+    const Section s(parent.reader(), list[i], fmt::format("{}[{}]", parent.Field(key), i));
     nodes[i] = ReadNode(s, true, &angles_rad[i]);
   }
 }
@@ -287,25 +262,18 @@ std::vector<EncoderNode> FwConfig::encoder_nodes() const {
   return {};
 }
 
-FwConfig ParseFwConfig(const std::string& text, const std::string& path) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(
-        fmt::format("{}:{}:{}: {}", path, e.mark.line + 1, e.mark.column + 1, e.msg));
-  }
-  if (!root.IsMap()) {
-    throw std::invalid_argument(fmt::format("{}: firmware config must be a YAML mapping", path));
-  }
-  const Section top(path, root, "");
+namespace {
+
+FwConfig ReadFwConfig(const bus::yaml::FieldReader& reader, const YAML::Node& root) {
+  const std::string& path = reader.file();
+  const Section top(reader, root, "");
   top.Allow({"estimator", "dbc_dir", "canopen", "sync", "imu", "accel", "paper000", "paper001",
              "paper002"});
   FwConfig cfg;
   cfg.source_path = path;
-  const YAML::Node est = root["estimator"];
-  if (!est) throw std::invalid_argument(fmt::format("{}: missing field 'estimator'", path));
-  const std::string name = est.as<std::string>("");
+  const YAML::Node est = top.Node("estimator");
+  if (!est.IsDefined()) top.Fail(root, "estimator", "is required");
+  const std::string name = reader.ToString(est, "estimator");
   if (name == "paper000") {
     cfg.estimator = EstimatorKind::kPaper000SlipCorrection;
   } else if (name == "paper001") {
@@ -316,8 +284,8 @@ FwConfig ParseFwConfig(const std::string& text, const std::string& path) {
     top.Fail(est, "estimator",
              fmt::format("'{}' is not one of paper000, paper001, paper002", name));
   }
-  if (root["dbc_dir"]) {
-    std::filesystem::path dir = root["dbc_dir"].as<std::string>("");
+  if (top.Has("dbc_dir")) {
+    std::filesystem::path dir = reader.ToString(top.Node("dbc_dir"), "dbc_dir");
     if (dir.empty()) top.FailHere("dbc_dir", "must be a directory path");
     if (dir.is_relative()) dir = std::filesystem::path(path).parent_path() / dir;
     cfg.dbc_dir = dir.lexically_normal().string();
@@ -356,12 +324,19 @@ FwConfig ParseFwConfig(const std::string& text, const std::string& path) {
   return cfg;
 }
 
+}  // namespace
+
+FwConfig ParseFwConfig(const std::string& text, const std::string& path) {
+  const bus::yaml::FieldReader reader(path);
+  return reader.Guard([&] {
+    const YAML::Node root = reader.Parse(text);
+    if (!root.IsMap()) reader.Fail(root, "(document)", "a firmware config must be a mapping");
+    return ReadFwConfig(reader, root);
+  });
+}
+
 FwConfig LoadFwConfig(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::invalid_argument(fmt::format("{}: cannot open firmware config", path));
-  std::stringstream text;
-  text << in.rdbuf();
-  return ParseFwConfig(text.str(), path);
+  return ParseFwConfig(bus::yaml::FieldReader(path).ReadFile(), path);
 }
 
 }  // namespace wheelhil::fw

@@ -6,9 +6,12 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <stdexcept>
+
+#include "bus/yaml_fields.h"
 
 namespace wheelhil::emulator::campaign {
 namespace {
@@ -16,57 +19,49 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-class Loader {
+// Campaign fields. A campaign's integers may be written as 2 or 2.0; a plain scalar in a value
+// list is a number or a boolean when it reads as one, a quoted one always a string.
+class Loader : public bus::yaml::FieldReader {
  public:
-  explicit Loader(std::string file) : file_(std::move(file)) {}
+  using FieldReader::FieldReader;
 
-  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
-                         const std::string& problem) const {
-    const int line = node.IsDefined() && !node.IsNull() ? node.Mark().line + 1 : 0;
-    FailAt(line, field, problem);
+  int Line(const YAML::Node& node) const {
+    return node.IsDefined() && !node.Mark().is_null() ? node.Mark().line + 1 : 0;
   }
-  [[noreturn]] void FailAt(int line, const std::string& field, const std::string& problem) const {
-    throw std::invalid_argument(fmt::format("{}:{}: {}: {}", file_, line, field, problem));
-  }
-  int Line(const YAML::Node& node) const { return node.IsDefined() ? node.Mark().line + 1 : 0; }
-
-  void OnlyKeys(const YAML::Node& map, const std::string& field,
-                const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) Fail(map, field, "must be a mapping");
-    for (const auto& kv : map) {
-      const auto key = kv.first.as<std::string>();
-      if (!allowed.count(key)) {
-        std::string list;
-        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-        Fail(kv.first, field.empty() ? key : field + "." + key,
-             fmt::format("unknown key (allowed: {})", list));
-      }
-    }
+  int Column(const YAML::Node& node) const {
+    return node.IsDefined() && !node.Mark().is_null() ? node.Mark().column + 1 : 0;
   }
 
-  double Number(const YAML::Node& node, const std::string& field) const {
-    if (!node.IsDefined()) FailAt(0, field, "missing");
-    if (!node.IsScalar()) Fail(node, field, "must be a number");
-    double v = 0;
-    try {
-      v = node.as<double>();
-    } catch (const YAML::Exception&) {
-      Fail(node, field, fmt::format("'{}' is not a number", node.Scalar()));
-    }
-    if (!std::isfinite(v)) Fail(node, field, "must be finite");
-    return v;
+  // parent[key] as a finite number; required.
+  double RequiredNumber(const YAML::Node& parent, const std::string& key,
+                        const std::string& prefix) const {
+    return Number(parent, key, prefix, -std::numeric_limits<double>::infinity(),
+                  std::numeric_limits<double>::infinity());
   }
   int Integer(const YAML::Node& node, const std::string& field, int min_value) const {
-    const double v = Number(node, field);
+    const double v = ToNumber(node, field);
     if (v != std::floor(v) || v < min_value || v > 1e9) {
       Fail(node, field, fmt::format("({}) must be an integer >= {}", node.Scalar(), min_value));
     }
     return static_cast<int>(v);
   }
-  std::string String(const YAML::Node& node, const std::string& field) const {
-    if (!node.IsDefined()) FailAt(0, field, "missing");
-    if (!node.IsScalar() || node.Scalar().empty()) Fail(node, field, "must be a non-empty string");
-    return node.Scalar();
+  int Integer(const YAML::Node& parent, const std::string& key, const std::string& prefix,
+              int min_value) const {
+    const std::string field = Join(prefix, key);
+    const YAML::Node n = Get(parent, key);
+    if (!Present(n)) FailKey(parent, key, field, "is required");
+    return Integer(n, field, min_value);
+  }
+  std::string NonEmpty(const YAML::Node& node, const std::string& field) const {
+    const std::string s = ToString(node, field);
+    if (s.empty()) Fail(node, field, "must be a non-empty string");
+    return s;
+  }
+  std::string NonEmpty(const YAML::Node& parent, const std::string& key,
+                       const std::string& field) const {
+    const YAML::Node n = Get(parent, key);
+    if (!Present(n)) FailKey(parent, key, field, "is required");
+    return NonEmpty(n, field);
   }
   json Scalar(const YAML::Node& node, const std::string& field) const {
     if (!node.IsScalar()) Fail(node, field, "list entries must be scalars");
@@ -100,20 +95,16 @@ class Loader {
                     const std::set<std::string>& extra) const {
     std::set<std::string> allowed = {"metric", "max", "min"};
     allowed.insert(extra.begin(), extra.end());
-    OnlyKeys(node, field, allowed);
+    CheckKeys(node, field, allowed);
     MetricBound b;
     b.line = Line(node);
-    b.metric = String(node["metric"], field + ".metric");
-    if (node["max"]) b.max = Number(node["max"], field + ".max");
-    if (node["min"]) b.min = Number(node["min"], field + ".min");
+    b.column = Column(node);
+    b.metric = NonEmpty(node, "metric", field + ".metric");
+    if (node["max"]) b.max = ToNumber(node["max"], field + ".max");
+    if (node["min"]) b.min = ToNumber(node["min"], field + ".min");
     if (!b.max && !b.min) Fail(node, field, "needs max or min");
     return b;
   }
-
-  const std::string& file() const { return file_; }
-
- private:
-  std::string file_;
 };
 
 std::string Hex64(std::uint64_t v) { return fmt::format("{:016x}", v); }
@@ -246,28 +237,24 @@ std::string CampaignCriterion::Describe() const {
   return fmt::format(">= {:.4g} % of runs with {}", fraction * 100, bound->Describe());
 }
 
-CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file) {
-  Loader L(file);
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::ParserException& e) {
-    L.FailAt(e.mark.line + 1, "yaml", e.msg);
-  }
-  L.OnlyKeys(root, "",
-             {"campaign", "description", "base", "sampling", "runs", "seed", "repeats", "set",
-              "parameters", "pass", "rank_by", "timeout_s"});
+namespace {
+
+CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
+  const std::string& file = L.file();
+  L.CheckKeys(root, "",
+              {"campaign", "description", "base", "sampling", "runs", "seed", "repeats", "set",
+               "parameters", "pass", "rank_by", "timeout_s"});
   CampaignSpec spec;
   spec.file = file;
   spec.name =
-      root["campaign"] ? L.String(root["campaign"], "campaign") : fs::path(file).stem().string();
+      root["campaign"] ? L.NonEmpty(root["campaign"], "campaign") : fs::path(file).stem().string();
   for (char c : spec.name) {
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) {
       L.Fail(root["campaign"], "campaign", "use only letters, digits, '_', '-', '.'");
     }
   }
   const fs::path dir = fs::absolute(fs::path(file)).parent_path();
-  const std::string base = L.String(root["base"], "base");
+  const std::string base = L.NonEmpty(root, "base", "base");
   spec.base_scenario = fs::path(base).is_absolute() ? fs::path(base) : dir / base;
   spec.base_scenario = spec.base_scenario.lexically_normal();
   if (!fs::is_regular_file(spec.base_scenario)) {
@@ -275,7 +262,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
            fmt::format("scenario '{}' not found", spec.base_scenario.string()));
   }
 
-  const std::string sampling = root["sampling"] ? L.String(root["sampling"], "sampling") : "grid";
+  const std::string sampling = root["sampling"] ? L.NonEmpty(root["sampling"], "sampling") : "grid";
   if (sampling == "grid") {
     spec.sampling = CampaignSpec::Sampling::kGrid;
   } else if (sampling == "random") {
@@ -290,14 +277,14 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     L.Fail(root["sampling"], "runs", "random and lhs sampling need a run count `runs`");
   }
   if (root["seed"]) {
-    const double s = L.Number(root["seed"], "seed");
+    const double s = L.ToNumber(root["seed"], "seed");
     if (s < 0 || s != std::floor(s) || s > 9.0e15)
       L.Fail(root["seed"], "seed", "must be an integer >= 0");
     spec.seed = static_cast<std::uint64_t>(s);
   }
   if (root["repeats"]) spec.repeats = L.Integer(root["repeats"], "repeats", 1);
   if (root["timeout_s"]) {
-    spec.timeout_s = L.Number(root["timeout_s"], "timeout_s");
+    spec.timeout_s = L.ToNumber(root["timeout_s"], "timeout_s");
     if (spec.timeout_s <= 0) L.Fail(root["timeout_s"], "timeout_s", "must be > 0");
   }
 
@@ -305,8 +292,9 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     if (!set.IsMap()) L.Fail(set, "set", "must be a mapping of path: value");
     for (const auto& kv : set) {
       Override o;
-      o.path = kv.first.as<std::string>();
+      o.path = L.ToString(kv.first, "set");
       o.line = L.Line(kv.first);
+      o.column = L.Column(kv.first);
       o.value = L.ScalarOrList(kv.second, "set." + o.path);
       spec.overrides.push_back(std::move(o));
     }
@@ -320,17 +308,19 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   for (std::size_t i = 0; i < params.size(); ++i) {
     const YAML::Node p = params[i];
     const std::string field = fmt::format("parameters[{}]", i);
-    L.OnlyKeys(p, field, {"path", "values", "range", "uniform", "normal", "loguniform"});
+    L.CheckKeys(p, field, {"path", "values", "range", "uniform", "normal", "loguniform"});
     ParameterSpec ps;
     ps.line = L.Line(p);
-    if (const YAML::Node pp = p["path"]; pp.IsSequence()) {  // linked: one value, several paths
+    ps.column = L.Column(p);
+    const YAML::Node pp = Loader::Get(p, "path");
+    if (pp.IsSequence()) {  // linked: one value, several paths
       if (pp.size() == 0) L.Fail(pp, field + ".path", "needs at least one path");
       for (std::size_t k = 0; k < pp.size(); ++k) {
-        ps.paths.push_back(L.String(pp[k], fmt::format("{}.path[{}]", field, k)));
+        ps.paths.push_back(L.NonEmpty(pp[k], fmt::format("{}.path[{}]", field, k)));
         ps.path += (k == 0 ? "" : " + ") + ps.paths.back();
       }
     } else {
-      ps.path = L.String(pp, field + ".path");
+      ps.path = L.NonEmpty(p, "path", field + ".path");
       ps.paths = {ps.path};
     }
     for (const auto& one : ps.paths) {
@@ -346,34 +336,34 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     if (const auto r = p["range"]) {
       ++kinds;
       ps.kind = ParameterSpec::Kind::kRange;
-      L.OnlyKeys(r, field + ".range", {"from", "to", "steps"});
-      ps.from = L.Number(r["from"], field + ".range.from");
-      ps.to = L.Number(r["to"], field + ".range.to");
-      ps.steps = L.Integer(r["steps"], field + ".range.steps", 1);
+      L.CheckKeys(r, field + ".range", {"from", "to", "steps"});
+      ps.from = L.RequiredNumber(r, "from", field + ".range");
+      ps.to = L.RequiredNumber(r, "to", field + ".range");
+      ps.steps = L.Integer(r, "steps", field + ".range", 1);
     }
     if (const auto u = p["uniform"]) {
       ++kinds;
       ps.kind = ParameterSpec::Kind::kUniform;
-      L.OnlyKeys(u, field + ".uniform", {"min", "max"});
-      ps.from = L.Number(u["min"], field + ".uniform.min");
-      ps.to = L.Number(u["max"], field + ".uniform.max");
+      L.CheckKeys(u, field + ".uniform", {"min", "max"});
+      ps.from = L.RequiredNumber(u, "min", field + ".uniform");
+      ps.to = L.RequiredNumber(u, "max", field + ".uniform");
       if (!(ps.to > ps.from)) L.Fail(u, field + ".uniform", "needs min < max");
     }
     if (const auto u = p["loguniform"]) {
       ++kinds;
       ps.kind = ParameterSpec::Kind::kLogUniform;
-      L.OnlyKeys(u, field + ".loguniform", {"min", "max"});
-      ps.from = L.Number(u["min"], field + ".loguniform.min");
-      ps.to = L.Number(u["max"], field + ".loguniform.max");
+      L.CheckKeys(u, field + ".loguniform", {"min", "max"});
+      ps.from = L.RequiredNumber(u, "min", field + ".loguniform");
+      ps.to = L.RequiredNumber(u, "max", field + ".loguniform");
       if (!(ps.from > 0 && ps.to > ps.from))
         L.Fail(u, field + ".loguniform", "needs 0 < min < max");
     }
     if (const auto n = p["normal"]) {
       ++kinds;
       ps.kind = ParameterSpec::Kind::kNormal;
-      L.OnlyKeys(n, field + ".normal", {"mean", "stddev"});
-      ps.mean = L.Number(n["mean"], field + ".normal.mean");
-      ps.stddev = L.Number(n["stddev"], field + ".normal.stddev");
+      L.CheckKeys(n, field + ".normal", {"mean", "stddev"});
+      ps.mean = L.RequiredNumber(n, "mean", field + ".normal");
+      ps.stddev = L.RequiredNumber(n, "stddev", field + ".normal");
       if (!(ps.stddev > 0)) L.Fail(n, field + ".normal.stddev", "must be > 0");
     }
     if (kinds != 1) {
@@ -389,14 +379,8 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   }
 
   if (const auto pass = root["pass"]) {
-    L.OnlyKeys(pass, "pass", {"verdict", "run", "campaign"});
-    if (pass["verdict"]) {
-      try {
-        spec.require_verdict_pass = pass["verdict"].as<bool>();
-      } catch (const YAML::Exception&) {
-        L.Fail(pass["verdict"], "pass.verdict", "must be true or false");
-      }
-    }
+    L.CheckKeys(pass, "pass", {"verdict", "run", "campaign"});
+    if (pass["verdict"]) spec.require_verdict_pass = L.ToBool(pass["verdict"], "pass.verdict");
     if (const auto run = pass["run"]) {
       if (!run.IsSequence()) L.Fail(run, "pass.run", "must be a list of {metric, max|min}");
       for (std::size_t i = 0; i < run.size(); ++i) {
@@ -410,13 +394,14 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
         const std::string field = fmt::format("pass.campaign[{}]", i);
         CampaignCriterion cc;
         cc.line = L.Line(c);
+        cc.column = L.Column(c);
         if (!c.IsMap()) L.Fail(c, field, "must be a mapping");
         if (c["pass_rate"]) {
-          L.OnlyKeys(c, field, {"pass_rate"});
-          cc.fraction = L.Number(c["pass_rate"], field + ".pass_rate");
+          L.CheckKeys(c, field, {"pass_rate"});
+          cc.fraction = L.ToNumber(c["pass_rate"], field + ".pass_rate");
         } else {
           cc.bound = L.Bound(c, field, {"fraction"});
-          cc.fraction = c["fraction"] ? L.Number(c["fraction"], field + ".fraction") : 1.0;
+          cc.fraction = c["fraction"] ? L.ToNumber(c["fraction"], field + ".fraction") : 1.0;
         }
         if (cc.fraction < 0 || cc.fraction > 1) L.Fail(c, field, "fraction must be in [0, 1]");
         spec.campaign_criteria.push_back(cc);
@@ -424,7 +409,7 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
     }
   }
   if (root["rank_by"]) {
-    spec.rank_metric = L.String(root["rank_by"], "rank_by");
+    spec.rank_metric = L.NonEmpty(root["rank_by"], "rank_by");
   } else if (!spec.run_criteria.empty()) {
     spec.rank_metric = spec.run_criteria.front().metric;
   } else {
@@ -460,14 +445,15 @@ CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file
   return spec;
 }
 
+}  // namespace
+
+CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file) {
+  const Loader L(file);
+  return L.Guard([&] { return ReadCampaign(L, L.Parse(yaml_text)); });
+}
+
 CampaignSpec LoadCampaignFile(const fs::path& file) {
-  std::ifstream in(file);
-  if (!in) {
-    throw std::invalid_argument(fmt::format("{}:0: file: cannot be read", file.string()));
-  }
-  std::stringstream text;
-  text << in.rdbuf();
-  return ParseCampaign(text.str(), file.string());
+  return ParseCampaign(Loader(file.string()).ReadFile(), file.string());
 }
 
 json RunSpec::ParamsJson(const CampaignSpec& spec) const {
@@ -489,8 +475,8 @@ std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec) {
         grids.push_back(p.GridValues());
         total *= grids.back().size();
         if (total > 10'000'000) {
-          throw std::invalid_argument(
-              fmt::format("{}:{}: parameters: grid of more than 1e7 points", spec.file, p.line));
+          throw std::invalid_argument(fmt::format(
+              "{}:{}:{}: parameters: grid of more than 1e7 points", spec.file, p.line, p.column));
         }
       }
       // First parameter varies slowest (row-major, like nested loops in file order).

@@ -35,6 +35,7 @@ struct ParameterSpec {
   int steps = 0;                       ///< kRange: number of grid values (>= 2, or 1 = from)
   double mean = 0, stddev = 0;         ///< kNormal
   int line = 0;                        ///< line of this entry in the campaign file
+  int column = 0;                      ///< and its column
   /// Grid values (kList: the list, kRange: `steps` values from..to). Empty for distributions.
   std::vector<nlohmann::json> GridValues() const;
   /// Maps u in [0, 1) to a value (inverse CDF; lists pick floor(u * size)).
@@ -46,7 +47,7 @@ struct MetricBound {
   std::string metric;
   std::optional<double> max;  ///< metric <= max
   std::optional<double> min;  ///< metric >= min
-  int line = 0;
+  int line = 0, column = 0;
   /// True when `value` satisfies the bound (a missing metric never does).
   bool Holds(std::optional<double> value) const;
   std::string Describe() const;  ///< e.g. "pose.final_error_m <= 0.1"
@@ -57,7 +58,7 @@ struct MetricBound {
 struct CampaignCriterion {
   std::optional<MetricBound> bound;
   double fraction = 1.0;
-  int line = 0;
+  int line = 0, column = 0;
   std::string Describe() const;
 };
 
@@ -67,7 +68,7 @@ struct CampaignCriterion {
 struct Override {
   std::string path;
   nlohmann::json value;
-  int line = 0;
+  int line = 0, column = 0;
 };
 
 struct CampaignSpec {
@@ -89,7 +90,8 @@ struct CampaignSpec {
   std::string fingerprint;  ///< hash of everything that decides the run list (hex)
 };
 
-/// Loads and validates a campaign file. Throws std::invalid_argument "file:line: field: problem".
+/// Loads and validates a campaign file. Throws std::invalid_argument
+/// "file:line:col: field: problem".
 CampaignSpec LoadCampaignFile(const std::filesystem::path& file);
 /// Same from text; `file` names it in errors and relative paths resolve against its directory.
 CampaignSpec ParseCampaign(const std::string& yaml_text, const std::string& file);

@@ -8,6 +8,7 @@
 #include <variant>
 #include <vector>
 
+#include "bus/yaml_fields.h"
 #include "emulator/campaign/campaign_spec.h"
 
 namespace wheelhil::emulator::campaign {
@@ -157,12 +158,8 @@ void AbsolutizeRelativePaths(YAML::Node node, const fs::path& base_dir) {
 }
 
 YAML::Node LoadBase(const CampaignSpec& spec) {
-  try {
-    return YAML::LoadFile(spec.base_scenario.string());
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(
-        fmt::format("{}:{}: {}", spec.base_scenario.string(), e.mark.line + 1, e.msg));
-  }
+  const bus::yaml::FieldReader base(spec.base_scenario.string());
+  return base.Parse(base.ReadFile());
 }
 
 }  // namespace
@@ -180,7 +177,7 @@ fs::path CampaignDir(const CampaignSpec& spec) { return fs::absolute(spec.file).
 void ApplyOverrides(const CampaignSpec& spec, YAML::Node root) {
   for (const auto& o : spec.overrides) {
     SetAtPath(root, o.path, ResolveFiles(o.value, CampaignDir(spec)),
-              fmt::format("{}:{}: set", spec.file, o.line),
+              fmt::format("{}:{}:{}: set", spec.file, o.line, o.column),
               /*create_leaf=*/true);
   }
 }
@@ -193,7 +190,7 @@ void CheckParameterPaths(const CampaignSpec& spec) {
     for (const auto& path : p.paths) {
       SetAtPath(base, path,
                 p.kind == ParameterSpec::Kind::kList ? p.values.front() : nlohmann::json(p.from),
-                fmt::format("{}:{}: path", spec.file, p.line));
+                fmt::format("{}:{}:{}: path", spec.file, p.line, p.column));
     }
   }
 }
@@ -205,7 +202,8 @@ void WriteRunScenario(const CampaignSpec& spec, const RunSpec& run, const fs::pa
   for (std::size_t i = 0; i < spec.parameters.size(); ++i) {
     for (const auto& path : spec.parameters[i].paths) {
       SetAtPath(root, path, ResolveFiles(run.values.at(i), CampaignDir(spec)),
-                fmt::format("{}:{}: path", spec.file, spec.parameters[i].line));
+                fmt::format("{}:{}:{}: path", spec.file, spec.parameters[i].line,
+                            spec.parameters[i].column));
     }
   }
   YAML::Emitter out;

@@ -20,7 +20,7 @@ struct RunSpec;
 /// Splits "faults[0].probability" into {"faults", 0, "probability"}-style segments and sets the
 /// value there. The path must already exist in `root` (a campaign varies what the base defines):
 /// otherwise throws std::invalid_argument "<where>: <path>: <problem>", where `where` is e.g.
-/// "campaign.yaml:12" and the problem names the first missing segment.
+/// "campaign.yaml:12:5: path" and the problem names the first missing segment.
 /// With `create_leaf`, a missing last mapping key is added (its parent must exist).
 void SetAtPath(YAML::Node root, const std::string& path, const nlohmann::json& value,
                const std::string& where, bool create_leaf = false);

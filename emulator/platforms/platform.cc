@@ -3,14 +3,14 @@
 #include <fnmatch.h>
 
 #include <cmath>
-#include <fstream>
 #include <numbers>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
+
+#include "bus/yaml_fields.h"
 
 namespace wheelhil::emulator::platforms {
 
@@ -20,78 +20,52 @@ using physics::WheelKind;
 using physics::WheelSpec;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-class Reader {
+// Platform fields; a wheel's key missing from the wheel is looked up in wheel_defaults.
+class Reader : public bus::yaml::FieldReader {
  public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
+  using FieldReader::FieldReader;
 
-  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
-                         const std::string& problem) const {
-    const int line = node.IsDefined() ? node.Mark().line + 1 : 0;
-    throw std::invalid_argument(fmt::format("{}:{}: {}: {}", file_, line, field, problem));
+  // node[key], else fallback[key] (the defaults); undefined when neither has it. A null value
+  // counts as given (and then fails as not a number).
+  static YAML::Node Lookup(const YAML::Node& node, const YAML::Node& fallback,
+                           const std::string& key) {
+    const YAML::Node n = Get(node, key);
+    return n.IsDefined() ? n : Get(fallback, key);
   }
 
-  void CheckKeys(const YAML::Node& map, const std::string& field,
-                 const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) Fail(map, field, "must be a mapping");
-    for (const auto& kv : map) {
-      const auto key = kv.first.as<std::string>();
-      if (allowed.count(key) == 0) Fail(kv.first, field + "." + key, "unknown key");
-    }
-  }
-
-  // Looks a key up in `node`, then in `fallback` (defaults); required unless def given.
-  YAML::Node Find(const YAML::Node& node, const YAML::Node& fallback,
-                  const std::string& key) const {
-    if (node.IsDefined() && node.IsMap() && node[key]) return node[key];
-    if (fallback.IsDefined() && fallback.IsMap() && fallback[key]) return fallback[key];
-    return YAML::Node(YAML::NodeType::Undefined);
-  }
-
-  double Number(const YAML::Node& node, const std::string& field) const {
-    if (!node.IsScalar()) Fail(node, field, "must be a number");
-    double v = 0;
-    try {
-      v = node.as<double>();
-    } catch (const YAML::Exception&) {
-      Fail(node, field, fmt::format("'{}' is not a number", node.Scalar()));
-    }
-    if (!std::isfinite(v)) Fail(node, field, "must be finite");
-    return v;
-  }
-
-  double Get(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
-             const std::string& prefix, double min, double max, const double* def = nullptr) const {
-    const YAML::Node n = Find(parent, fallback, key);
+  // Lookup(parent, fallback, key) as a number in [min, max]; required unless def given.
+  double Value(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
+               const std::string& prefix, double min, double max,
+               const double* def = nullptr) const {
+    const YAML::Node n = Lookup(parent, fallback, key);
     const std::string field = prefix + key;
     if (!n.IsDefined()) {
       if (def != nullptr) return *def;
-      Fail(parent, field, "missing");
+      Fail(parent, field, "is required");
     }
-    const double v = Number(n, field);
-    if (v < min || v > max) Fail(n, field, fmt::format("{} is outside [{}, {}]", v, min, max));
-    return v;
+    return ToNumber(n, field, min, max);
   }
-  double GetOr(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
-               const std::string& prefix, double min, double max, double def) const {
-    return Get(parent, fallback, key, prefix, min, max, &def);
+  double ValueOr(const YAML::Node& parent, const YAML::Node& fallback, const std::string& key,
+                 const std::string& prefix, double min, double max, double def) const {
+    return Value(parent, fallback, key, prefix, min, max, &def);
   }
 
-  Eigen::Vector3d Vec3(const YAML::Node& n, const std::string& field) const {
-    if (!n.IsDefined()) Fail(n, field, "missing");
+  Eigen::Vector3d Vec3(const YAML::Node& parent, const std::string& key,
+                       const std::string& field) const {
+    const YAML::Node n = Get(parent, key);
+    if (!n.IsDefined()) Fail(parent, field, "is required");
     if (!n.IsSequence() || n.size() != 3) Fail(n, field, "must be a list of 3 numbers");
-    return {Number(n[0], field + "[0]"), Number(n[1], field + "[1]"), Number(n[2], field + "[2]")};
+    return {ToNumber(n[0], field + "[0]"), ToNumber(n[1], field + "[1]"),
+            ToNumber(n[2], field + "[2]")};
   }
 
-  std::string String(const YAML::Node& n, const std::string& field) const {
-    if (!n.IsDefined()) Fail(n, field, "missing");
-    if (!n.IsScalar()) Fail(n, field, "must be a string");
-    return n.Scalar();
+  // parent[key] as a string; required.
+  std::string Text(const YAML::Node& parent, const std::string& key,
+                   const std::string& field) const {
+    const YAML::Node n = Get(parent, key);
+    if (!n.IsDefined()) Fail(parent, field, "is required");
+    return ToString(n, field);
   }
-
-  const std::string& file() const { return file_; }
-
- private:
-  std::string file_;
 };
 
 const std::set<std::string> kWheelKeys = {"name",
@@ -124,9 +98,10 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
                      const std::string& prefix, bool* encoder) {
   rd.CheckKeys(n, prefix.substr(0, prefix.size() - 1), kWheelKeys);
   WheelSpec w;
-  w.name = rd.String(n["name"], prefix + "name");
-  const YAML::Node kind_node = rd.Find(n, defaults, "kind");
-  const std::string kind = rd.String(kind_node, prefix + "kind");
+  w.name = rd.Text(n, "name", prefix + "name");
+  const YAML::Node kind_node = rd.Lookup(n, defaults, "kind");
+  if (!kind_node.IsDefined()) rd.Fail(n, prefix + "kind", "is required");
+  const std::string kind = rd.ToString(kind_node, prefix + "kind");
   if (kind == "conventional") {
     w.kind = WheelKind::kConventional;
   } else if (kind == "mecanum") {
@@ -142,27 +117,27 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
         kind_node, prefix + "kind",
         fmt::format("'{}' is not one of conventional, mecanum, omni, orthogonal, caster", kind));
   }
-  w.mount_B = rd.Vec3(n["mount_m"], prefix + "mount_m");
-  w.heading_rad = rd.GetOr(n, defaults, "heading_deg", prefix, -360, 360, 0) * kDeg;
-  w.radius_m = rd.Get(n, defaults, "radius_m", prefix, 1e-3, 2);
-  w.inertia_kg_m2 = rd.Get(n, defaults, "inertia_kg_m2", prefix, 1e-9, 100);
+  w.mount_B = rd.Vec3(n, "mount_m", prefix + "mount_m");
+  w.heading_rad = rd.ValueOr(n, defaults, "heading_deg", prefix, -360, 360, 0) * kDeg;
+  w.radius_m = rd.Value(n, defaults, "radius_m", prefix, 1e-3, 2);
+  w.inertia_kg_m2 = rd.Value(n, defaults, "inertia_kg_m2", prefix, 1e-9, 100);
   const double def_roller = w.kind == WheelKind::kMecanum ? 45.0 : 90.0;
   w.roller_angle_rad =
-      rd.GetOr(n, defaults, "roller_angle_deg", prefix, -90, 90, def_roller) * kDeg;
+      rd.ValueOr(n, defaults, "roller_angle_deg", prefix, -90, 90, def_roller) * kDeg;
   if (w.kind == WheelKind::kMecanum &&
       std::abs(std::abs(w.roller_angle_rad) - 0.25 * std::numbers::pi) > 0.35) {
     rd.Fail(n, prefix + "roller_angle_deg", "a Mecanum roller angle must be near +-45");
   }
-  w.rolling_resistance = rd.GetOr(n, defaults, "rolling_resistance", prefix, 0, 0.5, 0.01);
-  w.bearing_friction_nm = rd.GetOr(n, defaults, "bearing_friction_nm", prefix, 0, 100, 0.001);
-  w.bearing_viscous_nm_s = rd.GetOr(n, defaults, "bearing_viscous_nm_s", prefix, 0, 100, 0.0);
-  w.lateral_mu_scale = rd.GetOr(n, defaults, "lateral_mu_scale", prefix, 0.01, 10, 1.0);
-  w.handover_dip_m = rd.GetOr(n, defaults, "handover_dip_m", prefix, 0, 0.1, 0.0);
+  w.rolling_resistance = rd.ValueOr(n, defaults, "rolling_resistance", prefix, 0, 0.5, 0.01);
+  w.bearing_friction_nm = rd.ValueOr(n, defaults, "bearing_friction_nm", prefix, 0, 100, 0.001);
+  w.bearing_viscous_nm_s = rd.ValueOr(n, defaults, "bearing_viscous_nm_s", prefix, 0, 100, 0.0);
+  w.lateral_mu_scale = rd.ValueOr(n, defaults, "lateral_mu_scale", prefix, 0.01, 10, 1.0);
+  w.handover_dip_m = rd.ValueOr(n, defaults, "handover_dip_m", prefix, 0, 0.1, 0.0);
   // 90 deg (the default) keeps the rad value bit-exact: the whole-segment dip.
-  const double zone_deg = rd.GetOr(n, defaults, "handover_zone_deg", prefix, 0.1, 90, 90.0);
+  const double zone_deg = rd.ValueOr(n, defaults, "handover_zone_deg", prefix, 0.1, 90, 90.0);
   w.handover_zone_rad = zone_deg == 90.0 ? 0.5 * std::numbers::pi : zone_deg * kDeg;
-  w.half_offset_m = rd.GetOr(n, defaults, "half_offset_m", prefix, 0, 0.2, 0.0);
-  const YAML::Node enc = rd.Find(n, defaults, "encoder");
+  w.half_offset_m = rd.ValueOr(n, defaults, "half_offset_m", prefix, 0, 0.2, 0.0);
+  const YAML::Node enc = rd.Lookup(n, defaults, "encoder");
   *encoder = false;
   if (enc.IsDefined()) {
     if (!enc.IsScalar() || (enc.Scalar() != "true" && enc.Scalar() != "false")) {
@@ -178,21 +153,21 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   if (!susp.IsDefined() && !dsusp.IsDefined()) rd.Fail(n, prefix + "suspension", "missing");
   const std::string sp = prefix + "suspension.";
   auto& q = w.suspension;
-  q.free_length_m = rd.Get(susp, dsusp, "free_length_m", sp, 1e-4, 2);
-  q.min_length_m = rd.Get(susp, dsusp, "min_length_m", sp, 0, 2);
-  q.max_length_m = rd.Get(susp, dsusp, "max_length_m", sp, 1e-4, 2);
+  q.free_length_m = rd.Value(susp, dsusp, "free_length_m", sp, 1e-4, 2);
+  q.min_length_m = rd.Value(susp, dsusp, "min_length_m", sp, 0, 2);
+  q.max_length_m = rd.Value(susp, dsusp, "max_length_m", sp, 1e-4, 2);
   if (q.min_length_m >= q.max_length_m) {
     rd.Fail(susp.IsDefined() ? susp : n, sp + "min_length_m", "must be below max_length_m");
   }
-  q.stiffness_n_m = rd.Get(susp, dsusp, "stiffness_n_m", sp, 1e-3, 1e8);
-  q.damping_n_s_m = rd.Get(susp, dsusp, "damping_n_s_m", sp, 0, 1e6);
+  q.stiffness_n_m = rd.Value(susp, dsusp, "stiffness_n_m", sp, 1e-3, 1e8);
+  q.damping_n_s_m = rd.Value(susp, dsusp, "damping_n_s_m", sp, 0, 1e6);
   q.bump_stiffness_n_m =
-      rd.GetOr(susp, dsusp, "bump_stiffness_n_m", sp, 0, 1e9, 10 * q.stiffness_n_m);
-  q.hub_mass_kg = rd.Get(susp, dsusp, "hub_mass_kg", sp, 1e-4, 100);
+      rd.ValueOr(susp, dsusp, "bump_stiffness_n_m", sp, 0, 1e9, 10 * q.stiffness_n_m);
+  q.hub_mass_kg = rd.Value(susp, dsusp, "hub_mass_kg", sp, 1e-4, 100);
   q.tire_stiffness_n_m =
-      rd.GetOr(susp, dsusp, "tire_stiffness_n_m", sp, 1, 1e9, q.tire_stiffness_n_m);
+      rd.ValueOr(susp, dsusp, "tire_stiffness_n_m", sp, 1, 1e9, q.tire_stiffness_n_m);
   q.tire_damping_n_s_m =
-      rd.GetOr(susp, dsusp, "tire_damping_n_s_m", sp, 0, 1e6, q.tire_damping_n_s_m);
+      rd.ValueOr(susp, dsusp, "tire_damping_n_s_m", sp, 0, 1e6, q.tire_damping_n_s_m);
 
   const YAML::Node motor = n["motor"];
   w.driven = motor.IsDefined() && !motor.IsNull();
@@ -202,18 +177,18 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
         defaults.IsDefined() && defaults.IsMap() ? defaults["motor"] : YAML::Node();
     const std::string mp = prefix + "motor.";
     auto& m = w.motor;
-    m.gear_ratio = rd.Get(motor, dmotor, "gear_ratio", mp, 1e-3, 1e4);
-    m.torque_constant_nm_a = rd.Get(motor, dmotor, "torque_constant_nm_a", mp, 1e-6, 100);
-    m.max_current_a = rd.Get(motor, dmotor, "max_current_a", mp, 1e-6, 1e4);
-    m.max_torque_nm = rd.GetOr(motor, dmotor, "max_torque_nm", mp, 1e-6, 1e6, 1e6);
-    m.rotor_inertia_kg_m2 = rd.GetOr(motor, dmotor, "rotor_inertia_kg_m2", mp, 0, 10, 0);
-    m.supply_voltage_v = rd.GetOr(motor, dmotor, "supply_voltage_v", mp, 1e-3, 1e4, 24);
-    m.winding_resistance_ohm = rd.GetOr(motor, dmotor, "winding_resistance_ohm", mp, 0, 1e4, 0);
-    m.max_accel_rad_s2 = rd.GetOr(motor, dmotor, "max_accel_rad_s2", mp, 0, 1e6, 0);
+    m.gear_ratio = rd.Value(motor, dmotor, "gear_ratio", mp, 1e-3, 1e4);
+    m.torque_constant_nm_a = rd.Value(motor, dmotor, "torque_constant_nm_a", mp, 1e-6, 100);
+    m.max_current_a = rd.Value(motor, dmotor, "max_current_a", mp, 1e-6, 1e4);
+    m.max_torque_nm = rd.ValueOr(motor, dmotor, "max_torque_nm", mp, 1e-6, 1e6, 1e6);
+    m.rotor_inertia_kg_m2 = rd.ValueOr(motor, dmotor, "rotor_inertia_kg_m2", mp, 0, 10, 0);
+    m.supply_voltage_v = rd.ValueOr(motor, dmotor, "supply_voltage_v", mp, 1e-3, 1e4, 24);
+    m.winding_resistance_ohm = rd.ValueOr(motor, dmotor, "winding_resistance_ohm", mp, 0, 1e4, 0);
+    m.max_accel_rad_s2 = rd.ValueOr(motor, dmotor, "max_accel_rad_s2", mp, 0, 1e6, 0);
     m.speed_gain_nm_s_rad =
-        rd.GetOr(motor, dmotor, "speed_gain_nm_s_rad", mp, 1e-6, 1e6, m.speed_gain_nm_s_rad);
+        rd.ValueOr(motor, dmotor, "speed_gain_nm_s_rad", mp, 1e-6, 1e6, m.speed_gain_nm_s_rad);
     m.integral_gain_nm_rad =
-        rd.GetOr(motor, dmotor, "integral_gain_nm_rad", mp, 0, 1e8, m.integral_gain_nm_rad);
+        rd.ValueOr(motor, dmotor, "integral_gain_nm_rad", mp, 0, 1e8, m.integral_gain_nm_rad);
     if (w.kind == WheelKind::kCaster) rd.Fail(motor, prefix + "motor", "a caster cannot be driven");
   }
   return w;
@@ -241,9 +216,10 @@ namespace {
 // position for errors ("" at the document root).
 void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& field,
                     const Reader& rd) {
-  if (!over.IsMap()) rd.Fail(over, field.empty() ? "overrides" : field, "must be a mapping");
+  const std::string name = field.empty() ? "overrides" : field;
+  if (!over.IsMap()) rd.Fail(over, name, "must be a mapping");
   for (const auto& kv : over) {
-    const auto key = kv.first.as<std::string>();
+    const std::string key = rd.ToString(kv.first, name);
     const std::string here = field.empty() ? key : field + "." + key;
     const YAML::Node value = kv.second;
     if (field.empty() && key == "wheels") {
@@ -252,7 +228,7 @@ void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& 
         rd.Fail(value, here, "file has no wheel list");
       if (!value.IsMap()) rd.Fail(value, here, "must map wheel names (or globs) to overrides");
       for (const auto& w : value) {
-        const auto pattern = w.first.as<std::string>();
+        const std::string pattern = rd.ToString(w.first, here);
         std::size_t matched = 0;
         for (std::size_t i = 0; i < wheels.size(); ++i) {
           const YAML::Node name = wheels[i]["name"];
@@ -275,27 +251,14 @@ void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& 
   }
 }
 
-}  // namespace
-
-Platform LoadPlatformYaml(const std::string& text, const std::string& file,
-                          const YAML::Node& overrides) {
-  Reader rd(file);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
-    throw std::invalid_argument(
-        fmt::format("{}:{}: (document): YAML syntax error: {}", file, e.mark.line + 1, e.msg));
-  }
-  if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
-  if (overrides.IsDefined() && !overrides.IsNull()) MergeOverrides(root, overrides, "", rd);
-  rd.CheckKeys(root, "(document)",
+Platform ReadPlatform(const Reader& rd, const YAML::Node& root) {
+  rd.CheckKeys(root, "",
                {"name", "description", "paper", "chassis", "wheel_defaults", "wheels", "kinematics",
                 "sensors", "solver"});
   Platform p;
-  p.source_file = file;
-  p.name = rd.String(root["name"], "name");
-  if (root["description"]) p.description = rd.String(root["description"], "description");
+  p.source_file = rd.file();
+  p.name = rd.Text(root, "name", "name");
+  if (root["description"]) p.description = rd.Text(root, "description", "description");
   auto& v = p.vehicle;
   v.name = p.name;
 
@@ -303,24 +266,24 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
   if (!ch.IsDefined()) rd.Fail(root, "chassis", "missing");
   rd.CheckKeys(ch, "chassis", {"mass_kg", "inertia_kg_m2", "half_extents_m", "mesh"});
   const YAML::Node none;
-  v.mass_kg = rd.Get(ch, none, "mass_kg", "chassis.", 1e-3, 1e5);
-  v.inertia_kg_m2 = rd.Vec3(ch["inertia_kg_m2"], "chassis.inertia_kg_m2");
+  v.mass_kg = rd.Value(ch, none, "mass_kg", "chassis.", 1e-3, 1e5);
+  v.inertia_kg_m2 = rd.Vec3(ch, "inertia_kg_m2", "chassis.inertia_kg_m2");
   for (int k = 0; k < 3; ++k) {
     if (!(v.inertia_kg_m2[k] > 0)) {
       rd.Fail(ch["inertia_kg_m2"], fmt::format("chassis.inertia_kg_m2[{}]", k), "must be > 0");
     }
   }
-  v.half_extents_m = rd.Vec3(ch["half_extents_m"], "chassis.half_extents_m");
-  if (ch["mesh"]) p.chassis_mesh = rd.String(ch["mesh"], "chassis.mesh");
+  v.half_extents_m = rd.Vec3(ch, "half_extents_m", "chassis.half_extents_m");
+  if (ch["mesh"]) p.chassis_mesh = rd.Text(ch, "mesh", "chassis.mesh");
 
   if (const YAML::Node s = root["solver"]; s.IsDefined()) {
     rd.CheckKeys(s, "solver", {"slip_threshold_m_s", "stribeck_velocity_m_s", "iterations"});
     v.slip_threshold_m_s =
-        rd.GetOr(s, none, "slip_threshold_m_s", "solver.", 1e-6, 10, v.slip_threshold_m_s);
+        rd.ValueOr(s, none, "slip_threshold_m_s", "solver.", 1e-6, 10, v.slip_threshold_m_s);
     v.stribeck_velocity_m_s =
-        rd.GetOr(s, none, "stribeck_velocity_m_s", "solver.", 1e-6, 10, v.stribeck_velocity_m_s);
-    v.solver_iterations =
-        static_cast<int>(rd.GetOr(s, none, "iterations", "solver.", 1, 1000, v.solver_iterations));
+        rd.ValueOr(s, none, "stribeck_velocity_m_s", "solver.", 1e-6, 10, v.stribeck_velocity_m_s);
+    v.solver_iterations = static_cast<int>(
+        rd.ValueOr(s, none, "iterations", "solver.", 1, 1000, v.solver_iterations));
   }
 
   const YAML::Node defaults = root["wheel_defaults"];
@@ -345,7 +308,7 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
   const YAML::Node kin = root["kinematics"];
   if (!kin.IsDefined()) rd.Fail(root, "kinematics", "missing");
   if (!kin.IsMap()) rd.Fail(kin, "kinematics", "must be a mapping");
-  const std::string type = rd.String(kin["type"], "kinematics.type");
+  const std::string type = rd.Text(kin, "type", "kinematics.type");
   if (type == "diff_drive") {
     p.kinematics = KinematicsKind::kDiffDrive;
   } else if (type == "mecanum4") {
@@ -357,9 +320,9 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
             fmt::format("'{}' is not one of diff_drive, mecanum4, omni3", type));
   }
   for (const auto& kv : kin) {
-    const auto key = kv.first.as<std::string>();
+    const std::string key = rd.ToString(kv.first, "kinematics");
     if (key == "type") continue;
-    p.parameters.emplace_back(key, rd.Number(kv.second, "kinematics." + key));
+    p.parameters.emplace_back(key, rd.ToNumber(kv.second, "kinematics." + key));
   }
   const std::size_t expected_drive = p.kinematics == KinematicsKind::kDiffDrive  ? 2
                                      : p.kinematics == KinematicsKind::kMecanum4 ? 4
@@ -374,13 +337,13 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
     if (!sensors.IsSequence()) rd.Fail(sensors, "sensors", "must be a list");
     for (std::size_t i = 0; i < sensors.size(); ++i) {
       const std::string prefix = fmt::format("sensors[{}].", i);
-      rd.CheckKeys(sensors[i], prefix + "(entry)", {"name", "kind", "mount_m", "axis"});
+      rd.CheckKeys(sensors[i], fmt::format("sensors[{}]", i), {"name", "kind", "mount_m", "axis"});
       SensorMount s;
-      s.name = rd.String(sensors[i]["name"], prefix + "name");
-      s.kind = rd.String(sensors[i]["kind"], prefix + "kind");
-      s.position_B = rd.Vec3(sensors[i]["mount_m"], prefix + "mount_m");
+      s.name = rd.Text(sensors[i], "name", prefix + "name");
+      s.kind = rd.Text(sensors[i], "kind", prefix + "kind");
+      s.position_B = rd.Vec3(sensors[i], "mount_m", prefix + "mount_m");
       if (sensors[i]["axis"]) {
-        s.axis_B = rd.Vec3(sensors[i]["axis"], prefix + "axis");
+        s.axis_B = rd.Vec3(sensors[i], "axis", prefix + "axis");
         if (s.axis_B.norm() < 1e-9)
           rd.Fail(sensors[i]["axis"], prefix + "axis", "must be non-zero");
         s.axis_B.normalize();
@@ -389,20 +352,29 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
     }
   }
   try {
-    physics::ValidateVehicleSpec(v, file);
+    physics::ValidateVehicleSpec(v, "vehicle");
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(fmt::format("{}:0: {}", file, e.what()));
+    // A rule across several values: no one position to point at.
+    throw std::invalid_argument(fmt::format("{}: {}", rd.Where(YAML::Mark::null_mark()), e.what()));
   }
   return p;
 }
 
+}  // namespace
+
+Platform LoadPlatformYaml(const std::string& text, const std::string& file,
+                          const YAML::Node& overrides) {
+  const Reader rd(file);
+  return rd.Guard([&] {
+    YAML::Node root = rd.Parse(text);
+    if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
+    if (overrides.IsDefined() && !overrides.IsNull()) MergeOverrides(root, overrides, "", rd);
+    return ReadPlatform(rd, root);
+  });
+}
+
 Platform LoadPlatformFile(const std::string& path, const YAML::Node& overrides) {
-  std::ifstream in(path);
-  if (!in)
-    throw std::invalid_argument(fmt::format("{}:0: (file): cannot open platform file", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return LoadPlatformYaml(ss.str(), path, overrides);
+  return LoadPlatformYaml(Reader(path).ReadFile(), path, overrides);
 }
 
 double WheelSpeedForTwist(const WheelSpec& w, const BodyTwist& t) noexcept {

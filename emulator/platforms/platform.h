@@ -3,8 +3,8 @@
 /// kinematics, sensor mounts) turned into a physics::VehicleSpec plus what the command path
 /// and the sensors need. Every quantity carries its unit in the key (mass_kg, heading_deg, ...).
 /// The three papers' platforms ship in scenarios/platforms/ (diff2, mecanum4_omni3, ortho3).
-/// Load errors throw std::invalid_argument "file:line: field: problem". Body frame B: x forward,
-/// y left, z up, origin at the chassis centre of mass. Value types, thread-compatible.
+/// Load errors throw std::invalid_argument "file:line:col: field: problem". Body frame B: x
+/// forward, y left, z up, origin at the chassis centre of mass. Value types, thread-compatible.
 
 #include <string>
 #include <vector>

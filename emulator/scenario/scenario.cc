@@ -3,15 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
 #include "bus/dbc.h"
+#include "bus/yaml_fields.h"
 #include "emulator/scoring/metric_components.h"
 #include "emulator/scoring/metrics.h"
 
@@ -21,85 +20,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class Reader {
+// Scenario fields; relative paths resolve against the scenario file's folder.
+class Reader : public bus::yaml::FieldReader {
  public:
-  explicit Reader(std::string file) : file_(std::move(file)) {
-    base_dir_ = fs::path(file_).parent_path();
-  }
-
-  std::string Where(const YAML::Node& node) const {
-    if (!node.IsDefined()) return fmt::format("{}:0:0", file_);
-    return fmt::format("{}:{}:{}", file_, node.Mark().line + 1, node.Mark().column + 1);
-  }
-
-  [[noreturn]] void Fail(const YAML::Node& node, const std::string& field,
-                         const std::string& problem) const {
-    throw std::invalid_argument(fmt::format("{}: {}: {}", Where(node), field, problem));
-  }
-
-  void CheckKeys(const YAML::Node& map, const std::string& field,
-                 const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) Fail(map, field, "must be a mapping");
-    for (const auto& kv : map) {
-      const auto key = kv.first.as<std::string>();
-      if (allowed.count(key) == 0) {
-        Fail(kv.first, field.empty() ? key : field + "." + key, "unknown key");
-      }
-    }
-  }
-
-  double Number(const YAML::Node& parent, const std::string& key, const std::string& field,
-                double min, double max, std::optional<double> def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    const std::string f = field.empty() ? key : field + "." + key;
-    if (!n.IsDefined() || n.IsNull()) {
-      if (def) return *def;
-      Fail(parent, f, "is required");
-    }
-    if (!n.IsScalar()) Fail(n, f, "must be a number");
-    double v = 0;
-    try {
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      Fail(n, f, fmt::format("'{}' is not a number", n.Scalar()));
-    }
-    if (!std::isfinite(v)) Fail(n, f, "must be finite");
-    if (v < min || v > max) Fail(n, f, fmt::format("{} is outside [{}, {}]", v, min, max));
-    return v;
-  }
-
-  std::string String(const YAML::Node& parent, const std::string& key, const std::string& field,
-                     std::optional<std::string> def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    const std::string f = field.empty() ? key : field + "." + key;
-    if (!n.IsDefined() || n.IsNull()) {
-      if (def) return *def;
-      Fail(parent, f, "is required");
-    }
-    if (!n.IsScalar()) Fail(n, f, "must be a string");
-    return n.Scalar();
-  }
-
-  bool Bool(const YAML::Node& parent, const std::string& key, const std::string& field,
-            bool def) const {
-    const YAML::Node n = parent.IsMap() ? parent[key] : YAML::Node();
-    if (!n.IsDefined() || n.IsNull()) return def;
-    try {
-      return n.as<bool>();
-    } catch (const YAML::Exception&) {
-      Fail(n, field + "." + key, "must be true or false");
-    }
-  }
+  explicit Reader(std::string file)
+      : FieldReader(std::move(file)), base_dir_(fs::path(this->file()).parent_path()) {}
 
   std::string Path(const std::string& p) const {
     if (p.empty() || fs::path(p).is_absolute()) return p;
     return (base_dir_ / p).lexically_normal().string();
   }
 
-  const std::string& file() const { return file_; }
-
  private:
-  std::string file_;
   fs::path base_dir_;
 };
 
@@ -109,24 +41,24 @@ Friction ReadFriction(const Reader& r, const YAML::Node& n, const std::string& f
   f.mu_peak = r.Number(n, "mu_peak", field, 0, 10, def.mu_peak);
   f.mu_slide = r.Number(n, "mu_slide", field, 0, 10, std::min(def.mu_slide, f.mu_peak));
   if (f.mu_slide > f.mu_peak) {
-    r.Fail(n["mu_slide"], field + ".mu_slide", "must not exceed mu_peak");
+    r.FailKey(n, "mu_slide", field + ".mu_slide", "must not exceed mu_peak");
   }
   return f;
 }
 
-std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& n,
-                                         const std::string& field) {
-  if (!n.IsSequence() || n.size() < 3) r.Fail(n, field, "must be a list of >= 3 [x, y] points");
+std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& parent,
+                                         const std::string& key, const std::string& prefix) {
+  const std::string field = Reader::Join(prefix, key);
+  const YAML::Node n = Reader::Get(parent, key);
+  if (!n.IsSequence() || n.size() < 3) {
+    r.FailKey(parent, key, field, "must be a list of >= 3 [x, y] points");
+  }
   std::vector<Eigen::Vector2d> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node p = n[i];
     const std::string f = fmt::format("{}[{}]", field, i);
     if (!p.IsSequence() || p.size() != 2) r.Fail(p, f, "must be [x, y]");
-    try {
-      out.emplace_back(p[0].as<double>(), p[1].as<double>());
-    } catch (const YAML::Exception&) {
-      r.Fail(p, f, "must hold two numbers");
-    }
+    out.emplace_back(r.ToNumber(p[0], f + "[0]"), r.ToNumber(p[1], f + "[1]"));
   }
   return out;
 }
@@ -139,7 +71,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
   if (const auto m = n["meshes"]) {
     if (!m.IsSequence()) r.Fail(m, "terrain.meshes", "must be a list of files");
     for (std::size_t i = 0; i < m.size(); ++i) {
-      const std::string p = r.Path(m[i].as<std::string>());
+      const std::string p = r.Path(r.ToString(m[i], fmt::format("terrain.meshes[{}]", i)));
       if (!fs::exists(p)) r.Fail(m[i], fmt::format("terrain.meshes[{}]", i), p + " not found");
       t.meshes.push_back(p);
     }
@@ -151,7 +83,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
       r.CheckKeys(ps[i], f, {"name", "polygon_m", "mu_peak", "mu_slide"});
       PatchSpec p;
       p.name = r.String(ps[i], "name", f, fmt::format("patch{}", i));
-      p.polygon_m = ReadPolygon(r, ps[i]["polygon_m"], f + ".polygon_m");
+      p.polygon_m = ReadPolygon(r, ps[i], "polygon_m", f);
       p.friction = ReadFriction(r, ps[i], f, Friction{0.1, 0.08});
       t.patches.push_back(std::move(p));
     }
@@ -168,19 +100,22 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     s.length_min_m = r.Number(rp, "length_min_m", f, 1e-3, 100, 0.05);
     s.length_max_m = r.Number(rp, "length_max_m", f, s.length_min_m, 100, 0.2);
     s.width_m = r.Number(rp, "width_m", f, 1e-3, 10, 0.1);
-    const auto ty = rp["track_y_m"];
+    const YAML::Node ty = Reader::Get(rp, "track_y_m");
+    if (!ty.IsDefined()) r.Fail(rp, f + ".track_y_m", "is required (a list of y)");
     if (!ty.IsSequence() || ty.size() == 0) r.Fail(ty, f + ".track_y_m", "must be a list of y");
-    for (const auto& y : ty) s.track_y_m.push_back(y.as<double>());
+    for (std::size_t i = 0; i < ty.size(); ++i) {
+      s.track_y_m.push_back(r.ToNumber(ty[i], fmt::format("{}.track_y_m[{}]", f, i)));
+    }
     s.friction = ReadFriction(r, rp, f, Friction{0.05, 0.03});
     const std::string placement = r.String(rp, "placement", f, "uniform");
     if (placement == "stratified") {
       s.placement = RandomPatchesSpec::Placement::kStratified;
       const double section = s.count > 0 ? (s.x_max_m - s.x_min_m) / s.count : 0.0;
       if (s.count > 0 && s.length_max_m > section) {
-        r.Fail(rp["length_max_m"], f + ".length_max_m",
-               fmt::format("({}) must be <= the section length (x_max_m - x_min_m) / count = {} "
-                           "with placement: stratified",
-                           s.length_max_m, section));
+        r.FailKey(rp, "length_max_m", f + ".length_max_m",
+                  fmt::format("({}) must be <= the section length (x_max_m - x_min_m) / count = {} "
+                              "with placement: stratified",
+                              s.length_max_m, section));
       }
     } else if (placement != "uniform") {
       r.Fail(rp["placement"], f + ".placement",
@@ -224,9 +159,9 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
   const double accel = r.Number(s, "accel", f, 1e-6, 1e3, std::nullopt);
   const double turn_speed = r.Number(s, "turn_speed_rad_s", f, 1e-6, 50, 0.5);
   const double turn_accel = r.Number(s, "turn_accel_rad_s2", f, 1e-6, 1e3, 1.0);
-  const YAML::Node pts = s["points_m"];
+  const YAML::Node pts = Reader::Get(s, "points_m");
   if (!pts.IsSequence() || pts.size() == 0) {
-    r.Fail(pts.IsDefined() ? pts : s, f + ".points_m", "must be a non-empty list of [x, y]");
+    r.FailKey(s, "points_m", f + ".points_m", "must be a non-empty list of [x, y]");
   }
   Eigen::Vector3d pose;
   if (!NominalPoseAfter(out, &pose)) {
@@ -277,9 +212,12 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
   }
 }
 
-std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
+std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
                                       const platforms::Platform& platform) {
-  if (!n.IsSequence() || n.size() == 0) r.Fail(n, "motion", "must be a non-empty list of segments");
+  const YAML::Node n = Reader::Get(root, "motion");
+  if (!n.IsSequence() || n.size() == 0) {
+    r.FailKey(root, "motion", "motion", "must be a non-empty list of segments");
+  }
   std::vector<MotionSegment> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node s = n[i];
@@ -305,11 +243,13 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
     } else if (type == "trapezoid") {
       r.CheckKeys(s, f, {"type", "direction", "distance", "speed", "accel"});
       m.kind = MotionSegment::Kind::kTrapezoid;
-      const auto d = s["direction"];
+      const YAML::Node d = Reader::Get(s, "direction");
       if (!d.IsSequence() || d.size() != 3) {
-        r.Fail(d.IsDefined() ? d : s, f + ".direction", "must be [vx, vy, wz]");
+        r.FailKey(s, "direction", f + ".direction", "must be [vx, vy, wz]");
       }
-      m.direction = Eigen::Vector3d(d[0].as<double>(), d[1].as<double>(), d[2].as<double>());
+      for (int k = 0; k < 3; ++k) {
+        m.direction[k] = r.ToNumber(d[k], fmt::format("{}.direction[{}]", f, k));
+      }
       if (!(m.direction.norm() > 0)) r.Fail(d, f + ".direction", "must not be zero");
       m.direction.normalize();
       m.distance = r.Number(s, "distance", f, 0, 1e5, std::nullopt);
@@ -320,12 +260,14 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& n,
       r.CheckKeys(s, f, {"type", "duration_s", "omega_rad_s"});
       m.kind = MotionSegment::Kind::kWheels;
       m.duration_s = r.Number(s, "duration_s", f, 0, 1e6, std::nullopt);
-      const auto w = s["omega_rad_s"];
+      const YAML::Node w = Reader::Get(s, "omega_rad_s");
       if (!w.IsSequence() || w.size() != wheels) {
-        r.Fail(w.IsDefined() ? w : s, f + ".omega_rad_s",
-               fmt::format("must list {} wheel speeds (platform wheel order)", wheels));
+        r.FailKey(s, "omega_rad_s", f + ".omega_rad_s",
+                  fmt::format("must list {} wheel speeds (platform wheel order)", wheels));
       }
-      for (const auto& x : w) m.wheel_speeds_rad_s.push_back(x.as<double>());
+      for (std::size_t k = 0; k < w.size(); ++k) {
+        m.wheel_speeds_rad_s.push_back(r.ToNumber(w[k], fmt::format("{}.omega_rad_s[{}]", f, k)));
+      }
     } else {
       r.Fail(s["type"], f + ".type",
              fmt::format("'{}' is not one of twist, trapezoid, hold, wheels, waypoints", type));
@@ -343,23 +285,16 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
   DbcImuSpec d;
   d.where = r.Where(n);
   d.dbc = r.Path(r.String(n, "dbc", f, std::nullopt));
-  if (const auto m = n["mount_m"]) {
+  if (const YAML::Node m = Reader::Get(n, "mount_m"); Reader::Present(m)) {
     if (!m.IsSequence() || m.size() != 3) r.Fail(m, f + ".mount_m", "must be [x, y, z] in m");
-    for (int i = 0; i < 3; ++i) {
-      double x = std::nan("");
-      try {
-        x = m[i].as<double>();
-      } catch (const YAML::Exception&) {
-      }
-      if (!std::isfinite(x) || std::abs(x) > 10) {
-        r.Fail(m[i], fmt::format("{}.mount_m[{}]", f, i), "must be a number within +-10 m");
-      }
-      d.mount_m[i] = x;
+    for (std::size_t i = 0; i < 3; ++i) {
+      d.mount_m[static_cast<int>(i)] =
+          r.ToNumber(m[i], fmt::format("{}.mount_m[{}]", f, i), -10, 10);
     }
   }
-  const auto ch = n["channels"];
-  if (!ch || !ch.IsSequence() || ch.size() == 0) {
-    r.Fail(ch ? ch : n, f + ".channels", "must list at least one {quantity, message, signal}");
+  const YAML::Node ch = Reader::Get(n, "channels");
+  if (!ch.IsSequence() || ch.size() == 0) {
+    r.FailKey(n, "channels", f + ".channels", "must list at least one {quantity, message, signal}");
   }
   for (std::size_t i = 0; i < ch.size(); ++i) {
     const std::string cf = fmt::format("{}.channels[{}]", f, i);
@@ -368,15 +303,16 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
     const std::string q = r.String(ch[i], "quantity", cf, std::nullopt);
     const auto quantity = ParseImuQuantity(q);
     if (!quantity) {
-      r.Fail(ch[i]["quantity"], cf + ".quantity",
-             fmt::format("'{}' is not one of rate_x, rate_y, rate_z, accel_x, accel_y, accel_z", q));
+      r.FailKey(ch[i], "quantity", cf + ".quantity",
+                fmt::format("'{}' is not one of rate_x, rate_y, rate_z, accel_x, accel_y, accel_z",
+                            q));
     }
     c.quantity = *quantity;
     c.message = r.String(ch[i], "message", cf, std::nullopt);
     c.signal = r.String(ch[i], "signal", cf, std::nullopt);
     d.node.channels.push_back(c);
   }
-  if (const auto ms = n["messages"]) {
+  if (const YAML::Node ms = Reader::Get(n, "messages"); Reader::Present(ms)) {
     if (!ms.IsSequence()) r.Fail(ms, f + ".messages", "must be a list");
     for (std::size_t i = 0; i < ms.size(); ++i) {
       const std::string mf = fmt::format("{}.messages[{}]", f, i);
@@ -388,14 +324,14 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
       const std::string kind = r.String(ms[i], "checksum_kind", mf, std::string("xor"));
       const auto k = ParseChecksumKind(kind);
       if (!k) {
-        r.Fail(ms[i]["checksum_kind"], mf + ".checksum_kind",
-               fmt::format("'{}' is not one of xor, sum, crc8_sae_j1850", kind));
+        r.FailKey(ms[i], "checksum_kind", mf + ".checksum_kind",
+                  fmt::format("'{}' is not one of xor, sum, crc8_sae_j1850", kind));
       }
       o.checksum = *k;
       d.node.message_options.push_back(o);
     }
   }
-  if (const auto g = n["gyro"]) {
+  if (const YAML::Node g = Reader::Get(n, "gyro"); Reader::Present(g)) {
     const std::string gf = f + ".gyro";
     r.CheckKeys(g, gf,
                 {"noise_density_rad_s_sqrt_hz", "bias_rad_s", "bias_random_walk_rad_s_sqrt_s"});
@@ -404,7 +340,7 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
     d.gyro_bias_random_walk_rad_s_sqrt_s =
         r.Number(g, "bias_random_walk_rad_s_sqrt_s", gf, 0, 1, 0.0);
   }
-  if (const auto a = n["accel"]) {
+  if (const YAML::Node a = Reader::Get(n, "accel"); Reader::Present(a)) {
     const std::string af = f + ".accel";
     r.CheckKeys(a, af, {"noise_density_m_s2_sqrt_hz", "bias_m_s2"});
     d.accel_noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
@@ -414,7 +350,7 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
   try {
     db = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
   } catch (const std::exception& e) {
-    r.Fail(n["dbc"], f + ".dbc", e.what());
+    r.FailKey(n, "dbc", f + ".dbc", e.what());
   }
   try {
     (void)DbcImuNode(db, d.node, 0);
@@ -430,11 +366,13 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
   return d;
 }
 
-SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::Platform& platform) {
+SensorsSpec ReadSensors(const Reader& r, const YAML::Node& root,
+                        const platforms::Platform& platform) {
   SensorsSpec s;
-  if (!n.IsDefined()) r.Fail(n, "sensors", "is required (encoders at least)");
+  const YAML::Node n = Reader::Get(root, "sensors");
+  if (!n.IsDefined()) r.Fail(root, "sensors", "is required (encoders at least)");
   r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4", "dbc_imu"});
-  const auto e = n["encoders"];
+  const YAML::Node e = Reader::Get(n, "encoders");
   if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
   r.CheckKeys(e, "sensors.encoders",
               {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
@@ -443,10 +381,10 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::P
   s.encoder_quadrature_x4 = r.Bool(e, "quadrature_x4", "sensors.encoders", true);
   s.encoder_missed_count_prob = r.Number(e, "missed_count_prob", "sensors.encoders", 0, 1, 0.0);
   s.encoder_glitch_prob = r.Number(e, "glitch_prob", "sensors.encoders", 0, 1, 0.0);
-  const auto nodes = e["nodes"];
+  const YAML::Node nodes = Reader::Get(e, "nodes");
   if (!nodes.IsSequence() || nodes.size() == 0) {
-    r.Fail(nodes.IsDefined() ? nodes : e, "sensors.encoders.nodes",
-           "must list the encoder nodes ({wheel, node_id})");
+    r.FailKey(e, "nodes", "sensors.encoders.nodes",
+              "must list the encoder nodes ({wheel, node_id})");
   }
   std::set<int> ids;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -522,7 +460,9 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& n, const platforms::P
     s.accel4_bias_m_s2 = four("bias_m_s2", 10.0);
     s.accel4_scale_error = four("scale_error", 0.5);
   }
-  if (const auto d = n["dbc_imu"]) s.dbc_imu = ReadDbcImu(r, d);
+  if (const YAML::Node d = Reader::Get(n, "dbc_imu"); Reader::Present(d)) {
+    s.dbc_imu = ReadDbcImu(r, d);
+  }
   if (const auto b = n["bus"]) {
     r.CheckKeys(b, "sensors.bus", {"bitrate_bps", "heartbeat_ms"});
     s.bitrate_bps = static_cast<std::uint32_t>(
@@ -852,7 +792,8 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   t.sync_period_s = r.Number(n, "sync_period_s", "timing", 1e-4, 10, 0.01);
   const double steps = t.sync_period_s * t.physics_rate_hz;
   if (std::abs(steps - std::round(steps)) > 1e-6) {
-    r.Fail(n["sync_period_s"], "timing.sync_period_s", "must be a whole number of physics steps");
+    r.FailKey(n, "sync_period_s", "timing.sync_period_s",
+              "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
   return t;
@@ -932,20 +873,21 @@ platforms::BodyTwist TwistAt(const std::vector<MotionSegment>& motion, double t_
   return {};
 }
 
+namespace {
+
 // `scoring: {metrics: [name, ...]}`: the metric components that score the run (default: the
 // generic ones).
 std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
-  if (!n.IsDefined() || n.IsNull()) return scoring::DefaultMetricComponents();
+  if (!Reader::Present(n)) return scoring::DefaultMetricComponents();
   r.CheckKeys(n, "scoring", {"metrics"});
-  const YAML::Node m = n["metrics"];
-  if (!m.IsDefined() || m.IsNull()) return scoring::DefaultMetricComponents();
+  const YAML::Node m = Reader::Get(n, "metrics");
+  if (!Reader::Present(m)) return scoring::DefaultMetricComponents();
   if (!m.IsSequence()) r.Fail(m, "scoring.metrics", "must be a list of metric component names");
   const auto& known = scoring::MetricComponentNames();
   std::vector<std::string> names;
   for (std::size_t i = 0; i < m.size(); ++i) {
     const std::string f = fmt::format("scoring.metrics[{}]", i);
-    if (!m[i].IsScalar()) r.Fail(m[i], f, "must be a metric component name");
-    const std::string name = m[i].Scalar();
+    const std::string name = r.ToString(m[i], f);
     if (std::find(known.begin(), known.end(), name) == known.end()) {
       r.Fail(m[i], f, fmt::format("'{}' is not one of {}", name, fmt::join(known, ", ")));
     }
@@ -957,26 +899,17 @@ std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
   return names;
 }
 
-Scenario ParseScenario(const std::string& text, const std::string& file) {
-  Reader r(file);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
-    throw std::invalid_argument(fmt::format("{}:{}:{}: (document): YAML syntax error: {}", file,
-                                            e.mark.line + 1, e.mark.column + 1, e.msg));
-  }
-  if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
+Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   r.CheckKeys(root, "",
               {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "faults",
                "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s"});
   Scenario s;
-  s.source_path = file;
+  s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);
   s.description = r.String(root, "description", "", std::string());
   s.seed = static_cast<std::uint64_t>(r.Number(root, "seed", "", 0, 9e15, 1.0));
 
-  const auto p = root["platform"];
+  const YAML::Node p = Reader::Get(root, "platform");
   if (!p.IsDefined()) r.Fail(root, "platform", "is required");
   if (p.IsScalar()) {
     const std::string path = r.Path(p.Scalar());
@@ -988,37 +921,44 @@ Scenario ParseScenario(const std::string& text, const std::string& file) {
   } else {
     r.CheckKeys(p, "platform", {"file", "overrides"});
     const std::string path = r.Path(r.String(p, "file", "platform", std::nullopt));
-    const YAML::Node overrides = p["overrides"];
-    if (overrides && !overrides.IsMap()) {
+    const YAML::Node overrides = Reader::Get(p, "overrides");
+    if (overrides.IsDefined() && !overrides.IsMap()) {
       r.Fail(overrides, "platform.overrides", "must be a mapping");
     }
     try {
       s.platform = platforms::LoadPlatformFile(path, overrides);
     } catch (const std::invalid_argument& e) {
-      r.Fail(overrides ? overrides : p["file"], overrides ? "platform.overrides" : "platform.file",
-             e.what());
+      const bool over = overrides.IsDefined();
+      r.Fail(over ? overrides : p["file"], over ? "platform.overrides" : "platform.file", e.what());
     }
   }
-  s.terrain = ReadTerrain(r, root["terrain"]);
-  s.motion = ReadMotion(r, root["motion"], s.platform);
-  s.sensors = ReadSensors(r, root["sensors"], s.platform);
-  s.faults = ReadFaults(r, root["faults"], s.sensors, s.platform);
-  s.firmware = ReadFirmware(r, root["firmware"]);
-  s.timing = ReadTiming(r, root["timing"], MotionDuration(s.motion));
-  s.expectations = ReadExpectations(r, root["expectations"]);
-  s.metric_components = ReadScoring(r, root["scoring"]);
+  s.terrain = ReadTerrain(r, Reader::Get(root, "terrain"));
+  s.motion = ReadMotion(r, root, s.platform);
+  s.sensors = ReadSensors(r, root, s.platform);
+  s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.platform);
+  s.firmware = ReadFirmware(r, Reader::Get(root, "firmware"));
+  s.timing = ReadTiming(r, Reader::Get(root, "timing"), MotionDuration(s.motion));
+  s.expectations = ReadExpectations(r, Reader::Get(root, "expectations"));
+  s.metric_components = ReadScoring(r, Reader::Get(root, "scoring"));
   if (root["slip_threshold_m_s"]) {
     s.slip_threshold_m_s = r.Number(root, "slip_threshold_m_s", "", 1e-6, 10, std::nullopt);
   }
   return s;
 }
 
+}  // namespace
+
+Scenario ParseScenario(const std::string& text, const std::string& file) {
+  const Reader r(file);
+  return r.Guard([&] {
+    const YAML::Node root = r.Parse(text);
+    if (!root.IsMap()) r.Fail(root, "(document)", "must be a mapping");
+    return ReadScenario(r, root);
+  });
+}
+
 Scenario LoadScenarioFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::invalid_argument(fmt::format("{}:0:0: (file): cannot be read", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseScenario(ss.str(), path);
+  return ParseScenario(Reader(path).ReadFile(), path);
 }
 
 }  // namespace wheelhil::emulator::scenario

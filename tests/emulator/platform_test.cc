@@ -12,6 +12,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/bus/yaml_fields_test_util.h"
 #include "tests/emulator/physics_test_util.h"
 
 namespace wheelhil::emulator::platforms {
@@ -103,7 +104,7 @@ TEST(PlatformFile, BadFieldNamesFileLineAndField) {
   text.replace(pos, 15, "radius_m: -0.075");
   EXPECT_THAT([&] { LoadPlatformYaml(text, "bad.yaml"); },
               ThrowsMessage<std::invalid_argument>(
-                  AllOf(HasSubstr("bad.yaml:"), HasSubstr("radius_m"), HasSubstr("outside"))));
+                  AllOf(HasSubstr("bad.yaml:"), HasSubstr("radius_m"), HasSubstr("must be in ["))));
   std::string typo = Shipped("diff2");
   typo.replace(typo.find("heading_deg"), 11, "headin_deg");
   EXPECT_THAT([&] { LoadPlatformYaml(typo, "typo.yaml"); },
@@ -116,11 +117,21 @@ TEST(PlatformFile, BadFieldNamesFileLineAndField) {
                   AllOf(HasSubstr("nan.yaml:"), HasSubstr("chassis.mass_kg"))));
   std::string zone = Shipped("ortho3");
   zone.replace(zone.find("handover_zone_deg: 20"), 21, "handover_zone_deg: 120");
-  EXPECT_THAT([&] { LoadPlatformYaml(zone, "zone.yaml"); },
-              ThrowsMessage<std::invalid_argument>(AllOf(
-                  HasSubstr("zone.yaml:"), HasSubstr("handover_zone_deg"), HasSubstr("outside"))));
+  EXPECT_THAT(
+      [&] { LoadPlatformYaml(zone, "zone.yaml"); },
+      ThrowsMessage<std::invalid_argument>(AllOf(
+          HasSubstr("zone.yaml:"), HasSubstr("handover_zone_deg"), HasSubstr("must be in ["))));
   EXPECT_THAT([&] { LoadPlatformYaml("name: [unclosed", "syntax.yaml"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("syntax.yaml:")));
+}
+
+TEST(PlatformFile, DamagedShippedPlatformsGiveOnlyLocatedInputErrors) {
+  for (const char* name : {"diff2", "mecanum4_omni3", "ortho3"}) {
+    SCOPED_TRACE(name);
+    const std::string file = std::string(name) + ".yaml";
+    yaml_mutation::ExpectOnlyLocatedInputErrors(
+        Shipped(name), file, [&](const std::string& text) { (void)LoadPlatformYaml(text, file); });
+  }
 }
 
 TEST(PlatformFile, LineNumberPointsAtTheBadValue) {
@@ -174,7 +185,7 @@ TEST(PlatformFile, OverridesMergeIntoTheFileAndWheelsByNameOrGlob) {
                          YAML::Load("wheels: {follower_front: {suspension: {stiffness_n_m: -1}}}"));
       },
       ThrowsMessage<std::invalid_argument>(
-          AllOf(HasSubstr("suspension.stiffness_n_m"), HasSubstr("outside"))));
+          AllOf(HasSubstr("suspension.stiffness_n_m"), HasSubstr("must be in ["))));
   EXPECT_THAT([&] { LoadPlatformYaml(text, "m.yaml", YAML::Load("chassis: {mass_kgg: 3}")); },
               ThrowsMessage<std::invalid_argument>(
                   AllOf(HasSubstr("chassis.mass_kgg"), HasSubstr("unknown key"))));

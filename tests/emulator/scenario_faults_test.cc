@@ -126,7 +126,7 @@ TEST(ScenarioFaultsParse, ErrorsNameFileLineColumnAndField) {
   ExpectError("  - {type: frame, kind: smash, start_s: 1}\n", 1, "smash", "faults[0].kind",
               "'smash' is not one of drop, delay");
   ExpectError("  - {type: frame, kind: drop, probability: 1.5, start_s: 1}\n", 1, "1.5",
-              "faults[0].probability", "outside [0, 1]");
+              "faults[0].probability", "(1.5) must be in [0, 1]");
   ExpectError("  - {type: frame, kind: drop, id: 0x900, start_s: 1}\n", 1, "0x900", "faults[0].id",
               "beyond 0x7FF");
   ExpectError("  - {type: frame, kind: delay, id: 0x174, start_s: 1}\n", 1, "{type",
@@ -134,7 +134,7 @@ TEST(ScenarioFaultsParse, ErrorsNameFileLineColumnAndField) {
   ExpectError(
       "  - {type: bus, kind: flood, start_s: 1}\n  - {type: bus, kind: flood, load: 2, start_s: "
       "1}\n",
-      2, "2,", "faults[1].load", "outside");
+      2, "2,", "faults[1].load", "(2) must be in [0.001, 1]");
   ExpectError("  - {type: bus, kind: bus_off, node_id: 9, start_s: 1}\n", 1, "9,",
               "faults[0].node_id", "no encoder node has this id");
   ExpectError("  - {type: sensor, sensor: accel4, kind: bias_step, value: 1, start_s: 1}\n", 1,
@@ -150,11 +150,11 @@ TEST(ScenarioFaultsParse, ErrorsNameFileLineColumnAndField) {
   ExpectError("  - {type: wheel_friction, wheel: middle, mu_scale: 0.1, start_s: 1, end_s: 2}\n", 1,
               "middle", "faults[0].wheel", "platform diff2 has no wheel 'middle'");
   ExpectError("  - {type: wheel_friction, wheel: left, mu_scale: -1, start_s: 1, end_s: 2}\n", 1,
-              "-1", "faults[0].mu_scale", "outside");
+              "-1", "faults[0].mu_scale", "(-1) must be in [0, 10]");
   ExpectError("  - {type: torque_disturbance, wheel: left, start_s: 1, end_s: 2}\n", 1, "{type",
               "faults[0].torque_nm", "is required");
   ExpectError("  - {type: torque_disturbance, wheel: left, torque_nm: 1, start_s: 2, end_s: 1}\n",
-              1, "1}", "faults[0].end_s", "outside");
+              1, "1}", "faults[0].end_s", "(1) must be in [2, ");
   ExpectError("  - {type: bump, x_m: 1}\n", 1, "{type", "faults[0].height_m", "is required");
   ExpectError("  - {type: frame, kind: drop, start_s: 1, prob: 1}\n", 1, "prob", "faults[0].prob",
               "unknown key");

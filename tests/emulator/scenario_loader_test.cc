@@ -3,12 +3,14 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
 
 #include "emulator/scenario/scenario.h"
+#include "tests/bus/yaml_fields_test_util.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
@@ -156,6 +158,40 @@ TEST(ScenarioLoader, ConfigPlaceholderNeedsConfig) {
 TEST(ScenarioLoader, SyntaxErrorHasPosition) {
   EXPECT_THAT([] { (void)ParseScenario("name: [unclosed\n", kFile); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("inline.yaml:")));
+}
+
+// A required key missing inside a section used to escape as YAML::InvalidNode (the process
+// aborted in `wheelhil run`); it is an input error at the section, naming the field.
+TEST(ScenarioLoader, MissingTrackYIsAnInputErrorAtItsSection) {
+  const std::string path =
+      std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/smoke/paper000_slip_short.yaml";
+  std::string text = yaml_mutation::ReadText(path);
+  const auto line = text.find("    track_y_m:");
+  ASSERT_NE(line, std::string::npos);
+  text.erase(line, text.find('\n', line) + 1 - line);
+  // The random_patches mapping starts at its first key, the line after `random_patches:`.
+  const auto section = text.find("  random_patches:\n");
+  ASSERT_NE(section, std::string::npos);
+  const int section_line =
+      2 + static_cast<int>(std::count(text.begin(), text.begin() + section, '\n'));
+  EXPECT_THAT([&] { (void)ParseScenario(text, path); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr(path + ":" + std::to_string(section_line) +
+                            ":5: terrain.random_patches.track_y_m: is required")));
+}
+
+TEST(ScenarioLoader, DamagedShippedScenariosGiveOnlyLocatedInputErrors) {
+  for (const char* dir : {"/scenarios", "/scenarios/smoke"}) {
+    for (const auto& e :
+         std::filesystem::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) + dir)) {
+      if (e.path().extension() != ".yaml") continue;
+      SCOPED_TRACE(e.path().string());
+      const std::string path = e.path().string();
+      yaml_mutation::ExpectOnlyLocatedInputErrors(
+          yaml_mutation::ReadText(path), path,
+          [&](const std::string& text) { (void)ParseScenario(text, path); });
+    }
+  }
 }
 
 TEST(ScenarioLoader, ShippedPaper000Loads) {

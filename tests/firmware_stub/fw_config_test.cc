@@ -7,6 +7,8 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "tests/bus/yaml_fields_test_util.h"
+
 namespace wheelhil::fw {
 namespace {
 
@@ -38,6 +40,18 @@ TEST(FwConfig, UnknownEstimatorNamesFileLineAndField) {
   const auto path = WriteTemp("fw_bad.yaml", "# comment\nestimator: paper999\n");
   EXPECT_THAT([&] { LoadFwConfig(path); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("fw_bad.yaml:2:12: estimator")));
+}
+
+TEST(FwConfig, DamagedShippedConfigsGiveOnlyLocatedInputErrors) {
+  for (const auto& e : std::filesystem::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) +
+                                                           "/scenarios/firmware")) {
+    if (e.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(e.path().string());
+    const std::string path = e.path().string();
+    yaml_mutation::ExpectOnlyLocatedInputErrors(
+        yaml_mutation::ReadText(path), path,
+        [&](const std::string& text) { (void)ParseFwConfig(text, path); });
+  }
 }
 
 TEST(FwConfig, MissingFileIsNamed) {

@@ -30,7 +30,7 @@ sed 's/track_width_m: 0.5 /track_width_m: -0.5/' "$good" > "$work/bad.yaml"
 line=$(grep -n 'track_width_m' "$work/bad.yaml" | cut -d: -f1)
 expect 2 "bad.yaml:$line:18: paper000.track_width_m: (-0.5) must be > 0" -- \
   "$fw" --can ucan0 --config "$work/bad.yaml"
-expect 2 "nonexistent.yaml: cannot open firmware config" -- \
+expect 2 "nonexistent.yaml:0:0: (file): cannot be read" -- \
   "$fw" --can ucan0 --config "$work/nonexistent.yaml"
 expect 2 "--can is required" -- "$fw" --config "$good"
 expect 2 "/nonexistent/cia406_encoder.dbc: DBC file not found" -- \

@@ -65,7 +65,7 @@ TEST(FwProgramConfig, ErrorsNameFileLineAndField) {
   ExpectError(Replace(kOk, "{period_s: 0.25}", "{period_s: 0.25, deadline_s: -1}"),
               "sync.deadline_s: (-1) must be >= 0");
   ExpectError(Replace(kOk, "track_width_m: 0.5", "trackwidth_m: 0.5"),
-              "fw.yaml:5:3: paper000.trackwidth_m: unknown field");
+              "fw.yaml:5:3: paper000.trackwidth_m: unknown key");
   ExpectError(Replace(kOk, "counts_per_rev: 2000", "counts_per_rev: lots"),
               "fw.yaml:7:19: paper000.counts_per_rev: 'lots' is not a number");
   ExpectError(Replace(kOk, "{node_id: 2, sign: -1}", "{node_id: 200}"),
@@ -74,12 +74,11 @@ TEST(FwProgramConfig, ErrorsNameFileLineAndField) {
               "paper000: node_id 1 is used twice");
   ExpectError(Replace(kOk, "{period_s: 0.25}", "{period_s: 0.25, deadline_s: 0.3}"),
               "fw.yaml:2:36: sync.deadline_s: (0.3) must be <= period_s (0.25)");
-  ExpectError(Replace(kOk, "sync: {period_s: 0.25}\n", ""),
-              "fw.yaml:1:1: sync: missing (required)");
+  ExpectError(Replace(kOk, "sync: {period_s: 0.25}\n", ""), "fw.yaml:1:1: sync: is required");
   ExpectError(Replace(kOk, "imu: {yaw_frame_id: 0x174}\n", ""),
               "imu: paper000 needs the yaw-rate IMU");
   ExpectError(Replace(kOk, "calibration_samples: 40", "calibration_samples: 0"),
-              "paper000.residual_sigma_rad: missing (required)");
+              "fw.yaml:5:3: paper000.residual_sigma_rad: is required");
   ExpectError(Replace(kOk, "0x174", "0x900"), "imu.yaw_frame_id: (2304) must be in [1, 2047]");
   ExpectError(Replace(kOk, "estimator: paper000", "estimator: paper999"),
               "fw.yaml:1:12: estimator: 'paper999' is not one of");
@@ -104,7 +103,8 @@ paper002:
     - {node_id: 2, angle_deg: 120}
 )";
   ExpectError(p2, "fw.yaml:10:5: paper002.wheels: must be a list of exactly three entries");
-  ExpectError(p2 + "    - {node_id: 3}\n", "paper002.wheels[2].angle_deg: missing (required)");
+  ExpectError(p2 + "    - {node_id: 3}\n",
+              "fw.yaml:12:7: paper002.wheels[2].angle_deg: is required");
   const FwConfig c = ParseFwConfig(p2 + "    - {node_id: 3, angle_deg: 240}\n", "fw.yaml");
   EXPECT_NEAR(c.paper002.angles_rad[2], 4.18879, 1e-5);
   EXPECT_EQ(c.accel.frame_id, 0x170u);

@@ -9,6 +9,7 @@
 #include <set>
 
 #include "emulator/campaign/scenario_writer.h"
+#include "tests/bus/yaml_fields_test_util.h"
 #include "tests/emulator/campaign/campaign_test_util.h"
 
 namespace wheelhil::emulator::campaign {
@@ -196,20 +197,33 @@ pass:
             ">= 95 % of runs with pose.final_position_error_m <= 0.05");
 }
 
+TEST(ShippedCampaigns, DamagedCampaignsGiveOnlyLocatedInputErrors) {
+  for (const auto& e : std::filesystem::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) +
+                                                           "/scenarios/campaigns")) {
+    if (e.path().extension() != ".yaml") continue;
+    SCOPED_TRACE(e.path().string());
+    const std::string path = e.path().string();
+    yaml_mutation::ExpectOnlyLocatedInputErrors(
+        yaml_mutation::ReadText(path), path,
+        [&](const std::string& text) { (void)ParseCampaign(text, path); });
+  }
+}
+
 TEST_F(CampaignSpecTest, LoadErrorsNameFileLineAndField) {
   const std::string file = (dir_.path() / "camp.yaml").string();
   EXPECT_THAT(
       [&] { Parse("base: base.yaml\nparameterz: []\n"); },
-      ThrowsMessage<std::invalid_argument>(HasSubstr(file + ":2: parameterz: unknown key")));
+      ThrowsMessage<std::invalid_argument>(HasSubstr(file + ":2:1: parameterz: unknown key")));
   EXPECT_THAT([&] { Parse("base: nothere.yaml\nparameters: [{path: a, values: [1]}]\n"); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr(":1: base: scenario")));
+              ThrowsMessage<std::invalid_argument>(HasSubstr(":1:7: base: scenario")));
   EXPECT_THAT(
       [&] {
         Parse(
             "base: base.yaml\nparameters:\n  - path: terrain.friction\n    uniform: {min: 0, max: "
             "1}\n");
       },
-      ThrowsMessage<std::invalid_argument>(HasSubstr(":3: parameters[0]: a random distribution")));
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr(":3:5: parameters[0]: a random distribution")));
   EXPECT_THAT(
       [&] { Parse("base: base.yaml\nsampling: lhs\nparameters: [{path: a, values: [1]}]\n"); },
       ThrowsMessage<std::invalid_argument>(HasSubstr("runs")));
@@ -217,7 +231,7 @@ TEST_F(CampaignSpecTest, LoadErrorsNameFileLineAndField) {
       [&] {
         Parse("base: base.yaml\nparameters:\n  - path: a\n    range: {from: 0, to: 1, steps: 0}\n");
       },
-      ThrowsMessage<std::invalid_argument>(HasSubstr(":4: parameters[0].range.steps")));
+      ThrowsMessage<std::invalid_argument>(HasSubstr(":4:36: parameters[0].range.steps")));
 }
 
 TEST_F(CampaignSpecTest, ParameterPathMissingFromBaseNamesCampaignLineAndPath) {
@@ -229,13 +243,13 @@ parameters:
     values: [0.1]
 )");
   EXPECT_THAT([&] { CheckParameterPaths(spec); },
-              ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("camp.yaml:5: path: faults[2].probability: 'faults[2]' does not exist "
-                            "in the base scenario ('faults' has 1 entries)")));
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "camp.yaml:5:5: path: faults[2].probability: 'faults[2]' does not exist "
+                  "in the base scenario ('faults' has 1 entries)")));
   const auto typo = Parse("base: base.yaml\nparameters:\n  - {path: terrain.frict, values: [1]}\n");
   EXPECT_THAT([&] { CheckParameterPaths(typo); },
               ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("camp.yaml:3: path: terrain.frict: 'terrain.frict' does not exist")));
+                  HasSubstr("camp.yaml:3:5: path: terrain.frict: 'terrain.frict' does not exist")));
 }
 
 TEST_F(CampaignSpecTest, SetOverridesMayAddALeafThatParametersThenVary) {
@@ -258,7 +272,7 @@ parameters:
       "base: base.yaml\nset:\n  nothere.x: 1\nparameters: [{path: terrain.friction, values: "
       "[1]}]\n");
   EXPECT_THAT([&] { CheckParameterPaths(bad); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("camp.yaml:3: set: nothere.x")));
+              ThrowsMessage<std::invalid_argument>(HasSubstr("camp.yaml:3:3: set: nothere.x")));
 }
 
 TEST_F(CampaignSpecTest, SetAtPathWritesMapsAndSequences) {

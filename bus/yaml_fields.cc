@@ -1,0 +1,170 @@
+#include "bus/yaml_fields.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace wheelhil::bus::yaml {
+
+FieldReader::FieldReader(std::string file) : file_(std::move(file)) {}
+
+std::string FieldReader::Join(std::string_view prefix, std::string_view key) {
+  if (prefix.empty()) return std::string(key);
+  return fmt::format("{}.{}", prefix, key);
+}
+
+std::string FieldReader::Where(const YAML::Node& node) const {
+  return Where(node.IsDefined() ? node.Mark() : YAML::Mark::null_mark());
+}
+
+std::string FieldReader::Where(const YAML::Mark& mark) const {
+  if (mark.is_null()) return fmt::format("{}:0:0", file_);
+  return fmt::format("{}:{}:{}", file_, mark.line + 1, mark.column + 1);
+}
+
+void FieldReader::Fail(const YAML::Node& at, std::string_view field,
+                       std::string_view problem) const {
+  Fail(at.IsDefined() ? at.Mark() : YAML::Mark::null_mark(), field, problem);
+}
+
+void FieldReader::Fail(const YAML::Mark& at, std::string_view field,
+                       std::string_view problem) const {
+  throw std::invalid_argument(fmt::format("{}: {}: {}", Where(at), field, problem));
+}
+
+void FieldReader::FailKey(const YAML::Node& parent, const std::string& key,
+                          std::string_view field, std::string_view problem) const {
+  const YAML::Node n = Get(parent, key);
+  Fail(n.IsDefined() ? n : parent, field, problem);
+}
+
+void FieldReader::FailYaml(const YAML::Exception& e) const {
+  if (!e.mark.is_null())
+    Fail(e.mark, section_field_.empty() ? "(document)" : section_field_, e.msg);
+  Fail(section_mark_, section_field_.empty() ? "(document)" : section_field_, e.msg);
+}
+
+std::string FieldReader::ReadFile() const {
+  std::ifstream in(file_, std::ios::binary);
+  if (!in) Fail(YAML::Mark::null_mark(), "(file)", "cannot be read");
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+YAML::Node FieldReader::Parse(const std::string& text) const {
+  try {
+    return YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    Fail(e.mark, "(document)", "YAML syntax error: " + e.msg);
+  }
+}
+
+YAML::Node FieldReader::Get(const YAML::Node& parent, const std::string& key) {
+  if (!parent.IsDefined() || !parent.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+  const YAML::Node n = parent[key];
+  // A missing key gives a node that throws when used; hand out a harmless undefined one.
+  if (!n.IsDefined()) return YAML::Node(YAML::NodeType::Undefined);
+  return n;
+}
+
+bool FieldReader::Present(const YAML::Node& node) { return node.IsDefined() && !node.IsNull(); }
+
+void FieldReader::CheckKeys(const YAML::Node& map, std::string_view field,
+                            const std::set<std::string>& allowed) const {
+  const std::string_view name = field.empty() ? "(document)" : field;
+  if (!map.IsDefined() || !map.IsMap()) Fail(map, name, "must be a mapping");
+  section_mark_ = map.Mark();
+  section_field_ = std::string(field);
+  for (const auto& kv : map) {
+    if (!kv.first.IsScalar()) Fail(kv.first, name, "a key must be a plain name");
+    const std::string& key = kv.first.Scalar();
+    if (allowed.count(key) != 0) continue;
+    std::string list;
+    for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+    Fail(kv.first, Join(field, key), fmt::format("unknown key (allowed: {})", list));
+  }
+}
+
+double FieldReader::ToNumber(const YAML::Node& node, std::string_view field) const {
+  if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be a number");
+  double v = 0;
+  if (!YAML::convert<double>::decode(node, v)) {
+    Fail(node, field, fmt::format("'{}' is not a number", node.Scalar()));
+  }
+  if (!std::isfinite(v)) Fail(node, field, "must be finite");
+  return v;
+}
+
+double FieldReader::ToNumber(const YAML::Node& node, std::string_view field, double min,
+                             double max) const {
+  const double v = ToNumber(node, field);
+  if (v < min || v > max) Fail(node, field, fmt::format("({}) must be in [{}, {}]", v, min, max));
+  return v;
+}
+
+long long FieldReader::ToInteger(const YAML::Node& node, std::string_view field, long long min,
+                                 long long max) const {
+  if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be an integer");
+  long long v = 0;
+  if (!YAML::convert<long long>::decode(node, v)) {
+    Fail(node, field, fmt::format("'{}' is not an integer", node.Scalar()));
+  }
+  if (v < min || v > max) Fail(node, field, fmt::format("({}) must be in [{}, {}]", v, min, max));
+  return v;
+}
+
+bool FieldReader::ToBool(const YAML::Node& node, std::string_view field) const {
+  bool v = false;
+  if (!node.IsDefined() || !node.IsScalar() || !YAML::convert<bool>::decode(node, v)) {
+    Fail(node, field, "must be true or false");
+  }
+  return v;
+}
+
+std::string FieldReader::ToString(const YAML::Node& node, std::string_view field) const {
+  if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be a string");
+  return node.Scalar();
+}
+
+YAML::Node FieldReader::Required(const YAML::Node& parent, const std::string& key,
+                                 std::string_view field) const {
+  const YAML::Node n = Get(parent, key);
+  if (!Present(n)) FailKey(parent, key, field, "is required");
+  return n;
+}
+
+double FieldReader::Number(const YAML::Node& parent, const std::string& key,
+                           std::string_view prefix, double min, double max,
+                           std::optional<double> def) const {
+  const std::string field = Join(prefix, key);
+  if (def && !Present(Get(parent, key))) return *def;
+  return ToNumber(Required(parent, key, field), field, min, max);
+}
+
+long long FieldReader::Integer(const YAML::Node& parent, const std::string& key,
+                               std::string_view prefix, long long min, long long max,
+                               std::optional<long long> def) const {
+  const std::string field = Join(prefix, key);
+  if (def && !Present(Get(parent, key))) return *def;
+  return ToInteger(Required(parent, key, field), field, min, max);
+}
+
+bool FieldReader::Bool(const YAML::Node& parent, const std::string& key, std::string_view prefix,
+                       std::optional<bool> def) const {
+  const std::string field = Join(prefix, key);
+  if (def && !Present(Get(parent, key))) return *def;
+  return ToBool(Required(parent, key, field), field);
+}
+
+std::string FieldReader::String(const YAML::Node& parent, const std::string& key,
+                                std::string_view prefix, std::optional<std::string> def) const {
+  const std::string field = Join(prefix, key);
+  if (def && !Present(Get(parent, key))) return *def;
+  return ToString(Required(parent, key, field), field);
+}
+
+}  // namespace wheelhil::bus::yaml
