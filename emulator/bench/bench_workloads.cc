@@ -25,9 +25,9 @@
 #include "bus/ucan_broker.h"
 #include "emulator/bench/bench_report.h"
 #include "emulator/bench/fan_out_readers.h"
+#include "emulator/bench/paper002_device_set.h"
 #include "emulator/physics/physics_world.h"
 #include "emulator/platforms/platform.h"
-#include "emulator/realtime/paper002_device_set.h"
 #include "emulator/realtime/realtime_pacer.h"
 
 namespace wheelhil::emulator::bench {

@@ -46,7 +46,7 @@ struct RealtimeWorkloadOptions {
   double miss_threshold_us = 1000.0;  ///< A frame later than this missed its deadline.
   std::string prefix = "realtime.";   ///< Key prefix: "realtime." or "realtime.loaded_".
 };
-/// The paper-002 device set (emulator/realtime/paper002_device_set.h) paced in real time onto
+/// The paper-002 device set (emulator/bench/paper002_device_set.h) paced in real time onto
 /// a private ucan bus (broker on $WHEELHIL_UCAN_DIR, libwheelhil_ucan.so preloaded), a reader
 /// on the bus recording each frame's arrival. Sets <prefix>p50_us, p99_us, max_us (send time
 /// minus nominal instant, after the send returned), missed_deadlines, and for the unloaded run

@@ -13,8 +13,8 @@
 #include <Eigen/Geometry>
 
 #include "emulator/physics/roller_vehicle.h"
+#include "emulator/physics/terrain.h"
 #include "emulator/physics/vehicle_spec.h"
-#include "emulator/terrain.h"
 
 class btDefaultCollisionConfiguration;
 class btCollisionDispatcher;

@@ -27,8 +27,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "emulator/physics/terrain.h"
 #include "emulator/physics/vehicle_spec.h"
-#include "emulator/terrain.h"
 
 class btRigidBody;
 class btCollisionShape;

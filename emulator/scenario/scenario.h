@@ -20,9 +20,9 @@
 #include "emulator/faults/device_faults.h"
 #include "emulator/faults/frame_faults.h"
 #include "emulator/faults/sensor_faults.h"
+#include "emulator/physics/terrain.h"
 #include "emulator/platforms/platform.h"
 #include "emulator/scoring/expectations.h"
-#include "emulator/terrain.h"
 
 namespace wheelhil::emulator::scenario {
 

@@ -19,7 +19,7 @@
 #include "bus/dbc.h"
 #include "bus/dbc_codec.h"
 #include "emulator/bench/bench_report.h"
-#include "emulator/realtime/paper002_device_set.h"
+#include "emulator/bench/paper002_device_set.h"
 #include "emulator/realtime/realtime_pacer.h"
 #include "emulator/realtime/spsc_ring.h"
 
@@ -270,9 +270,9 @@ TEST(FramePacer, CountsRecordsTheWriterCouldNotTake) {
 }
 
 TEST(Paper002DeviceSet, OneCycleHasSyncThreeTpdosAccelAndImuInBusOrder) {
-  realtime::Paper002DeviceSetOptions o;
+  bench::Paper002DeviceSetOptions o;
   o.source_dir = WHEELHIL_SOURCE_DIR;
-  realtime::Paper002DeviceSet devices(o);
+  bench::Paper002DeviceSet devices(o);
   std::vector<PacedFrame> frames;
   for (int c = 0; c < 20; ++c) devices.NextCycle(frames);
   EXPECT_EQ(devices.problems(), 0u);
@@ -297,9 +297,9 @@ TEST(Paper002DeviceSet, OneCycleHasSyncThreeTpdosAccelAndImuInBusOrder) {
 }
 
 TEST(Paper002DeviceSet, AccelFramesDecodeThroughTheDbcWithCounterAndChecksum) {
-  realtime::Paper002DeviceSetOptions o;
+  bench::Paper002DeviceSetOptions o;
   o.source_dir = WHEELHIL_SOURCE_DIR;
-  realtime::Paper002DeviceSet devices(o);
+  bench::Paper002DeviceSet devices(o);
   std::vector<PacedFrame> frames;
   for (int c = 0; c < 100; ++c) devices.NextCycle(frames);  // 0.1 s: accelerating at 0.5 m/s^2
   const auto db =
@@ -334,9 +334,9 @@ TEST(Paper002DeviceSet, AccelFramesDecodeThroughTheDbcWithCounterAndChecksum) {
 }
 
 TEST(Paper002DeviceSet, BadSourceDirThrows) {
-  realtime::Paper002DeviceSetOptions o;
+  bench::Paper002DeviceSetOptions o;
   o.source_dir = "/nonexistent";
-  EXPECT_THROW(realtime::Paper002DeviceSet devices(o), std::invalid_argument);
+  EXPECT_THROW(bench::Paper002DeviceSet devices(o), std::invalid_argument);
 }
 
 TEST(BenchReport, CpuModelFromCpuinfo) {

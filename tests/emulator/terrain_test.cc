@@ -1,7 +1,7 @@
 // Terrain: analytic planes, meshes through assimp in four formats with scale/up-axis options,
 // friction patches, and clear errors for missing or malformed meshes.
 
-#include "emulator/terrain.h"
+#include "emulator/physics/terrain.h"
 
 #include <cstdio>
 #include <filesystem>

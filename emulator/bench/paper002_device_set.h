@@ -1,5 +1,5 @@
 #pragma once
-/// The device set of paper 002 as it appears on the bus, for the real-time mode and `wheelhil
+/// The device set of paper 002 as it appears on the bus, for the real-time workload of `wheelhil
 /// bench`: per 1 ms cycle a SYNC (0x080, the master's), the TPDO1 of three CiA 406 encoder nodes
 /// (1..3, transmission type 1, answering the SYNC), one ACC4_Data frame with the four
 /// accelerometer channels (bus/dbc/wheelhil_accel4.dbc, counter and checksum), and every
@@ -19,7 +19,7 @@
 
 #include "emulator/realtime/realtime_pacer.h"
 
-namespace wheelhil::emulator::realtime {
+namespace wheelhil::emulator::bench {
 
 struct Paper002DeviceSetOptions {
   /// Repository root (for bus/dbc/*.dbc).
@@ -42,7 +42,7 @@ class Paper002DeviceSet {
 
   /// Appends the frames whose start of frame falls in the next cycle (in bus order, nominal
   /// instants non-decreasing across calls); the first cycle starts at nominal 0.
-  void NextCycle(std::vector<PacedFrame>& out);
+  void NextCycle(std::vector<realtime::PacedFrame>& out);
 
   std::int64_t cycle_ns() const noexcept;
   /// Cycles produced so far.
@@ -55,4 +55,4 @@ class Paper002DeviceSet {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace wheelhil::emulator::realtime
+}  // namespace wheelhil::emulator::bench

@@ -1,4 +1,4 @@
-#include "emulator/realtime/paper002_device_set.h"
+#include "emulator/bench/paper002_device_set.h"
 
 #include <algorithm>
 #include <array>
@@ -18,7 +18,10 @@
 #include "emulator/sensors/encoder_model.h"
 #include "emulator/sensors/gyro_model.h"
 
-namespace wheelhil::emulator::realtime {
+namespace wheelhil::emulator::bench {
+
+using realtime::PacedFrame;
+
 namespace {
 
 constexpr double kWheelRadiusM = 0.05;       // scenarios/firmware/paper002_orthogonal_omni.yaml
@@ -294,4 +297,4 @@ std::int64_t Paper002DeviceSet::cycle_ns() const noexcept { return impl_->option
 std::int64_t Paper002DeviceSet::cycles() const noexcept { return impl_->cycle; }
 std::uint64_t Paper002DeviceSet::problems() const noexcept { return impl_->problems; }
 
-}  // namespace wheelhil::emulator::realtime
+}  // namespace wheelhil::emulator::bench

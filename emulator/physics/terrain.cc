@@ -1,4 +1,4 @@
-#include "emulator/terrain.h"
+#include "emulator/physics/terrain.h"
 
 #include <algorithm>
 #include <array>
