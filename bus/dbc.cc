@@ -1,3 +1,5 @@
+// One file on purpose (~700 lines): the DBC grammar (BU_, BO_, SG_, VAL_, BA_DEF_, BA_, ...)
+// is read by one tokenizer and one statement dispatcher; each statement's reader is short.
 #include "bus/dbc.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,7 @@
+// One file on purpose (~1300 lines): the broker is one event loop whose parts (client
+// connections, per-client filters, shared-memory rings and their doorbells, the in-process port
+// of a pumped run) share its locks and its fd table; split across files they would need a
+// shared internal header exposing every field.
 #include "bus/ucan_broker.h"
 
 #include <fcntl.h>

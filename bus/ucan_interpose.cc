@@ -12,6 +12,9 @@
 // Per-fd state lives in a table indexed by fd, guarded by one mutex (fork-safe through
 // pthread_atfork); a lock-free byte per fd keeps the fast path for other fds to one load.
 // No global objects with constructors: the library is loaded into python, candump, ...
+//
+// One file on purpose (~1300 lines): an interposition library is one translation unit of
+// exported libc symbols over one fd table and its lock; every wrapper below depends on both.
 
 #include <dlfcn.h>
 #include <fcntl.h>

@@ -1,3 +1,6 @@
+// One file on purpose (~700 lines): one vehicle's step over its per-wheel state. PreStep (ray
+// casts, suspension, motor, roller-contact friction and the contact solver) is still one long
+// function; splitting it into named stages is open work.
 #include "emulator/physics/roller_vehicle.h"
 
 #include <algorithm>
