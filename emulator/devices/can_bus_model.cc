@@ -145,16 +145,6 @@ unsigned ExactBits(const bus::CanFrame& f) {
 
 }  // namespace
 
-std::uint16_t CanCrc15(std::span<const std::uint8_t> bits) noexcept {
-  std::uint16_t crc = 0;
-  for (std::uint8_t b : bits) {
-    const bool crc_next = ((b & 1u) != 0) != ((crc & 0x4000u) != 0);
-    crc = static_cast<std::uint16_t>((crc << 1) & 0x7FFF);
-    if (crc_next) crc ^= 0x4599;
-  }
-  return crc;
-}
-
 unsigned CanFrameBits(const bus::CanFrame& f, StuffingMode mode) noexcept {
   if (f.fd || f.error || !f.IsValid()) return 0;
   const unsigned n = f.rtr ? 0u : f.len;  // data bytes on the wire
@@ -326,11 +316,6 @@ std::int64_t CanBusModel::busy_ns() const {
 double CanBusModel::BusLoad() const {
   if (now_ns_ <= 0) return 0.0;
   return static_cast<double>(busy_ns()) / static_cast<double>(now_ns_);
-}
-
-std::size_t CanBusModel::queue_depth(int node) const {
-  if (node < 0 || static_cast<std::size_t>(node) >= nodes_.size()) return 0;
-  return nodes_[static_cast<std::size_t>(node)].queue.size();
 }
 
 }  // namespace wheelhil::emulator

@@ -35,7 +35,6 @@
 
 #include <cstdint>
 #include <deque>
-#include <span>
 #include <string>
 #include <vector>
 
@@ -48,9 +47,6 @@ enum class StuffingMode { kNoStuffing, kTindell, kWorstCase, kExact };
 /// Bits a classic frame needs on the wire, SOF to end of the 3-bit interframe space.
 /// Returns 0 for frames this model does not cover (FD, error frames, invalid frames).
 unsigned CanFrameBits(const bus::CanFrame& frame, StuffingMode mode) noexcept;
-
-/// The 15-bit CAN CRC of an unstuffed bit sequence (0/1 values), poly 0x4599, init 0.
-std::uint16_t CanCrc15(std::span<const std::uint8_t> bits) noexcept;
 
 /// Arbitration key of a frame: lower wins. Bit layout (MSB first, 32 bits used): base id (11),
 /// RTR/SRR, IDE, extension id (18), extended RTR.
@@ -110,7 +106,6 @@ class CanBusModel {
   std::int64_t busy_ns() const;
   std::uint64_t frames_sent() const { return frames_sent_; }
   std::uint64_t frames_dropped() const { return frames_dropped_; }
-  std::size_t queue_depth(int node) const;
   /// Longest queueing delay (SOF minus ready) seen so far.
   std::int64_t max_queue_delay_ns() const { return max_queue_delay_ns_; }
 

@@ -105,7 +105,6 @@ class CanopenEncoderNode {
   void ClearFault(std::int64_t t_ns);
 
   NmtState state() const { return state_; }
-  std::uint8_t node_id() const { return config_.node_id; }
   /// Frames rejected by the codec (malformed SDO / NMT frames) so far.
   std::uint64_t rejected_frames() const { return rejected_frames_; }
 
@@ -130,7 +129,6 @@ class CanopenEncoderNode {
   std::int16_t ReportedSpeed() const;
   void EmitTpdo(std::int64_t due_ns, std::vector<NodeFrame>& out);
   void Emit(bool ok, const bus::CanFrame& frame, std::int64_t due_ns, std::vector<NodeFrame>& out);
-  std::uint16_t event_timer_ms() const { return cyclic_timer_ms_; }
 
   Cia406NodeConfig config_;
   std::shared_ptr<const Cia406Codec> codec_;

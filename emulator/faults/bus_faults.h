@@ -1,5 +1,5 @@
 #pragma once
-/// Bus faults (issue 5 part 4) around one CanBusModel, over a window [t0, t1):
+/// Bus faults around one CanBusModel, over a window [t0, t1):
 ///   kErrorBurst  `error_frames` error frames right after t0: the bus is unavailable to every node
 ///                while they last. Model: each error frame is a zero-length id-0x000 blocker
 ///                frame sent by a hidden top-priority node (it wins the next arbitration after t0
@@ -63,7 +63,6 @@ class FaultyCanBus {
   /// blockers come back as error frames.
   std::vector<WireFrame> AdvanceTo(std::int64_t t_ns);
 
-  CanBusModel& bus() { return bus_; }
   std::uint64_t dropped_bus_off() const { return dropped_bus_off_; }
   std::uint64_t flood_frames() const { return flood_frames_; }
   std::uint64_t error_frames() const { return error_frames_; }

@@ -1,5 +1,5 @@
 #pragma once
-/// Device faults (issue 5 part 4) for one node, over a window [t0, t1):
+/// Device faults for one node, over a window [t0, t1):
 ///   kSilent         the node sends nothing (it still receives and keeps its state);
 ///   kHeartbeatLost  only its heartbeats (0x700+id, state byte != 0) are not sent;
 ///   kReboot         power cycle: off over [t0, t1) (t1 = t0 + 1 ns for an instant reboot),

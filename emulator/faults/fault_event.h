@@ -64,7 +64,6 @@ class WindowPhase {
     return (!started_ && t_ns >= w.t0_ns) ||
            (!ended_ && w.t1_ns != FaultWindow::kForever && t_ns >= w.t1_ns);
   }
-  bool started() const { return started_; }
 
  private:
   bool started_ = false;

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -182,12 +181,6 @@ std::vector<NodeFrame> FrameFaultFilter::Process(const std::vector<NodeFrame>& i
   std::vector<NodeFrame> out(held_.begin(), split);
   held_.erase(held_.begin(), split);
   return out;
-}
-
-std::int64_t FrameFaultFilter::NextReleaseNs() const {
-  std::int64_t next = std::numeric_limits<std::int64_t>::max();
-  for (const NodeFrame& f : held_) next = std::min(next, f.due_ns);
-  return next;
 }
 
 }  // namespace wheelhil::emulator

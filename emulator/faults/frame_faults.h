@@ -1,7 +1,7 @@
 #pragma once
-/// Frame faults (issue 5 part 4): a filter between a device's output (NodeFrame: frame + due
-/// instant) and the bus. Each fault selects frames by (id & mask) == (fault id & mask), the same
-/// frame format (standard/extended), and its window [t0, t1) on the frame's due instant:
+/// Frame faults: a filter between a device's output (NodeFrame: frame + due instant) and the
+/// bus. Each fault selects frames by (id & mask) == (fault id & mask), the same frame format
+/// (standard/extended), and its window [t0, t1) on the frame's due instant:
 ///   kDrop           the frame is not sent, with probability `probability` (seeded RNG);
 ///   kDelay          the frame becomes due delay_ns later (held by the filter until then);
 ///   kDuplicate      a second copy follows, due delay_ns after the first (with probability);
@@ -74,9 +74,6 @@ class FrameFaultFilter {
   /// every frame due at or before t_ns: the passed/modified ones and delayed ones released now.
   /// Frames that become due later (delay, a duplicate's copy) are held for a later call.
   std::vector<NodeFrame> Process(const std::vector<NodeFrame>& in, std::int64_t t_ns);
-  /// Earliest instant a held frame becomes due (INT64_MAX if none).
-  std::int64_t NextReleaseNs() const;
-
   /// Frames each fault acted on (index = position in the fault list).
   std::uint64_t affected(std::size_t fault_index) const { return states_[fault_index].affected; }
   std::uint64_t unapplied() const { return unapplied_; }

@@ -82,11 +82,6 @@ void SensorFaultInjector::Track(std::int64_t t_ns) {
   }
 }
 
-bool SensorFaultInjector::ActiveAt(std::int64_t t_ns) const {
-  return std::any_of(faults_.begin(), faults_.end(),
-                     [&](const State& s) { return s.fault.window.Contains(t_ns); });
-}
-
 std::optional<double> SensorFaultInjector::Modify(double x, std::int64_t t_ns, bool counts) {
   bool drop = false;
   for (State& s : faults_) {

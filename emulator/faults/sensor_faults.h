@@ -1,6 +1,6 @@
 #pragma once
-/// Sensor faults (issue 5 part 4) as modifiers applied to a sensor's output sample at its
-/// sample instant t (integer ns), between the sensor model and the device that encodes it.
+/// Sensor faults as modifiers applied to a sensor's output sample at its sample instant t
+/// (integer ns), between the sensor model and the device that encodes it.
 /// Each fault is active over its window [t0, t1) (t1 = kForever: from t0 on):
 ///   kBiasStep     + value (sample units: m/s^2, rad/s, counts);
 ///   kDriftRamp    + value * (t - t0) [s] (value in units per second);
@@ -62,8 +62,6 @@ class SensorFaultInjector {
   std::optional<std::uint32_t> ApplyCounts(std::uint32_t counts, std::int64_t t_ns,
                                            int counter_bits = 32);
 
-  /// True when any fault's window contains t_ns.
-  bool ActiveAt(std::int64_t t_ns) const;
   /// Counts lost to kMissedCounts so far.
   std::int64_t missed_counts() const { return missed_total_; }
 

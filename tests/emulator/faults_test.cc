@@ -21,7 +21,11 @@
 #include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
-#include "emulator/faults/fault_schedule.h"
+#include "emulator/faults/bus_faults.h"
+#include "emulator/faults/device_faults.h"
+#include "emulator/faults/fault_event.h"
+#include "emulator/faults/frame_faults.h"
+#include "emulator/faults/sensor_faults.h"
 
 namespace wheelhil::emulator {
 namespace {
