@@ -49,7 +49,8 @@ void SlipCorrectingOdometry::FinishCalibration() noexcept {
   for (double r : calibration_) b2 += (r - mean) * (r - mean);
   mean_rad_ = mean;
   sigma_rad_ = std::sqrt(b2 / n);  // Divisor n, as B2 of the normality test.
-  normality_ = SkewnessKurtosisTest(calibration_, 1.96);
+  const bus::NormalityResult test = bus::SkewnessKurtosisTest(calibration_, 1.96);
+  normality_ = test.defined ? std::optional(test) : std::nullopt;
   calibrated_ = true;
 }
 

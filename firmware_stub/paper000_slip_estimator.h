@@ -20,7 +20,7 @@
 #include <optional>
 #include <vector>
 
-#include "firmware_stub/normality_test.h"
+#include "bus/normality.h"
 #include "firmware_stub/planar_pose.h"
 
 namespace wheelhil::fw {
@@ -78,7 +78,7 @@ class SlipCorrectingOdometry {
   double band_high_rad() const { return mean_rad_ + config_.z * sigma_rad_; }
   /// Skewness/kurtosis test of the calibration window's residuals (nullopt before calibration
   /// ends, when the statistics were configured, or when the test is undefined, e.g. sigma 0).
-  const std::optional<NormalityResult>& calibration_normality() const { return normality_; }
+  const std::optional<bus::NormalityResult>& calibration_normality() const { return normality_; }
 
   std::uint64_t samples() const { return samples_; }
   std::uint64_t slips_left() const { return slips_left_; }
@@ -99,7 +99,7 @@ class SlipCorrectingOdometry {
   double mean_rad_ = 0.0;
   double sigma_rad_ = 0.0;
   std::vector<double> calibration_;  // Reserved to N at construction.
-  std::optional<NormalityResult> normality_;
+  std::optional<bus::NormalityResult> normality_;
   Pose2 pose_encoder_;
   Pose2 pose_corrected_;
   SlipStepResult last_;

@@ -5,6 +5,8 @@
 
 #include <fmt/format.h>
 
+#include "bus/normality.h"
+
 namespace wheelhil::emulator::scoring {
 
 namespace {
@@ -150,7 +152,8 @@ class ResidualNormalityComponent final : public MetricComponent {
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
     const auto& residual = run.estimates.residual().residual_rad;
     if (run.estimates.detections().empty() || residual.empty()) return;
-    const NormalityResult n = NormalityTest(residual);
+    // Paper 000 states no minimum n; below 8 samples the skewness test is not defined.
+    const bus::NormalityResult n = bus::SkewnessKurtosisTest(residual, 1.96, 8);
     metrics["residual"] = json{{"samples", n.n},
                                {"mean_rad", n.mean},
                                {"sigma_rad", n.sigma},

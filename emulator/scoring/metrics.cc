@@ -156,37 +156,4 @@ SlipMetrics ComputeSlipMetrics(const std::vector<Interval>& truth,
   return m;
 }
 
-NormalityResult NormalityTest(const std::vector<double>& x, double z) {
-  NormalityResult r;
-  r.n = x.size();
-  if (x.size() < 8) return r;
-  const double n = static_cast<double>(x.size());
-  double mean = 0;
-  for (double v : x) mean += v;
-  mean /= n;
-  double b2 = 0, b3 = 0, b4 = 0;
-  for (double v : x) {
-    const double d = v - mean;
-    b2 += d * d;
-    b3 += d * d * d;
-    b4 += d * d * d * d;
-  }
-  b2 /= n;
-  b3 /= n;
-  b4 /= n;
-  r.mean = mean;
-  r.sigma = std::sqrt(b2);
-  if (!(b2 > 0)) return r;
-  r.g1 = b3 / std::pow(b2, 1.5);
-  r.g2 = b4 / (b2 * b2) - 3.0;
-  const double sd1 = std::sqrt(6.0 * (n - 2) / ((n + 1) * (n + 3)));
-  const double e2 = -6.0 / (n + 1);
-  const double sd2 =
-      std::sqrt(24.0 * n * (n - 2) * (n - 3) / ((n + 1) * (n + 1) * (n + 3) * (n + 5)));
-  r.u1 = r.g1 / sd1;
-  r.u2 = (r.g2 - e2) / sd2;
-  r.accepted = std::abs(r.u1) < z && std::abs(r.u2) < z;
-  return r;
-}
-
 }  // namespace wheelhil::emulator::scoring

@@ -92,14 +92,5 @@ std::vector<Interval> FlagsToIntervals(const std::vector<double>& t_s,
                                        const std::vector<bool>& flags, double step_s,
                                        double merge_gap_s = 0.0, double min_length_s = 0.0);
 
-/// Sample skewness and excess kurtosis normality test (D'Agostino large-n form, as paper 000):
-/// accepted when |U1| < z and |U2| < z.
-struct NormalityResult {
-  double mean = 0, sigma = 0;  // sample mean and sqrt(B2) (divisor n), unit of the samples
-  double g1 = 0, g2 = 0, u1 = 0, u2 = 0;
-  bool accepted = false;
-  std::size_t n = 0;
-};
-NormalityResult NormalityTest(const std::vector<double>& x, double z = 1.96);
 
 }  // namespace wheelhil::emulator::scoring

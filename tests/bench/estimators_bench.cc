@@ -8,7 +8,7 @@
 #include <array>
 #include <cstdint>
 
-#include "firmware_stub/normality_test.h"
+#include "bus/normality.h"
 #include "firmware_stub/paper000_slip_estimator.h"
 #include "firmware_stub/paper001_follower_odometry.h"
 #include "firmware_stub/paper002_velocity_fusion.h"
@@ -69,7 +69,7 @@ void BM_SkewnessKurtosisHistogram(benchmark::State& state) {
   const std::array<double, 10> centres = {-4.5, -3.5, -2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.5, 4.5};
   const std::array<std::uint64_t, 10> counts = {9, 21, 92, 163, 232, 218, 151, 74, 30, 10};
   for (auto _ : state) {
-    benchmark::DoNotOptimize(SkewnessKurtosisTestHistogram(centres, counts));
+    benchmark::DoNotOptimize(bus::SkewnessKurtosisTestHistogram(centres, counts));
   }
 }
 BENCHMARK(BM_SkewnessKurtosisHistogram);
