@@ -238,11 +238,14 @@ void PhysicsStage::StartWorker(std::int64_t steps, const cpu_set_t* cpus,
   // The worker also owns the sensor models of the devices that read ahead (their noise
   // streams); the run's thread still encodes every sample.
   std::vector<Device*> ahead(devices.size(), nullptr);
+  bool any_ahead = false;
   for (std::size_t d = 0; d < devices.size(); ++d) {
     if (!devices[d]->ReadsAhead()) continue;
     devices[d]->StartReadingsAhead();
     ahead[d] = devices[d].get();
+    any_ahead = true;
   }
+  if (!any_ahead) ahead.clear();
   const std::int64_t t0_ns = run_.now_ns;
   // 2048 steps of look-ahead (~2 s of motion at 1 kHz, ~1.5 MB): either side may lose its CPU
   // to another process for a time slice (a few ms) without the other running dry or blocking.

@@ -1,4 +1,4 @@
-// End-to-end campaign tests on the fake runner (tests/emulator/fake_wheelhil_run.cc, a test
+// End-to-end campaign tests on the fake runner (tests/emulator/campaign/fake_wheelhil_run.cc, a test
 // double of `wheelhil run`): resume after SIGKILL, shards merged == unsharded, JUnit XML against
 // the schema, reports, smoke.
 

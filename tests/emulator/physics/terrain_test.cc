@@ -11,7 +11,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "tests/emulator/physics_test_util.h"
+#include "tests/emulator/physics/physics_test_util.h"
 
 namespace wheelhil::emulator {
 namespace {

@@ -21,7 +21,7 @@
 #include "bus/ucan_runtime_dir.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
-#include "tests/emulator/scenario_run_support.h"
+#include "tests/emulator/scenario/runner_test_support.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "tests/emulator/physics_test_util.h"
+#include "tests/emulator/physics/physics_test_util.h"
 
 namespace wheelhil::emulator {
 namespace {

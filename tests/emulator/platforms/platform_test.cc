@@ -13,7 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/bus/yaml_fields_test_util.h"
-#include "tests/emulator/physics_test_util.h"
+#include "tests/emulator/physics/physics_test_util.h"
 
 namespace wheelhil::emulator::platforms {
 namespace {

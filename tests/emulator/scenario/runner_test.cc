@@ -23,7 +23,7 @@
 #include "emulator/devices/frame_checksum.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
-#include "tests/emulator/scenario_run_support.h"
+#include "tests/emulator/scenario/runner_test_support.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
