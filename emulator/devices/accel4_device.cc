@@ -35,16 +35,12 @@ double Accel4Device::channel_noise_std(const std::string& channel) const {
 }
 
 void Accel4Device::ArmFaults(DeviceFaults faults) {
-  device_fault_ = std::move(faults.device);
+  TakeDeviceFaults(faults);
   for (auto& [channel, injector] : faults.sensors) {
     for (std::size_t c = 0; c < 4; ++c) {
       if (channel == fmt::format("accel4.{}", c + 1)) faults_[c] = std::move(injector);
     }
   }
-}
-
-std::uint64_t Accel4Device::suppressed_frames() const {
-  return device_fault_ ? device_fault_->suppressed_frames() : 0;
 }
 
 void Accel4Device::StartReadingsAhead() {
@@ -89,13 +85,8 @@ void Accel4Device::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort&
     frames[0].due_ns = ts;
     (void)node_.EncodeSample(a, frames[0].frame);  // advances (and counts) even when dropped
     if (dropped) continue;
-    if (device_fault_) device_fault_->FilterOutputs(frames);
-    port.Send(std::move(frames), true);
+    SendThroughDeviceFaults(std::move(frames), true, port);
   }
-}
-
-void Accel4Device::EndStep(std::int64_t t_ns) {
-  if (device_fault_) device_fault_->AdvanceTo(t_ns);
 }
 
 }  // namespace wheelhil::emulator

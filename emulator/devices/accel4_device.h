@@ -30,11 +30,9 @@ class Accel4Device final : public Device {
   std::string fault_name() const override { return "accel4"; }
   std::int64_t NextEventNs() const override { return node_.next_sample_ns(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
-  void EndStep(std::int64_t t_ns) override;
   std::vector<std::string> sensor_channels() const override;
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
-  std::uint64_t suppressed_frames() const override;
 
   bool ReadsAhead() const override { return true; }
   void StartReadingsAhead() override;
@@ -48,7 +46,6 @@ class Accel4Device final : public Device {
   bool ahead_ = false;
   std::int64_t ahead_next_ns_ = 0;  // the worker's next sample instant
   std::array<std::unique_ptr<SensorFaultInjector>, 4> faults_;
-  std::unique_ptr<DeviceFaultInjector> device_fault_;
 };
 
 }  // namespace wheelhil::emulator

@@ -19,8 +19,6 @@ EncoderParams WithDirection(EncoderParams p, int direction) {
 
 }  // namespace
 
-Device::~Device() = default;
-
 Cia406EncoderDevice::Cia406EncoderDevice(const Cia406EncoderDeviceConfig& config,
                                          std::shared_ptr<const Cia406Codec> codec)
     : config_(config),
@@ -39,14 +37,10 @@ double Cia406EncoderDevice::channel_noise_std(const std::string&) const {
 }
 
 void Cia406EncoderDevice::ArmFaults(DeviceFaults faults) {
-  device_fault_ = std::move(faults.device);
+  TakeDeviceFaults(faults);
   for (auto& [channel, injector] : faults.sensors) {
     if (channel == channel_) sensor_fault_ = std::move(injector);
   }
-}
-
-std::uint64_t Cia406EncoderDevice::suppressed_frames() const {
-  return device_fault_ ? device_fault_->suppressed_frames() : 0;
 }
 
 std::int64_t Cia406EncoderDevice::missed_counts() const {
@@ -58,8 +52,7 @@ void Cia406EncoderDevice::Send(std::vector<NodeFrame> frames, bool from_poll, De
     port.CountSilenced(frames.size());
     return;
   }
-  if (device_fault_ && !frames.empty()) device_fault_->FilterOutputs(frames);
-  port.Send(std::move(frames), from_poll);
+  SendThroughDeviceFaults(std::move(frames), from_poll, port);
 }
 
 void Cia406EncoderDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
@@ -70,11 +63,9 @@ void Cia406EncoderDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, Devi
                        config_.direction;
   // A dropped sample (dropout) leaves the node's last measurement in place.
   if (counts) node_->SetMeasurement(*counts, speed);
-  if (device_fault_) {
-    if (device_fault_->NextActionNs() <= t_ns) {
-      (void)device_fault_->ApplyTo(*node_, config_.node, codec_, t_ns);
-    }
-    device_fault_->AdvanceTo(t_ns);
+  if (DeviceFaultInjector* faults = device_faults()) {
+    if (faults->NextActionNs() <= t_ns) (void)faults->ApplyTo(*node_, config_.node, codec_, t_ns);
+    faults->AdvanceTo(t_ns);
   }
   Send(node_->Poll(t_ns), true, port);
   if (node_->state() != last_state_) {

@@ -49,7 +49,6 @@ class Cia406EncoderDevice final : public Device {
   /// The encoder's own noise is its quantisation: 1/sqrt(12) count.
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
-  std::uint64_t suppressed_frames() const override;
   std::int64_t missed_counts() const override;
 
   std::uint8_t canopen_node_id() const override { return config_.node.node_id; }
@@ -71,7 +70,6 @@ class Cia406EncoderDevice final : public Device {
   EncoderModel model_;
   std::unique_ptr<CanopenEncoderNode> node_;
   std::unique_ptr<SensorFaultInjector> sensor_fault_;
-  std::unique_ptr<DeviceFaultInjector> device_fault_;
   CanopenEncoderNode::NmtState last_state_ = CanopenEncoderNode::NmtState::kOff;
 };
 

@@ -59,16 +59,12 @@ double DbcImuDevice::channel_noise_std(const std::string& channel) const {
 }
 
 void DbcImuDevice::ArmFaults(DeviceFaults faults) {
-  device_fault_ = std::move(faults.device);
+  TakeDeviceFaults(faults);
   for (auto& [channel, injector] : faults.sensors) {
     for (std::size_t c = 0; c < kChannels.size(); ++c) {
       if (channel == kChannels[c]) faults_[c] = std::move(injector);
     }
   }
-}
-
-std::uint64_t DbcImuDevice::suppressed_frames() const {
-  return device_fault_ ? device_fault_->suppressed_frames() : 0;
 }
 
 void DbcImuDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
@@ -94,13 +90,8 @@ void DbcImuDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort&
     sample.accel_m_s2 = {v[3], v[4], v[5]};
     std::vector<NodeFrame> frames = node_.Poll(ts, sample);  // advances even when dropped
     if (dropped) continue;
-    if (device_fault_ && !frames.empty()) device_fault_->FilterOutputs(frames);
-    port.Send(std::move(frames), true);
+    SendThroughDeviceFaults(std::move(frames), true, port);
   }
-}
-
-void DbcImuDevice::EndStep(std::int64_t t_ns) {
-  if (device_fault_) device_fault_->AdvanceTo(t_ns);
 }
 
 }  // namespace wheelhil::emulator

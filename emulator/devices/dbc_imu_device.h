@@ -41,11 +41,9 @@ class DbcImuDevice final : public Device {
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override { return node_.NextEventNs(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
-  void EndStep(std::int64_t t_ns) override;
   std::vector<std::string> sensor_channels() const override;
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
-  std::uint64_t suppressed_frames() const override;
 
   const DbcImuNode& node() const { return node_; }
 
@@ -55,7 +53,6 @@ class DbcImuDevice final : public Device {
   std::vector<GyroModel> gyros_;  // x, y, z
   std::unique_ptr<AccelerometerModel> accel_;
   std::array<std::unique_ptr<SensorFaultInjector>, 6> faults_;  // rate x y z, accel x y z
-  std::unique_ptr<DeviceFaultInjector> device_fault_;
 };
 
 }  // namespace wheelhil::emulator

@@ -61,7 +61,10 @@ struct DeviceFaults {
 
 class Device {
  public:
+  Device();
   virtual ~Device();
+  Device(const Device&) = delete;
+  Device& operator=(const Device&) = delete;
 
   /// The bus node's name: "encoder1", "imu", "accel4", ...
   virtual const std::string& name() const = 0;
@@ -74,8 +77,9 @@ class Device {
   virtual void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) {
     (void)frame, (void)t_ns, (void)port;
   }
-  /// After every device was polled at t_ns and the frame faults released what was due.
-  virtual void EndStep(std::int64_t t_ns) { (void)t_ns; }
+  /// After every device was polled at t_ns and the frame faults released what was due: the
+  /// device faults' windows advance (their start/end events).
+  virtual void EndStep(std::int64_t t_ns);
   /// The name fault specs and the fault log use for the device ("gyro" for the IMU).
   virtual std::string fault_name() const { return name(); }
   /// Its CANopen node id (1..127); 0: not a CANopen node.
@@ -110,7 +114,7 @@ class Device {
   virtual void ArmFaults(DeviceFaults faults) = 0;
   /// Totals of its faults for report.json: frames its device faults suppressed, encoder
   /// counts its sensor faults removed.
-  virtual std::uint64_t suppressed_frames() const = 0;
+  virtual std::uint64_t suppressed_frames() const;
   virtual std::int64_t missed_counts() const { return 0; }
 
   /// Readings that depend on the body kinematics and the sensors' own noise streams only may be
@@ -124,8 +128,17 @@ class Device {
     (void)t_after_ns, (void)body, (void)out;
   }
 
+ protected:
+  /// Keeps the device faults of `faults` (ArmFaults): SendThroughDeviceFaults applies them, and
+  /// EndStep advances their windows.
+  void TakeDeviceFaults(DeviceFaults& faults);
+  DeviceFaultInjector* device_faults() const { return device_faults_.get(); }
+  /// `frames` through the device faults (silent, heartbeat lost, off) to the port.
+  void SendThroughDeviceFaults(std::vector<NodeFrame> frames, bool from_poll, DevicePort& port);
+
  private:
   bool silent_ = false;
+  std::unique_ptr<DeviceFaultInjector> device_faults_;
 };
 
 }  // namespace wheelhil::emulator

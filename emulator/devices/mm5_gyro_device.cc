@@ -18,14 +18,10 @@ double Mm5GyroDevice::channel_noise_std(const std::string&) const {
 }
 
 void Mm5GyroDevice::ArmFaults(DeviceFaults faults) {
-  device_fault_ = std::move(faults.device);
+  TakeDeviceFaults(faults);
   for (auto& [channel, injector] : faults.sensors) {
     if (channel == "gyro") gyro_fault_ = std::move(injector);
   }
-}
-
-std::uint64_t Mm5GyroDevice::suppressed_frames() const {
-  return device_fault_ ? device_fault_->suppressed_frames() : 0;
 }
 
 void Mm5GyroDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
@@ -40,13 +36,8 @@ void Mm5GyroDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort
     std::vector<NodeFrame> frames(1);
     frames[0].due_ns = ts;
     (void)node_.Encode(*rate, a_B.y(), frames[0].frame);
-    if (device_fault_) device_fault_->FilterOutputs(frames);
-    port.Send(std::move(frames), true);
+    SendThroughDeviceFaults(std::move(frames), true, port);
   }
-}
-
-void Mm5GyroDevice::EndStep(std::int64_t t_ns) {
-  if (device_fault_) device_fault_->AdvanceTo(t_ns);
 }
 
 }  // namespace wheelhil::emulator

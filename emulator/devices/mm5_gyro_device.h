@@ -25,18 +25,15 @@ class Mm5GyroDevice final : public Device {
   std::string fault_name() const override { return "gyro"; }
   std::int64_t NextEventNs() const override { return node_.next_sample_ns(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
-  void EndStep(std::int64_t t_ns) override;
   std::vector<std::string> sensor_channels() const override { return {"gyro"}; }
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
-  std::uint64_t suppressed_frames() const override;
 
  private:
   std::string name_ = "imu";
   GyroParams gyro_;
   Mm5ImuNode node_;
   std::unique_ptr<SensorFaultInjector> gyro_fault_;
-  std::unique_ptr<DeviceFaultInjector> device_fault_;
 };
 
 }  // namespace wheelhil::emulator
