@@ -72,8 +72,10 @@ class Run {
   std::string out_;
   sim::RunContext run_;
   sim::CpuPlacement cpus_;
-  std::unique_ptr<PhysicsStage> physics_;
   std::vector<std::unique_ptr<Device>> devices_;
+  // Declared after the devices: a worker still stepping (a run left by an exception) is stopped
+  // before the devices whose readings it takes go.
+  std::unique_ptr<PhysicsStage> physics_;
   std::unique_ptr<sim::BusHub> hub_;
   std::unique_ptr<firmware::FirmwareLink> link_;
   firmware::FirmwareProcess firmware_;
