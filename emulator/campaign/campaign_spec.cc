@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "bus/yaml_fields.h"
+#include "emulator/scoring/expectations.h"
 
 namespace wheelhil::emulator::campaign {
 namespace {
@@ -221,8 +222,9 @@ json ParameterSpec::FromUnit(double u) const {
 
 bool MetricBound::Holds(std::optional<double> value) const {
   if (!value || !std::isfinite(*value)) return false;
-  if (max && *value > *max) return false;
-  if (min && *value < *min) return false;
+  // The run's expectations and a campaign's criteria compare through one evaluator.
+  if (max && !scoring::Compare(*value, "<=", *max)) return false;
+  if (min && !scoring::Compare(*value, ">=", *min)) return false;
   return true;
 }
 
