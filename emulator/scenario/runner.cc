@@ -27,6 +27,7 @@
 #include "emulator/scoring/truth_recorder.h"
 #include "emulator/sim/bus_hub.h"
 #include "emulator/sim/cpu_placement.h"
+#include "emulator/sim/cycle_scheduler.h"
 #include "emulator/sim/event_loop.h"
 #include "emulator/sim/run_context.h"
 
@@ -42,24 +43,44 @@ double WallSeconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
 }
 
-// One run: builds the stages, runs the phases of the event loop, scores and writes the result.
-class Run {
+// One run: builds the stages, runs the phases of the event loop (its sources order the stages:
+// emulator/sim/cycle_scheduler.h), scores and writes the result.
+class Run final : public sim::RunStages, public sim::FirmwareGate {
  public:
   Run(const Scenario& s, const RunOptions& o) : s_(s), o_(o) {}
   RunResult Execute();
 
- private:
-  class Tick;
-  class SyncProducer;
+  // sim::RunStages
+  std::int64_t step_ns() const override { return physics_->step_ns(); }
+  bool StepPhysics(std::int64_t t_end_ns, bool motion) override {
+    return physics_->Step(t_end_ns - physics_->step_ns(), motion);
+  }
+  void StepDevices(std::int64_t t_ns, bool motion) override;
+  void RecordTruth(std::int64_t t_ns, bool force) override {
+    truth_->Record(t_ns, physics_->body(), physics_->wheels(), force);
+  }
+  void AdvanceBus(std::int64_t t_ns) override { hub_->AdvanceTo(t_ns); }
+  std::int64_t bus_now_ns() const override { return hub_->now_ns(); }
+  int SendSync(std::int64_t t_ns) override;
+  void AfterMotionStep() override { Progress(false); }
 
+  // sim::FirmwareGate
+  bool lockstep() const override { return lockstep_; }
+  void Drain() override {
+    link_->Drain(0, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+  }
+  void WaitBootAnswers() override;
+  bool CycleCompleteOnBus() const override { return handshake_->CycleCompleteOnBus(); }
+  bool LatestSyncOnWire() const override { return handshake_->LatestSyncOnWire(); }
+  void WaitStatus(int cycle, std::int64_t k) override;
+  void WaitLastStatus(int cycle, std::int64_t k) override;
+
+ private:
   void Build();
   void StartFirmware();
-  // The stages of one physics step that ends at t_ns (see Tick).
-  void StepDevices(std::int64_t t_ns, bool motion);
   // Lockstep: waits until `done` (wall-clock timeout); false on timeout or failure.
   bool WaitFirmware(const std::function<bool()>& done);
   void OnFirmwareFrame(const bus::CanFrame& f);
-  void WaitStatus(int cycle, std::int64_t k);
   void StartWorker(std::int64_t steps);
   void RunPhases();
   void Progress(bool final);
@@ -86,162 +107,30 @@ class Run {
   Clock::time_point wall0_, last_progress_;
 };
 
-// The physics step ending at its instant and everything that depends on it, in this order:
-// physics, node faults, devices, truth, bus, firmware link.
-class Run::Tick final : public sim::EventSource {
- public:
-  struct Options {
-    bool motion = false;
-    bool record_truth = true;
-    bool wait_boot_answers = false;  // lockstep start-up: the firmware's reaction to each node
-    std::int64_t ticks = -1;         // ticks to run, -1: until the phase is done
-  };
-  explicit Tick(Run& run) : r_(run) {}
-  void Start(const Options& o) {
-    o_ = o;
-    fired_ = 0;
-    next_ns_ = r_.run_.now_ns + r_.physics_->step_ns();
-    physics_failed_ = false;
-  }
-  std::int64_t NextEventNs() const override {
-    return o_.ticks >= 0 && fired_ >= o_.ticks ? sim::kNever : next_ns_;
-  }
-  // In motion a cycle's steps run to its end after a failure (the next SYNC stops the run).
-  bool StopsOnFailure() const override { return !o_.motion || physics_failed_; }
-  void Fire(std::int64_t t_ns) override;
-  /// The next tick is the first of cycle `cycle` (SYNC number mod 256, the k-th of the run).
-  void OpenCycle(int cycle, std::int64_t k) {
-    cycle_ = cycle;
-    cycle_k_ = k;
-    first_of_cycle_ = true;
-  }
-  void Stop() { o_.ticks = fired_; }
-  /// The cycle whose FW_Status is awaited after the next SYNC (-1: none).
-  int pending_status_cycle = -1;
-
- private:
-  Run& r_;
-  Options o_;
-  std::int64_t fired_ = 0;
-  std::int64_t next_ns_ = 0;
-  bool physics_failed_ = false;
-  bool first_of_cycle_ = false;
-  int cycle_ = -1;
-  std::int64_t cycle_k_ = 0;
-};
-
-void Run::Tick::Fire(std::int64_t t_ns) {
-  ++fired_;
-  next_ns_ = t_ns + r_.physics_->step_ns();
-  const std::int64_t step_ns = r_.physics_->step_ns();
-  if (!r_.physics_->Step(t_ns - step_ns, o_.motion)) {
-    physics_failed_ = true;
-  } else {
-    r_.run_.now_ns = t_ns;
-    r_.StepDevices(t_ns, o_.motion);
-  }
-  const std::int64_t now = r_.run_.now_ns;
-  if (o_.record_truth) r_.truth_->Record(now, r_.physics_->body(), r_.physics_->wheels(), false);
-  r_.hub_->AdvanceTo(now);
-  if (!r_.lockstep_) {
-    r_.link_->Drain(0, [this](const bus::CanFrame& f) { r_.OnFirmwareFrame(f); });
-  } else if (o_.wait_boot_answers) {
-    const auto& awaiting = r_.handshake_->awaiting_nodes();
-    if (!awaiting.empty() && !r_.WaitFirmware([&] { return awaiting.empty(); })) {
-      r_.run_.Fail(fmt::format(
-          "timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
-          *awaiting.begin(), r_.s_.timing.timeout_s));
-    }
-  } else if (first_of_cycle_) {
-    // The firmware's answer is fixed by the frames it was given once the cycle's last
-    // sync-answer is on the wire; if one is missing, the next SYNC closes the cycle.
-    first_of_cycle_ = false;
-    if (r_.handshake_->CycleCompleteOnBus()) {
-      r_.WaitStatus(cycle_, cycle_k_);
-    } else {
-      pending_status_cycle = cycle_;
-    }
-  }
-  if (o_.motion) r_.Progress(false);
-}
-
-// SYNC at the start of each cycle k = 0..cycles; the last one only closes cycle cycles-1.
-class Run::SyncProducer final : public sim::EventSource {
- public:
-  SyncProducer(Run& run, Tick& tick, std::int64_t t0_ns, std::int64_t cycle_ns,
-               std::int64_t period_ns, std::int64_t cycles)
-      : r_(run), tick_(tick), t0_ns_(t0_ns), cycle_ns_(cycle_ns), period_ns_(period_ns),
-        cycles_(cycles) {}
-  std::int64_t NextEventNs() const override {
-    return k_ <= cycles_ ? t0_ns_ + k_ * cycle_ns_ : sim::kNever;
-  }
-  void Fire(std::int64_t t_ns) override;
-
- private:
-  // Moves the bus on (half steps, at most one period) until `done`.
-  void AdvanceBusUntil(const std::function<bool()>& done);
-  void CloseLastCycle(int want);
-
-  Run& r_;
-  Tick& tick_;
-  std::int64_t t0_ns_, cycle_ns_, period_ns_, cycles_;
-  std::int64_t k_ = 0;
-};
-
-void Run::SyncProducer::AdvanceBusUntil(const std::function<bool()>& done) {
-  const std::int64_t half_step = r_.physics_->step_ns() / 2;
-  for (const std::int64_t until = r_.run_.now_ns + period_ns_;
-       !done() && r_.hub_->now_ns() < until;) {
-    r_.hub_->AdvanceTo(std::min(until, r_.hub_->now_ns() + half_step));
-  }
-}
-
-void Run::SyncProducer::Fire(std::int64_t t_ns) {
-  const std::int64_t k = k_++;
-  sim::RunContext& run = r_.run_;
-  r_.truth_->Record(t_ns, r_.physics_->body(), r_.physics_->wheels(), true);
+int Run::SendSync(std::int64_t t_ns) {
   bus::CanFrame sync;
   sync.id = bus::canopen::kSyncCobId;
   sync.len = 0;
-  r_.hub_->EnqueueSync(sync, t_ns);
-  const int want = static_cast<int>(r_.handshake_->syncs_sent() % 256);
-  r_.estimates_->OnSync(want, run.MotionSeconds(t_ns));
-  r_.handshake_->OnSyncSent();
-  // The SYNC and the frames answering it (the readings at this instant) go out before the
-  // physics moves on.
-  r_.hub_->AdvanceTo(t_ns + r_.physics_->step_ns() / 2);
-  if (r_.lockstep_ && tick_.pending_status_cycle >= 0) {
-    // The previous cycle was incomplete on the bus: this SYNC closes it once it is on the wire
-    // (an error burst or a flood can hold it back beyond half a step).
-    AdvanceBusUntil([&] { return r_.handshake_->LatestSyncOnWire(); });
-    r_.WaitStatus(std::exchange(tick_.pending_status_cycle, -1), k - 1);
-  }
-  if (k < cycles_) {
-    tick_.OpenCycle(want, k);
-    return;
-  }
-  tick_.Stop();
-  if (run.failed()) return;
-  // The last cycle: no physics step follows, so the bus finishes its frames (at most one
-  // period) before the answer is awaited.
-  if (r_.lockstep_) AdvanceBusUntil([&] { return r_.handshake_->CycleCompleteOnBus(); });
-  CloseLastCycle(want);
+  hub_->EnqueueSync(sync, t_ns);
+  const int cycle = static_cast<int>(handshake_->syncs_sent() % 256);
+  estimates_->OnSync(cycle, run_.MotionSeconds(t_ns));
+  handshake_->OnSyncSent();
+  return cycle;
 }
 
-void Run::SyncProducer::CloseLastCycle(int want) {
-  sim::RunContext& run = r_.run_;
-  if (run.failed()) return;
-  if (!r_.lockstep_ || r_.handshake_->CycleCompleteOnBus()) {
-    if (!r_.WaitFirmware([&] { return r_.handshake_->StatusSeen(want); })) {
-      run.Fail(fmt::format("timeout: no FW_Status for the last cycle {} within {} s", cycles_,
-                           r_.s_.timing.timeout_s));
-    }
-  } else {
-    // A sync answer of the last SYNC never came (silent node, dropped frame): no later SYNC
-    // closes that cycle, so its answer is not awaited.
-    run.events.push_back(json{{"t_s", run.MotionSeconds(run.now_ns)},
-                              {"event", "last_cycle_incomplete"},
-                              {"cycle", cycles_}});
+void Run::WaitBootAnswers() {
+  const auto& awaiting = handshake_->awaiting_nodes();
+  if (!awaiting.empty() && !WaitFirmware([&] { return awaiting.empty(); })) {
+    run_.Fail(fmt::format(
+        "timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
+        *awaiting.begin(), s_.timing.timeout_s));
+  }
+}
+
+void Run::WaitLastStatus(int cycle, std::int64_t k) {
+  if (!WaitFirmware([&] { return handshake_->StatusSeen(cycle); })) {
+    run_.Fail(fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
+                          s_.timing.timeout_s));
   }
 }
 
@@ -348,12 +237,11 @@ void Run::RunPhases() {
   sim::RealtimeWait realtime_wait;
   sim::EventLoop loop(run_, lockstep_ ? static_cast<sim::WaitPolicy&>(lockstep_wait)
                                       : static_cast<sim::WaitPolicy&>(realtime_wait));
-  Tick tick(*this);
+  sim::StepSource tick(*this, *this, run_);
 
   // Boot: the nodes boot, the firmware configures and starts them.
   const std::int64_t boot_limit_ns = std::llround(10e9);
-  tick.Start({.motion = false, .record_truth = true, .wait_boot_answers = true});
-  // A run that failed before the motion still has its motion origin here (sim_time_s 0).
+  tick.Start({.motion = false, .record_truth = true, .wait_boot_answers = true, .steps = -1});
   loop.Run({"boot",
             {&tick},
             [&] {
@@ -369,11 +257,13 @@ void Run::RunPhases() {
   // Settle: the vehicle at rest on its suspension defines the start.
   tick.Start({.motion = false,
               .record_truth = false,
-              .ticks = std::llround(0.2e9) / physics_->step_ns() +
+              .wait_boot_answers = false,
+              .steps = std::llround(0.2e9) / physics_->step_ns() +
                        (std::llround(0.2e9) % physics_->step_ns() != 0 ? 1 : 0)});
   loop.Run({"settle", {&tick}, nullptr});
 
-  // Motion: SYNC every period; lockstep waits for the firmware's status of each cycle.
+  // Motion: SYNC every period; lockstep waits for the firmware's status of each cycle. A run
+  // that failed before still gets its motion origin here (sim_time_s 0 in its report).
   const std::int64_t step_ns = physics_->step_ns();
   const std::int64_t period_ns = std::llround(s_.timing.sync_period_s * 1e9);
   const std::int64_t steps_per_cycle = period_ns / step_ns;
@@ -392,8 +282,12 @@ void Run::RunPhases() {
   }
   handshake_->ExpectSyncAnswers(std::move(answers));
   if (lockstep_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
-  tick.Start({.motion = true, .record_truth = true, .ticks = cycles * steps_per_cycle});
-  SyncProducer sync(*this, tick, run_.now_ns, steps_per_cycle * step_ns, period_ns, cycles);
+  tick.Start({.motion = true,
+              .record_truth = true,
+              .wait_boot_answers = false,
+              .steps = cycles * steps_per_cycle});
+  sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns,
+                       period_ns, cycles);
   loop.Run({"motion", {&tick, &sync}, nullptr});
 }
 
