@@ -1,10 +1,11 @@
 #pragma once
-/// Runs a scenario end to end: physics at the scenario's rate (1 kHz default), CiA 406 encoder
-/// nodes and the MM5.10 yaw-rate node sampled from the ground truth, every frame timed by the
-/// CAN bus model (completion timestamps) and put on a real bus - a private userspace bus
-/// (UcanBroker in a fresh runtime directory) by default, or a SocketCAN interface - where the
-/// firmware under test runs (started from the scenario's command line, `${CAN}`, `${CONFIG}`
-/// and `${BIN}` substituted, LD_PRELOAD + WHEELHIL_UCAN_DIR set on the userspace bus).
+/// Runs a scenario end to end by wiring the run's components (docs/architecture.md): physics at
+/// the scenario's rate (1 kHz default), the scenario's devices (device registry) sampling the
+/// ground truth, every frame timed by the CAN bus model (completion timestamps) and put on a
+/// real bus - a private userspace bus (UcanBroker in a fresh runtime directory) by default, or
+/// a SocketCAN interface - where the firmware under test runs (started from the scenario's
+/// command line, `${CAN}`, `${CONFIG}` and `${BIN}` substituted, LD_PRELOAD +
+/// WHEELHIL_UCAN_DIR set on the userspace bus).
 ///
 /// Lockstep (default): the emulator is the SYNC producer; after each SYNC cycle it waits
 /// (wall-clock timeout) for the firmware's FW_Status of that cycle (wheelhil_fw.dbc, cycle
@@ -12,6 +13,7 @@
 /// reaction to every boot-up and SDO response. Frames from the firmware enter the bus model at
 /// the virtual instant they were received, so the same scenario and seed give the same can.log
 /// byte for byte. Realtime: virtual time is paced to the wall clock, nothing is waited for.
+/// The run is scored by the metric components the scenario selects (emulator/scoring).
 ///
 /// Leaves in out_dir: can.log, truth.csv, estimate.csv, truth.tum, estimate.tum (pose stream),
 /// estimate_raw.tum (pose_raw), events.jsonl, report.json, report.html, firmware.log, and the
