@@ -7,7 +7,6 @@
 
 #include <fstream>
 #include <iterator>
-#include <regex>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -64,11 +63,22 @@ inline std::vector<std::string> YamlMutations(const std::string& text) {
 
 /// Runs `load` on each mutation of `text`: it must return, or throw std::invalid_argument whose
 /// message starts with "<file>:<line>:<col>: ". Reports the first few offenders.
+/// "<file>:<line>:<col>: <something>" (no std::regex: GCC 12 warns inside it under the
+/// sanitizers).
+inline bool Located(const std::string& what, const std::string& file) {
+  if (what.rfind(file + ":", 0) != 0) return false;
+  std::size_t i = file.size() + 1;
+  for (int field = 0; field < 2; ++field) {
+    const std::size_t start = i;
+    while (i < what.size() && what[i] >= '0' && what[i] <= '9') ++i;
+    if (i == start || i >= what.size() || what[i] != ':') return false;
+    ++i;
+  }
+  return i + 1 < what.size() && what[i] == ' ';
+}
+
 template <typename Load>
 void ExpectOnlyLocatedInputErrors(const std::string& text, const std::string& file, Load&& load) {
-  const std::regex located(
-      std::regex_replace(file, std::regex(R"([.^$|()\[\]{}*+?\\])"), R"(\$&)") +
-      R"(:\d+:\d+: [\s\S]+)");
   int reported = 0;
   const std::vector<std::string> mutations = YamlMutations(text);
   for (const std::string& m : mutations) {
@@ -76,7 +86,7 @@ void ExpectOnlyLocatedInputErrors(const std::string& text, const std::string& fi
     try {
       load(m);
     } catch (const std::invalid_argument& e) {
-      if (!std::regex_match(std::string(e.what()), located)) {
+      if (!Located(e.what(), file)) {
         ADD_FAILURE() << "unlocated error: " << e.what() << "\n--- input:\n" << m;
         ++reported;
       }
