@@ -1,4 +1,4 @@
-// `wheelhil bench`'s lockstep rows over a kernel vcan (issue 9), through the real executable:
+// `wheelhil bench`'s lockstep rows over a kernel vcan, through the real executable:
 // `wheelhil bench --worker lockstep-vcan` is what the full bench runs for
 // lockstep.<paper>.vcan_rtf. With --uml (and no vcan0 on the host) it boots the user-mode-linux
 // guest of tests/vcan/uml_run.sh once and runs the three paper scenarios with the reference
