@@ -45,8 +45,6 @@ class DbcImuDevice final : public Device {
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
 
-  const DbcImuNode& node() const { return node_; }
-
  private:
   std::string name_ = "dbc_imu";
   DbcImuNode node_;

@@ -34,7 +34,6 @@ void FirmwareProcess::Start(const std::string& command,
   }
   // Also here: the group exists before the parent may signal it, whichever runs first.
   (void)::setpgid(pid_, pid_);
-  started_ = true;
   if (log_fd >= 0) ::close(log_fd);
 }
 

@@ -30,11 +30,9 @@ class FirmwareProcess {
   /// Ends the process group (see above). Idempotent.
   void Stop();
   bool running() const { return pid_ > 0; }
-  bool started() const { return started_; }
 
  private:
   pid_t pid_ = -1;
-  bool started_ = false;
   int exit_status_ = 0;
 };
 

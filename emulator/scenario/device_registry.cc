@@ -99,6 +99,7 @@ void BuildDbcImu(const DeviceBuildContext& c, Devices& out) {
   out.push_back(std::make_unique<DbcImuDevice>(dbc, dc));
 }
 
+// The device kinds, in the order their devices join the bus.
 const std::vector<std::pair<std::string, Builder>>& Builders() {
   static const std::vector<std::pair<std::string, Builder>> builders{
       {"cia406_encoder", BuildEncoders},
@@ -109,15 +110,6 @@ const std::vector<std::pair<std::string, Builder>>& Builders() {
 }
 
 }  // namespace
-
-const std::vector<std::string>& DeviceKinds() {
-  static const std::vector<std::string> kinds = [] {
-    std::vector<std::string> k;
-    for (const auto& [name, builder] : Builders()) k.push_back(name);
-    return k;
-  }();
-  return kinds;
-}
 
 std::vector<std::unique_ptr<Device>> BuildScenarioDevices(const DeviceBuildContext& context) {
   Devices devices;

@@ -26,9 +26,6 @@ struct DeviceBuildContext {
   const std::vector<physics::WheelTruth>& wheels;
 };
 
-/// The device kinds the registry knows, in the order their devices join the bus.
-const std::vector<std::string>& DeviceKinds();
-
 /// Every device of the scenario, in bus order.
 std::vector<std::unique_ptr<Device>> BuildScenarioDevices(const DeviceBuildContext& context);
 

@@ -85,7 +85,6 @@ struct EncoderDeviceSpec {
 /// A user's IMU described by its own DBC file (sensors.dbc_imu; emulator/devices/dbc_imu_device.h).
 struct DbcImuSpec {
   std::string dbc;  ///< The DBC file (absolute after loading).
-  std::string where;  ///< file:line:column of the entry, for messages.
   Eigen::Vector3d mount_m = Eigen::Vector3d::Zero();  ///< Mounting point in the body frame B.
   DbcImuConfig node;  ///< Which signal carries which quantity; counters and checksums.
   double gyro_noise_density_rad_s_sqrt_hz = 0;

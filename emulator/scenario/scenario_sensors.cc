@@ -19,7 +19,6 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
   const std::string f = "sensors.dbc_imu";
   r.CheckKeys(n, f, {"dbc", "mount_m", "channels", "messages", "gyro", "accel"});
   DbcImuSpec d;
-  d.where = r.Where(n);
   d.dbc = r.Path(r.String(n, "dbc", f, std::nullopt));
   if (const YAML::Node m = Reader::Get(n, "mount_m"); Reader::Present(m)) {
     if (!m.IsSequence() || m.size() != 3) r.Fail(m, f + ".mount_m", "must be [x, y, z] in m");

@@ -42,10 +42,8 @@ class CorrectionRatioComponent final : public MetricComponent {
     const auto corrected = streams.find("pose");
     const auto uncorrected = streams.find("pose_raw");
     if (corrected == streams.end() || uncorrected == streams.end()) return;
-    const double c =
-        ComputePoseMetrics(run.truth.poses(), corrected->second).final_position_error_m;
-    const double u =
-        ComputePoseMetrics(run.truth.poses(), uncorrected->second).final_position_error_m;
+    const double c = FinalPositionError(run.truth.poses(), corrected->second);
+    const double u = FinalPositionError(run.truth.poses(), uncorrected->second);
     metrics["correction"] = json{{"uncorrected_over_corrected", c > 0 ? u / c : 0.0},
                                  {"corrected_below_uncorrected", c < u}};
   }

@@ -46,6 +46,14 @@ double TotalRotation(const std::vector<PoseSample>& truth) {
   return r;
 }
 
+double FinalPositionError(const std::vector<PoseSample>& truth,
+                          const std::vector<PoseSample>& estimate) {
+  if (truth.empty() || estimate.empty()) return 0;
+  const PoseSample& e = estimate.back();
+  const PoseSample t = InterpolatePose(truth, e.t_s);
+  return std::hypot(e.x_m - t.x_m, e.y_m - t.y_m);
+}
+
 PoseMetrics ComputePoseMetrics(const std::vector<PoseSample>& truth,
                                const std::vector<PoseSample>& estimate) {
   PoseMetrics m;
@@ -61,7 +69,7 @@ PoseMetrics ComputePoseMetrics(const std::vector<PoseSample>& truth,
   m.ape_rmse_m = std::sqrt(sum_sq / static_cast<double>(estimate.size()));
   const PoseSample& e = estimate.back();
   const PoseSample t = InterpolatePose(truth, e.t_s);
-  m.final_position_error_m = std::hypot(e.x_m - t.x_m, e.y_m - t.y_m);
+  m.final_position_error_m = FinalPositionError(truth, estimate);
   m.final_heading_error_rad = std::abs(WrapAngle(e.theta_rad - t.theta_rad));
   return m;
 }

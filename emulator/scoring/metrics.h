@@ -41,6 +41,11 @@ double WrapAngle(double a_rad);
 /// `truth` must be sorted by time and non-empty.
 PoseSample InterpolatePose(const std::vector<PoseSample>& truth, double t_s);
 
+/// |p_est(end) - p_truth(end)| (paper 000 eq 13): the last estimate sample against the truth
+/// interpolated at its time; 0 when either is empty.
+double FinalPositionError(const std::vector<PoseSample>& truth,
+                          const std::vector<PoseSample>& estimate);
+
 /// Pose metrics of an estimate stream against the truth (both sorted by time). The estimate's
 /// samples are aligned to the truth by time (truth interpolated at each estimate time); the
 /// final errors use the last estimate sample. Empty estimate: all-zero metrics with samples 0.

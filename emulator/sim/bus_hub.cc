@@ -28,9 +28,9 @@ BusHub::BusHub(const CanBusConfig& config, std::vector<std::unique_ptr<Device>>&
     : bus_(config), devices_(devices), run_(run) {
   emulator_node_ = bus_.AddNode("emulator");
   firmware_node_ = bus_.AddNode("firmware", CanBusModel::QueueOrder::kFifo, 4096);
+  first_device_node_ = firmware_node_ + 1;
   for (std::size_t i = 0; i < devices_.size(); ++i) {
-    device_nodes_.push_back(bus_.AddNode(devices_[i]->name()));
-    device_of_node_[device_nodes_.back()] = static_cast<int>(i);
+    (void)bus_.AddNode(devices_[i]->name());
     ports_.push_back(std::make_unique<Port>(*this, i));
   }
 }
@@ -38,6 +38,13 @@ BusHub::BusHub(const CanBusConfig& config, std::vector<std::unique_ptr<Device>>&
 BusHub::~BusHub() = default;
 
 DevicePort& BusHub::port(std::size_t device) { return *ports_[device]; }
+
+int BusHub::DeviceOf(int node) const {
+  if (node >= first_device_node_ && node < first_device_node_ + static_cast<int>(devices_.size())) {
+    return node - first_device_node_;
+  }
+  return node == emulator_node_ ? -1 : -2;
+}
 
 void BusHub::OpenLog(const std::string& path, std::string interface) {
   iface_ = std::move(interface);
@@ -51,7 +58,7 @@ void BusHub::StartBackgroundLog(const cpu_set_t* cpus) {
 void BusHub::StopBackgroundLog() { background_log_.reset(); }
 
 void BusHub::SetFrameFaults(std::size_t device, std::unique_ptr<FrameFaultFilter> filter) {
-  frame_filters_[device_nodes_[device]] = std::move(filter);
+  frame_filters_[bus_node(device)] = std::move(filter);
 }
 
 void BusHub::SetBusFaults(std::vector<BusFault> faults, FaultEventLog* log) {
@@ -73,7 +80,7 @@ bool BusHub::Enqueue(int bus_node, const bus::CanFrame& f, std::int64_t ready_ns
 
 void BusHub::SubmitFromDevice(std::size_t device, std::vector<NodeFrame> frames,
                               bool from_poll) {
-  const int node = device_nodes_[device];
+  const int node = bus_node(device);
   const auto filter = frame_filters_.find(node);
   // Nothing to send and no frame fault that may release a delayed frame: nothing to do.
   if (frames.empty() && filter == frame_filters_.end()) return;
@@ -88,7 +95,7 @@ void BusHub::SubmitFromDevice(std::size_t device, std::vector<NodeFrame> frames,
 
 void BusHub::ReleaseDelayed() {
   for (auto& [node, filter] : frame_filters_) {
-    SubmitFromDevice(static_cast<std::size_t>(device_of_node_.at(node)), {}, true);
+    SubmitFromDevice(static_cast<std::size_t>(DeviceOf(node)), {}, true);
   }
 }
 
@@ -119,10 +126,7 @@ void BusHub::OnWire(const WireFrame& w) {
     (void)log_->Write(w.complete_ns, iface_, w.frame);
   }
   if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)
-  const auto sender = device_of_node_.find(w.node);
-  const int device = sender != device_of_node_.end() ? sender->second
-                     : w.node == emulator_node_       ? -1
-                                                      : -2;
+  const int device = DeviceOf(w.node);
   if (w.node != firmware_node_) {
     if (firmware_send_ && !firmware_send_(w.frame)) ++enqueue_failures_;
     if (observer_) observer_->OnEmulatorFrame(w, device);

@@ -78,9 +78,7 @@ class BusHub {
 
   std::int64_t now_ns() const { return bus_.now_ns(); }
   DevicePort& port(std::size_t device);
-  int bus_node(std::size_t device) const { return device_nodes_[device]; }
-  int emulator_node() const { return emulator_node_; }
-  int firmware_node() const { return firmware_node_; }
+  int bus_node(std::size_t device) const { return first_device_node_ + static_cast<int>(device); }
   const FaultyCanBus* faulty_bus() const { return faulty_bus_.get(); }
   const std::map<int, std::unique_ptr<FrameFaultFilter>>& frame_filters() const {
     return frame_filters_;
@@ -88,10 +86,12 @@ class BusHub {
 
   /// report.json's "bus" block.
   nlohmann::json Metrics() const;
-  void CountSilenced(std::size_t frames) { silenced_ += frames; }
 
  private:
   class Port;
+  // The device that owns bus node `node`, -1 for the SYNC producer, -2 for anyone else (the
+  // firmware, injected traffic).
+  int DeviceOf(int node) const;
   bool Enqueue(int bus_node, const bus::CanFrame& f, std::int64_t ready_ns);
   void OnWire(const WireFrame& w);
 
@@ -99,8 +99,7 @@ class BusHub {
   std::vector<std::unique_ptr<Device>>& devices_;
   RunContext& run_;
   int emulator_node_ = 0, firmware_node_ = 0;
-  std::vector<int> device_nodes_;
-  std::map<int, int> device_of_node_;
+  int first_device_node_ = 0;  // devices are the nodes first_device_node_ + index
   std::vector<std::unique_ptr<Port>> ports_;
   std::unique_ptr<FaultyCanBus> faulty_bus_;
   std::map<int, std::unique_ptr<FrameFaultFilter>> frame_filters_;  // by bus node

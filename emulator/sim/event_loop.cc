@@ -12,9 +12,7 @@ void RealtimeWait::StartPhase(std::int64_t t_ns) {
 }
 
 void RealtimeWait::WaitFor(std::int64_t t_ns) {
-  const std::int64_t deadline = anchor_wall_ns_ + (t_ns - anchor_t_ns_);
-  (void)realtime::SleepUntilNs(deadline);
-  last_lateness_ns_ = realtime::MonotonicNowNs() - deadline;
+  (void)realtime::SleepUntilNs(anchor_wall_ns_ + (t_ns - anchor_t_ns_));
 }
 
 std::uint64_t EventLoop::Run(const Phase& phase) {

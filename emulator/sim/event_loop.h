@@ -56,13 +56,10 @@ class RealtimeWait final : public WaitPolicy {
  public:
   void StartPhase(std::int64_t t_ns) override;
   void WaitFor(std::int64_t t_ns) override;
-  /// How late the latest instant was fired (ns; negative: early, never happens).
-  std::int64_t last_lateness_ns() const { return last_lateness_ns_; }
 
  private:
   std::int64_t anchor_t_ns_ = 0;
   std::int64_t anchor_wall_ns_ = 0;
-  std::int64_t last_lateness_ns_ = 0;
 };
 
 struct Phase {
