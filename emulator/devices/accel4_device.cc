@@ -71,16 +71,7 @@ void Accel4Device::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort&
       port.Fail("internal: accel4 sample missing from the physics worker");
       break;
     }
-    bool dropped = false;
-    for (std::size_t c = 0; c < 4; ++c) {
-      if (!faults_[c]) continue;
-      const auto v = faults_[c]->Apply(a[c], ts);
-      if (v) {
-        a[c] = *v;
-      } else {
-        dropped = true;
-      }
-    }
+    const bool dropped = !ApplyToChannels(faults_, a, ts);
     std::vector<NodeFrame> frames(1);
     frames[0].due_ns = ts;
     (void)node_.EncodeSample(a, frames[0].frame);  // advances (and counts) even when dropped

@@ -75,16 +75,7 @@ void DbcImuDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort&
     for (std::size_t c = 0; c < 3; ++c) v[c] = gyros_[c].Sample(k.omega_WB_B);
     const std::vector<double>& a = accel_->Sample(k);
     for (std::size_t c = 0; c < 3; ++c) v[3 + c] = a[c];
-    bool dropped = false;
-    for (std::size_t c = 0; c < 6; ++c) {
-      if (!faults_[c]) continue;
-      const auto x = faults_[c]->Apply(v[c], ts);
-      if (x) {
-        v[c] = *x;
-      } else {
-        dropped = true;
-      }
-    }
+    const bool dropped = !ApplyToChannels(faults_, v, ts);
     ImuSample sample;
     sample.rate_rad_s = {v[0], v[1], v[2]};
     sample.accel_m_s2 = {v[3], v[4], v[5]};

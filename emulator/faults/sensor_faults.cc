@@ -161,4 +161,19 @@ std::optional<std::uint32_t> SensorFaultInjector::ApplyCounts(std::uint32_t coun
   return static_cast<std::uint32_t>(static_cast<std::uint64_t>(v) & mask);
 }
 
+bool ApplyToChannels(std::span<const std::unique_ptr<SensorFaultInjector>> faults,
+                     std::span<double> samples, std::int64_t t_ns) {
+  bool kept = true;
+  for (std::size_t c = 0; c < faults.size() && c < samples.size(); ++c) {
+    if (!faults[c]) continue;
+    const auto v = faults[c]->Apply(samples[c], t_ns);
+    if (v) {
+      samples[c] = *v;
+    } else {
+      kept = false;
+    }
+  }
+  return kept;
+}
+
 }  // namespace wheelhil::emulator

@@ -18,8 +18,10 @@
 /// Thread-compatible.
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <random>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -86,5 +88,12 @@ class SensorFaultInjector {
   std::int64_t missed_total_ = 0;
   FaultEventLog* log_ = nullptr;
 };
+
+/// The sensor faults of a multi-channel device at one sample instant: channel c's injector
+/// (null: none) on samples[c]. Every injector is applied, also after a drop, so that each
+/// channel's stream advances the same way whatever the others do. False when a sample was
+/// dropped (the device then sends no frame for that instant).
+bool ApplyToChannels(std::span<const std::unique_ptr<SensorFaultInjector>> faults,
+                     std::span<double> samples, std::int64_t t_ns);
 
 }  // namespace wheelhil::emulator

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -589,6 +590,24 @@ TEST(SensorFaults, MissedCountsAreLostForGoodAndWrap) {
   // Bias on counts, wrapping below zero of a 16-bit register.
   SensorFaultInjector bias("encoder2", {{SensorFaultKind::kBiasStep, {0}, -3.0}}, 0.0, 1);
   EXPECT_EQ(*bias.ApplyCounts(1, 0, 16), 0xFFFEu);
+}
+
+TEST(SensorFaults, ChannelsAreFaultedTogetherAndADropDropsTheSample) {
+  std::array<std::unique_ptr<SensorFaultInjector>, 3> faults;
+  faults[0] = std::make_unique<SensorFaultInjector>(
+      "a", std::vector<SensorFault>{{SensorFaultKind::kBiasStep, {0, 10}, -1.0},
+                                    {SensorFaultKind::kDropout, {5, 10}, 0.0}},
+      0.0, 1);
+  faults[2] = std::make_unique<SensorFaultInjector>(
+      "c", std::vector<SensorFault>{{SensorFaultKind::kBiasStep, {0}, 0.5}}, 0.0, 2);
+  std::array<double, 3> v{1.0, 2.0, 3.0};
+  EXPECT_TRUE(ApplyToChannels(faults, v, 0));
+  EXPECT_THAT(v, ::testing::ElementsAre(0.0, 2.0, 3.5));
+  // Channel a drops: the sample is lost, and the channels after it are still faulted.
+  v = {1.0, 2.0, 3.0};
+  EXPECT_FALSE(ApplyToChannels(faults, v, 6));
+  EXPECT_DOUBLE_EQ(v[1], 2.0);
+  EXPECT_DOUBLE_EQ(v[2], 3.5);
 }
 
 TEST(SensorFaults, LoadErrorsNameTheField) {
