@@ -83,6 +83,13 @@ TEST(ScenarioLoader, DbcImuIsReadAndCheckedAgainstItsDbc) {
   ASSERT_EQ(s.sensors.dbc_imu->node.message_options.size(), 1u);
   EXPECT_EQ(s.sensors.dbc_imu->node.message_options[0].checksum, ChecksumKind::kCrc8SaeJ1850);
   EXPECT_DOUBLE_EQ(s.sensors.dbc_imu->gyro_noise_density_rad_s_sqrt_hz, 0.001);
+  // A DBC file that is not there: named at its key.
+  std::string missing = DbcImu("IMU_RateZ");
+  missing.replace(missing.find("user_imu.dbc"), 12, "no_such.dbc");
+  EXPECT_THAT([&] { (void)ParseScenario(Minimal(missing), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("inline.yaml:11:10: sensors.dbc_imu.dbc:"),
+                        HasSubstr("no_such.dbc:0: cannot open DBC file"))));
   // A signal the DBC does not have: the entry and the node's own reason.
   EXPECT_THAT([] { (void)ParseScenario(Minimal(DbcImu("IMU_Yaw")), kFile); },
               ThrowsMessage<std::invalid_argument>(
