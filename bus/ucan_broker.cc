@@ -22,6 +22,7 @@
 #include <cerrno>
 #include <condition_variable>
 #include <cstring>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -310,6 +311,8 @@ struct UcanBroker::Impl {
   Fd wake_fd;
   Fd spare_fd;  // released to refuse a connection when the process is out of fds
   std::uint64_t refused_connections = 0;
+  std::uint64_t activity = 0;  // events handled and frames routed (see UcanBroker::activity)
+  std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
   mutable std::mutex mu;
   std::condition_variable stopped_cv;
@@ -853,7 +856,9 @@ struct UcanBroker::Impl {
     const std::uint32_t can_id = f.can_id;
     const std::uint8_t* frame = f.frame.data();
     const std::size_t frame_len = f.frame_len;
-    const std::int64_t ts = std::max(RealtimeNs(), bus->last_ts_ns);
+    ++activity;
+    const std::int64_t ts =
+        std::max(receive_clock ? receive_clock() : RealtimeNs(), bus->last_ts_ns);
     bus->last_ts_ns = ts;
     ++bus->frames;
     const bool is_fd = frame_len == ucan::kCanFdMtu;
@@ -1027,6 +1032,7 @@ struct UcanBroker::Impl {
     if (n < 0) n = 0;
     for (int i = 0; i < n; ++i) {
       const std::uint64_t tag = events[i].data.u64;
+      if (tag != kWakeTag) ++activity;
       if (tag == kListenTag) {
         AcceptAll();
         continue;
@@ -1199,6 +1205,16 @@ bool UcanBroker::Pump(int timeout_ms) {
   if (impl_->Pass(impl_->pump_events, timeout_ms)) return true;
   impl_->Finish();
   return false;
+}
+
+std::uint64_t UcanBroker::activity() const {
+  std::lock_guard lk(impl_->mu);
+  return impl_->activity;
+}
+
+void UcanBroker::SetReceiveClock(std::function<std::int64_t()> clock_ns) {
+  std::lock_guard lk(impl_->mu);
+  impl_->receive_clock = std::move(clock_ns);
 }
 
 const std::string& UcanBroker::runtime_dir() const noexcept { return impl_->dir; }

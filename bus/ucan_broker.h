@@ -19,6 +19,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <system_error>
@@ -92,6 +93,13 @@ class UcanBroker {
   bool SendLocal(int port, const CanFrame& frame);
   /// Takes the next frame routed to the port; false when none is there.
   bool ReceiveLocal(int port, CanFrame* frame);
+
+  /// Grows with every connection event handled and every frame routed: equal before and after
+  /// a Pump() means that pass moved nothing.
+  std::uint64_t activity() const;
+  /// The receive timestamps' clock (ns; default CLOCK_REALTIME), e.g. a run's virtual clock.
+  /// Set it before traffic, or from the thread that pumps.
+  void SetReceiveClock(std::function<std::int64_t()> clock_ns);
 
   const std::string& runtime_dir() const noexcept;
   std::string socket_path() const;

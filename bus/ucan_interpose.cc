@@ -105,6 +105,7 @@ REAL_FN(sendmmsg, int, (int, mmsghdr*, unsigned, int))
 REAL_FN(recvmmsg, int, (int, mmsghdr*, unsigned, int, timespec*))
 REAL_FN(if_nametoindex, unsigned, (const char*))
 REAL_FN(if_indextoname, char*, (unsigned, char*))
+REAL_FN(clock_gettime, int, (clockid_t, timespec*))
 
 // ---- per-fd state ----
 
@@ -568,9 +569,18 @@ void LockRing(ucan::RingIndex& r) {
   if (pthread_mutex_lock(&r.lock) == EOWNERDEAD) pthread_mutex_consistent(&r.lock);
 }
 
+/// The program's CLOCK_MONOTONIC (virtual under libwheelhil_vtime.so): SO_RCVTIMEO deadlines.
 std::int64_t MonotonicNow() {
   timespec now{};
   ::clock_gettime(CLOCK_MONOTONIC, &now);
+  return static_cast<std::int64_t>(now.tv_sec) * 1000000000 + now.tv_nsec;
+}
+
+/// The host's CLOCK_MONOTONIC, whatever the program's clock is: TxStamps order frames against
+/// the broker's own clock (libc's clock_gettime, past any interposer loaded before this one).
+std::int64_t StampNow() {
+  timespec now{};
+  real_clock_gettime()(CLOCK_MONOTONIC, &now);
   return static_cast<std::int64_t>(now.tv_sec) * 1000000000 + now.tv_nsec;
 }
 
@@ -586,7 +596,7 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
     return Fail(ENETDOWN);
   }
   ucan::TxStamp stamp;
-  stamp.monotonic_ns = MonotonicNow();
+  stamp.monotonic_ns = StampNow();
   std::memcpy(msg + frame_len, &stamp, sizeof(stamp));
   const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
   if (tail - r.head.load(std::memory_order_acquire) >= h->slots) {
@@ -722,10 +732,8 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   if (v.rings != nullptr) return RingSend(fd, v.rings->header, buf, total, len, flags);
   // Stamped last, right before the send: a write that returned before this one began has a
   // smaller stamp (see ucan::TxStamp).
-  timespec now{};
-  ::clock_gettime(CLOCK_MONOTONIC, &now);
   ucan::TxStamp stamp;
-  stamp.monotonic_ns = static_cast<std::int64_t>(now.tv_sec) * 1000000000 + now.tv_nsec;
+  stamp.monotonic_ns = StampNow();
   std::memcpy(buf + total, &stamp, sizeof(stamp));
   const ssize_t n = real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
   if (n < 0) {

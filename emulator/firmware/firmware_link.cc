@@ -122,6 +122,7 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
 }
 
 bool FirmwareLink::Send(const bus::CanFrame& frame) {
+  firmware_blocked_ = false;
   if (pumped_) {
     const bool ok = broker_->SendLocal(local_port_, frame);
     // A pumped broker moves nothing on its own: hand the firmware what piled up between two
@@ -143,6 +144,87 @@ void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
   while (!can_->Receive(rx, wait)) {
     on_frame(rx.frame);
     wait = 0;
+  }
+}
+
+bool FirmwareLink::FirmwareConnected() const {
+  if (!broker_) return true;
+  for (const auto& st : broker_->Stats()) {
+    if (st.name == iface_ && st.clients >= 2) return true;
+  }
+  return false;
+}
+
+void FirmwareLink::KeepAlive(VirtualClock& clock) {
+  clock.WakeDue();
+  if (!broker_->Pump(0)) return;
+  bus::CanFrame f;
+  while (broker_->ReceiveLocal(local_port_, &f)) {
+  }
+  clock.Blocked();
+  clock.WaitForChange(1000);
+}
+
+void FirmwareLink::UseReceiveClock(const VirtualClock& clock) {
+  if (!broker_) return;
+  broker_->SetReceiveClock([&clock] {
+    return VirtualClock::kRealtimeAtStartNs + clock.now_ns();
+  });
+}
+
+bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess& process,
+                          const FrameFn& on_frame) {
+  // Blocked at the end of the last settle, nothing sent to it since and no deadline reached:
+  // nothing can have woken it.
+  if (clock.WakeDue() == 0 && firmware_blocked_) return true;
+  firmware_blocked_ = false;
+  const auto t0 = Clock::now();
+  bool reported = false;
+  auto pass = [&] {
+    const std::uint64_t before = broker_->activity();
+    Pump(0);
+    bus::CanFrame f;
+    while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
+    return broker_->activity() != before;
+  };
+  for (;;) {
+    const bool moved = pass();
+    if (run_.failed()) return false;
+    // A frame written right before its writer blocked is routed by one more pass.
+    if (!moved && clock.Blocked() && !pass()) {
+      if (process.running() && process.Exited()) {
+        run_.Fail("the firmware exited during the run (see firmware.log)");
+        return false;
+      }
+      firmware_blocked_ = true;
+      return true;
+    }
+    if (moved) continue;
+    const double wall = WallSeconds(t0);
+    if (wall > 1.0 && !reported) {
+      reported = true;
+      if (process.running() && process.Exited()) {
+        run_.Fail("the firmware exited during the run (see firmware.log)");
+        return false;
+      }
+    }
+    if (wall > timeout_s) {
+      std::string who;
+      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+      if (const pid_t p = clock.UnregisteredProcess(); who.empty() && p != 0) {
+        who = fmt::format("process {} never loaded libwheelhil_vtime.so (a static binary, or "
+                          "LD_PRELOAD cleared: see docs/virtual-time.md)",
+                          p);
+      }
+      run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                                           {"event", "firmware_not_blocking"},
+                                           {"threads", who}});
+      run_.Fail(fmt::format("the firmware did not block within {} s of wall time, so virtual "
+                            "time could not go on: {}",
+                            timeout_s, who.empty() ? "no thread seen running" : who));
+      return false;
+    }
+    clock.WaitForChange(200);
   }
 }
 

@@ -23,6 +23,7 @@
 #include "bus/socketcan_transport.h"
 #include "bus/ucan_broker.h"
 #include "emulator/firmware/firmware_process.h"
+#include "emulator/firmware/virtual_clock.h"
 #include "emulator/sim/run_context.h"
 
 namespace wheelhil::emulator::firmware {
@@ -54,6 +55,19 @@ class FirmwareLink {
                const FrameFn& on_frame);
   /// Real time: hands over what the firmware sent so far, waiting at most timeout_ms for it.
   void Drain(int timeout_ms, const FrameFn& on_frame);
+  /// Virtual time (pumped bus): ends the firmware's waits due at the clock's time, then routes
+  /// the bus and hands over the firmware's frames until every firmware thread is blocked and
+  /// a last pass moves nothing. False (the reason in the RunContext) when the firmware exited
+  /// or did not block within timeout_s of wall time (its running threads are named).
+  bool Settle(VirtualClock& clock, double timeout_s, FirmwareProcess& process,
+              const FrameFn& on_frame);
+  /// Virtual time, after the run: ends the waits due, routes the bus (the firmware's frames are
+  /// dropped) and waits up to 1 ms for the firmware to change.
+  void KeepAlive(VirtualClock& clock);
+  /// Virtual time: the frames' receive stamps are the clock's CLOCK_REALTIME.
+  void UseReceiveClock(const VirtualClock& clock);
+  /// The firmware has a socket bound on the private bus.
+  bool FirmwareConnected() const;
   /// Closes the transport and the private bus (its runtime directory goes with it).
   void Close();
 
@@ -70,6 +84,7 @@ class FirmwareLink {
   static constexpr int kMaxUnpumpedFrames = 32;
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
+  bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
   std::chrono::steady_clock::time_point last_exit_check_{};
 };
 

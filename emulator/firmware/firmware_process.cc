@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <functional>
 #include <cstdlib>
 #include <stdexcept>
 #include <thread>
@@ -50,13 +51,18 @@ std::optional<int> FirmwareProcess::Exited() {
   return std::nullopt;
 }
 
-void FirmwareProcess::Stop() {
+void FirmwareProcess::Stop(const std::function<void()>& while_waiting) {
   if (pid_ <= 0) return;
   const pid_t group = pid_;
   (void)::kill(-group, SIGTERM);
-  for (int i = 0; i < 200; ++i) {
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(2)) {
     if (Exited()) return;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (while_waiting) {
+      while_waiting();
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
   }
   (void)::kill(-group, SIGKILL);
   int status = 0;

@@ -7,6 +7,7 @@
 
 #include <sys/types.h>
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <utility>
@@ -27,9 +28,12 @@ class FirmwareProcess {
              const std::string& log_path);
   /// The exit status once it has exited (128 + signal for a signal), else nullopt.
   std::optional<int> Exited();
-  /// Ends the process group (see above). Idempotent.
-  void Stop();
+  /// Ends the process group (see above). Idempotent. `while_waiting` (each call short) runs
+  /// in the grace period instead of a sleep: a firmware on the virtual clock needs its time to
+  /// go on to see its own shutdown through.
+  void Stop(const std::function<void()>& while_waiting = nullptr);
   bool running() const { return pid_ > 0; }
+  pid_t pid() const { return pid_; }
 
  private:
   pid_t pid_ = -1;

@@ -41,6 +41,11 @@ std::string DerivedWheelhilFwConfig(const std::string& config_path,
       cfg["dbc_dir"] = (fs::path(config_path).parent_path() / p).lexically_normal().string();
     }
   }
+  if (!run.set_sync) {
+    YAML::Emitter e;
+    e << cfg;
+    return std::string("# Derived by wheelhil run from ") + config_path + "\n" + e.c_str() + "\n";
+  }
   cfg["sync"]["produce"] = false;
   cfg["sync"]["period_s"] = run.sync_period_s;
   // A cycle closes as soon as its frames are in; the deadline only matters for lost frames. In

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -15,6 +16,7 @@
 #include "emulator/firmware/firmware_link.h"
 #include "emulator/firmware/firmware_process.h"
 #include "emulator/firmware/lockstep_handshake.h"
+#include "emulator/firmware/virtual_clock.h"
 #include "emulator/firmware/wheelhil_fw_config.h"
 #include "emulator/scenario/device_registry.h"
 #include "emulator/scenario/fault_plan.h"
@@ -43,6 +45,19 @@ double WallSeconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
 }
 
+// libwheelhil_vtime.so: $WHEELHIL_VTIME_LIB, else next to the bus library the child preloads.
+std::string VtimeLibrary(const std::vector<std::pair<std::string, std::string>>& env) {
+  if (const char* lib = std::getenv("WHEELHIL_VTIME_LIB"); lib != nullptr && lib[0] != '\0') {
+    return lib;
+  }
+  for (const auto& [key, value] : env) {
+    if (key != "LD_PRELOAD") continue;
+    const std::string first = value.substr(0, value.find(':'));
+    return fs::path(first).parent_path().append("libwheelhil_vtime.so").string();
+  }
+  return "libwheelhil_vtime.so";
+}
+
 // One run: builds the stages, runs the phases of the event loop (its sources order the stages:
 // emulator/sim/cycle_scheduler.h), scores and writes the result.
 class Run final : public sim::RunStages, public sim::FirmwareGate {
@@ -64,10 +79,15 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   int SendSync(std::int64_t t_ns) override;
   void AfterMotionStep() override { Progress(false); }
 
-  // sim::FirmwareGate
-  bool lockstep() const override { return lockstep_; }
+  // sim::FirmwareGate. On the virtual clock the firmware is not waited for by handshake:
+  // wherever real time would take what it sent, the run lets it run until it blocks.
+  bool lockstep() const override { return lockstep_ && !virtual_time_; }
   void Drain() override {
-    link_->Drain(0, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+    if (virtual_time_) {
+      SettleFirmware();
+    } else {
+      link_->Drain(0, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+    }
   }
   void WaitBootAnswers() override;
   bool CycleCompleteOnBus() const override { return handshake_->CycleCompleteOnBus(); }
@@ -78,6 +98,11 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
  private:
   void Build();
   void StartFirmware();
+  // Virtual clock: the firmware runs at the bus's instant until every thread of it is blocked.
+  void SettleFirmware();
+  // Virtual clock: runs the firmware alone (its clock moving to its own deadlines) until it has
+  // opened the bus.
+  void StartFirmwareOnVirtualClock();
   // Lockstep: waits until `done` (wall-clock timeout); false on timeout or failure.
   bool WaitFirmware(const std::function<bool()>& done);
   void OnFirmwareFrame(const bus::CanFrame& f);
@@ -90,6 +115,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   const RunOptions& o_;
   std::uint64_t seed_ = 1;
   bool lockstep_ = true;
+  bool virtual_time_ = false;
   std::string out_;
   sim::RunContext run_;
   sim::CpuPlacement cpus_;
@@ -99,6 +125,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   std::unique_ptr<PhysicsStage> physics_;
   std::unique_ptr<sim::BusHub> hub_;
   std::unique_ptr<firmware::FirmwareLink> link_;
+  std::unique_ptr<firmware::VirtualClock> clock_;
   firmware::FirmwareProcess firmware_;
   std::unique_ptr<firmware::LockstepHandshake> handshake_;
   std::unique_ptr<scoring::EstimateDecoder> estimates_;
@@ -128,6 +155,16 @@ void Run::WaitBootAnswers() {
 }
 
 void Run::WaitLastStatus(int cycle, std::int64_t k) {
+  if (virtual_time_) {
+    // No answer is awaited: the firmware gets the last cycle's frames (at most one period of
+    // bus) and runs until it blocks.
+    const std::int64_t until = hub_->now_ns() + std::llround(s_.timing.sync_period_s * 1e9);
+    while (!run_.failed() && hub_->now_ns() < until) {
+      hub_->AdvanceTo(std::min(until, hub_->now_ns() + physics_->step_ns() / 2));
+      SettleFirmware();
+    }
+    return;
+  }
   if (!WaitFirmware([&] { return handshake_->StatusSeen(cycle); })) {
     run_.Fail(fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
                           s_.timing.timeout_s));
@@ -152,6 +189,12 @@ void Run::StepDevices(std::int64_t t_ns, bool motion) {
 void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
+  if (s_.timing.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
+    // The firmware is the SYNC producer: its SYNCs number the cycles.
+    estimates_->OnSync(static_cast<int>(handshake_->syncs_sent() % 256),
+                       run_.MotionSeconds(hub_->now_ns()));
+    handshake_->OnSyncSent();
+  }
   handshake_->OnFirmwareFrame(f);
   estimates_->OnFrame(f);
 }
@@ -168,6 +211,30 @@ void Run::WaitStatus(int cycle, std::int64_t k) {
   }
 }
 
+void Run::SettleFirmware() {
+  if (run_.failed() || !firmware_.running()) return;
+  clock_->SetNow(hub_->now_ns());
+  link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
+                [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+}
+
+void Run::StartFirmwareOnVirtualClock() {
+  const std::int64_t limit_ns = std::llround(10e9);
+  for (;;) {
+    SettleFirmware();
+    if (run_.failed() || link_->FirmwareConnected()) return;
+    const std::int64_t next = clock_->NextDeadlineNs();
+    if (next == sim::kNever || next > limit_ns) {
+      run_.Fail(fmt::format("the firmware did not open {} within 10 s of virtual time (it {})",
+                            link_->interface(),
+                            next == sim::kNever ? "blocked with no deadline" : "kept sleeping"));
+      return;
+    }
+    run_.now_ns = next;
+    hub_->AdvanceTo(next);
+  }
+}
+
 void Run::Build() {
   physics_ = std::make_unique<PhysicsStage>(s_, seed_, run_);
   devices_ = BuildScenarioDevices(
@@ -178,6 +245,16 @@ void Run::Build() {
   bc.bitrate_bps = s_.sensors.bitrate_bps;
   hub_ = std::make_unique<sim::BusHub>(bc, devices_, run_);
   link_ = std::make_unique<firmware::FirmwareLink>(o_.can_iface, lockstep_, run_);
+  if (virtual_time_) {
+    if (!link_->private_bus()) {
+      throw std::invalid_argument(fmt::format(
+          "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
+          "({}) the firmware's time is the host's (use --realtime, or no --can)",
+          s_.source_path, o_.can_iface));
+    }
+    clock_ = std::make_unique<firmware::VirtualClock>(link_->runtime_dir());
+    link_->UseReceiveClock(*clock_);
+  }
   hub_->OpenLog(out_ + "/can.log", link_->interface());
   hub_->SetFirmwareSend([this](const bus::CanFrame& f) { return link_->Send(f); });
   handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
@@ -206,7 +283,8 @@ void Run::StartFirmware() {
     const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
     scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(
                                      s_.firmware.config, s_.firmware.overrides_yaml,
-                                     {s_.timing.sync_period_s, lockstep_}));
+                                     {s_.timing.sync_period_s, lockstep_ && !virtual_time_,
+                                      !s_.timing.firmware_produces_sync}));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",
@@ -214,8 +292,30 @@ void Run::StartFirmware() {
   std::vector<std::pair<std::string, std::string>> env;
   if (link_->private_bus() && o_.ucan_child_env) env = o_.ucan_child_env(link_->runtime_dir());
   env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
+  if (virtual_time_) {
+    // The clock's library goes first: the bus library's own waits are then virtual too.
+    const std::string lib = VtimeLibrary(env);
+    if (!fs::exists(lib)) {
+      throw std::invalid_argument(fmt::format(
+          "timing.clock: virtual: {} not found (build target wheelhil_vtime)", lib));
+    }
+    for (auto& [key, value] : env) {
+      if (key == "LD_PRELOAD") value = lib + ":" + value;
+    }
+    for (auto& kv : clock_->ChildEnvironment(lib)) env.push_back(kv);
+    if (const std::string why_not = firmware::WhyNotVirtualClock(cmd); !why_not.empty()) {
+      throw std::invalid_argument(fmt::format("{}: timing.clock: virtual: {}", s_.source_path,
+                                              why_not));
+    }
+    clock_->ExpectFirstProcess();
+  }
   link_->BeforeFirmwareStarts();
   firmware_.Start(cmd, env, out_ + "/firmware.log");
+  if (virtual_time_) {
+    clock_->SetFirstProcessPid(firmware_.pid());
+    StartFirmwareOnVirtualClock();
+    return;
+  }
   if (!link_->WaitForConnection(firmware_, s_.timing.timeout_s, why)) run_.Fail(why);
 }
 
@@ -238,12 +338,21 @@ void Run::RunPhases() {
   sim::EventLoop loop(run_, lockstep_ ? static_cast<sim::WaitPolicy&>(lockstep_wait)
                                       : static_cast<sim::WaitPolicy&>(realtime_wait));
   sim::StepSource tick(*this, *this, run_);
+  // On the virtual clock the firmware's own deadlines are instants of every phase.
+  sim::FirmwareDeadlineSource firmware_deadlines(*this, *this, [this] {
+    return clock_ ? clock_->NextDeadlineNs() : sim::kNever;
+  });
+  auto sources = [&](std::vector<sim::EventSource*> v) {
+    if (virtual_time_) v.push_back(&firmware_deadlines);
+    return v;
+  };
+  auto steps_done = [&] { return tick.NextEventNs() == sim::kNever; };
 
   // Boot: the nodes boot, the firmware configures and starts them.
   const std::int64_t boot_limit_ns = std::llround(10e9);
   tick.Start({.motion = false, .record_truth = true, .wait_boot_answers = true, .steps = -1});
   loop.Run({"boot",
-            {&tick},
+            sources({&tick}),
             [&] {
               if (run_.now_ns > boot_limit_ns) {
                 run_.Fail("the encoder nodes were not started (NMT start) within 10 s of "
@@ -260,7 +369,7 @@ void Run::RunPhases() {
               .wait_boot_answers = false,
               .steps = std::llround(0.2e9) / physics_->step_ns() +
                        (std::llround(0.2e9) % physics_->step_ns() != 0 ? 1 : 0)});
-  loop.Run({"settle", {&tick}, nullptr});
+  loop.Run({"settle", sources({&tick}), steps_done});
 
   // Motion: SYNC every period; lockstep waits for the firmware's status of each cycle. A run
   // that failed before still gets its motion origin here (sim_time_s 0 in its report).
@@ -281,14 +390,19 @@ void Run::RunPhases() {
     }
   }
   handshake_->ExpectSyncAnswers(std::move(answers));
-  if (lockstep_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
+  if (lockstep_ && !virtual_time_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
   tick.Start({.motion = true,
               .record_truth = true,
               .wait_boot_answers = false,
               .steps = cycles * steps_per_cycle});
   sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns,
                        period_ns, cycles);
-  loop.Run({"motion", {&tick, &sync}, nullptr});
+  if (s_.timing.firmware_produces_sync) {
+    loop.Run({"motion", sources({&tick}), steps_done});
+  } else {
+    loop.Run({"motion", sources({&tick, &sync}),
+              [&] { return steps_done() && sync.NextEventNs() == sim::kNever; }});
+  }
 }
 
 void Run::Progress(bool final) {
@@ -339,7 +453,8 @@ RunResult Run::Execute() {
         fmt::format("no DBC files in '{}' (set WHEELHIL_DBC_DIR)", o_.dbc_dir));
   }
   lockstep_ = s_.timing.lockstep && !o_.realtime;
-  if (lockstep_) cpus_.ConfineToOneCpu(o_.cpu);
+  virtual_time_ = lockstep_ && s_.timing.virtual_clock && !s_.firmware.command.empty();
+  if (lockstep_ && !virtual_time_) cpus_.ConfineToOneCpu(o_.cpu);
   wall0_ = Clock::now();
   last_progress_ = wall0_;
   Build();
@@ -356,7 +471,17 @@ RunResult Run::Execute() {
   hub_->DrainToLog();
   const double wall_s = WallSeconds(wall0_);
   faults_->FlushEvents(run_);
-  firmware_.Stop();
+  if (virtual_time_) {
+    // The run is recorded; the firmware's clock goes on (deadline to deadline) until it exits.
+    firmware_.Stop([this] {
+      if (const std::int64_t next = clock_->NextDeadlineNs(); next != sim::kNever) {
+        clock_->SetNow(next);
+      }
+      link_->KeepAlive(*clock_);
+    });
+  } else {
+    firmware_.Stop();
+  }
   hub_->CloseLog();
   if (run_.failed()) {
     run_.events.push_back(json{{"t_s", run_.MotionSeconds(run_.now_ns)},

@@ -282,7 +282,8 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   TimingSpec t;
   t.duration_s = motion_s;
   if (!n.IsDefined()) return t;
-  r.CheckKeys(n, "timing", {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s"});
+  r.CheckKeys(n, "timing", {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s",
+                            "clock", "sync_producer"});
   const std::string mode = r.String(n, "mode", "timing", std::string("lockstep"));
   if (mode == "lockstep") {
     t.lockstep = true;
@@ -300,6 +301,24 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
               "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
+  const std::string clock = r.String(n, "clock", "timing", std::string("cooperative"));
+  if (clock == "virtual") {
+    t.virtual_clock = true;
+  } else if (clock != "cooperative") {
+    r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual or cooperative", clock));
+  }
+  const std::string producer = r.String(n, "sync_producer", "timing", std::string("emulator"));
+  if (producer == "firmware") {
+    t.firmware_produces_sync = true;
+  } else if (producer != "emulator") {
+    r.Fail(n["sync_producer"], "timing.sync_producer",
+           fmt::format("'{}' is not firmware or emulator", producer));
+  }
+  if (t.firmware_produces_sync && t.lockstep && !t.virtual_clock) {
+    r.FailKey(n, "sync_producer", "timing.sync_producer",
+              "a firmware that produces SYNC runs in lockstep only on the virtual clock "
+              "(timing.clock: virtual)");
+  }
   return t;
 }
 

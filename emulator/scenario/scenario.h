@@ -179,6 +179,11 @@ struct TimingSpec {
   double physics_rate_hz = 1000;
   double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
+  /// Lockstep on the firmware's virtual clock (libwheelhil_vtime.so: docs/virtual-time.md)
+  /// instead of the cooperative FW_Status handshake.
+  bool virtual_clock = false;
+  /// The firmware is the SYNC producer (the CANopen master's role); else the emulator is.
+  bool firmware_produces_sync = false;
 };
 
 using Expectation = scoring::Expectation;

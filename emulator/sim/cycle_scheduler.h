@@ -15,6 +15,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <utility>
 
 #include "emulator/sim/event_loop.h"
 #include "emulator/sim/run_context.h"
@@ -122,6 +123,25 @@ class SyncSource final : public EventSource {
   StepSource& steps_;
   std::int64_t t0_ns_, cycle_ns_, period_ns_, cycles_;
   std::int64_t k_ = 0;
+};
+
+/// The firmware's own deadlines on the virtual clock (a timer, a sleep, a poll timeout): at
+/// each, the bus moves on to that instant and the firmware runs until it blocks (Drain).
+class FirmwareDeadlineSource final : public EventSource {
+ public:
+  FirmwareDeadlineSource(RunStages& stages, FirmwareGate& gate,
+                         std::function<std::int64_t()> next_deadline_ns)
+      : stages_(stages), gate_(gate), next_(std::move(next_deadline_ns)) {}
+  std::int64_t NextEventNs() const override { return next_(); }
+  void Fire(std::int64_t t_ns) override {
+    if (t_ns > stages_.bus_now_ns()) stages_.AdvanceBus(t_ns);
+    gate_.Drain();
+  }
+
+ private:
+  RunStages& stages_;
+  FirmwareGate& gate_;
+  std::function<std::int64_t()> next_;
 };
 
 }  // namespace wheelhil::emulator::sim

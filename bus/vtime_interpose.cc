@@ -1,0 +1,843 @@
+// libwheelhil_vtime.so: runs a program on the emulator's virtual clock (bus/vtime_protocol.h,
+// docs/virtual-time.md). Preloaded before libwheelhil_ucan.so; inactive unless
+// $WHEELHIL_VTIME names the clock page of a run.
+//
+// Clock reads return the page's time. Every timed wait becomes a wait without timeout plus a
+// deadline in the thread's slot: a sleep waits on the slot's futex, a poll/select/epoll adds
+// the thread's eventfd to what it waits for, a condition variable waits untimed; the host ends
+// the wait when virtual time reaches the deadline (directly, or through the process's agent
+// thread for eventfds and condition variables). Virtual timerfds are eventfds the agent writes
+// the expirations to, so read/poll/epoll on them work through the kernel.
+//
+// One file on purpose: an interposition library is one translation unit of exported libc
+// symbols over one shared page; every wrapper depends on the slot helpers. No global objects
+// with constructors (the library is loaded into python, sh, ...).
+
+#include <dlfcn.h>
+#include <fcntl.h>
+#include <linux/futex.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/mman.h>
+#include <sys/select.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <sys/time.h>
+#include <sys/timerfd.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+
+#include "bus/vtime_protocol.h"
+
+#define VTIME_EXPORT extern "C" __attribute__((visibility("default")))
+
+namespace {
+
+namespace vt = wheelhil::bus::vtime;
+
+// ---- the real functions ----
+
+template <typename F>
+F Resolve(F& slot, const char* name, const char* version = nullptr) {
+  F f = __atomic_load_n(&slot, __ATOMIC_ACQUIRE);
+  if (f == nullptr) {
+    void* p = version != nullptr ? dlvsym(RTLD_NEXT, name, version) : nullptr;
+    if (p == nullptr) p = dlsym(RTLD_NEXT, name);
+    f = reinterpret_cast<F>(p);
+    __atomic_store_n(&slot, f, __ATOMIC_RELEASE);
+  }
+  return f;
+}
+
+#define REAL_FN(name, ret, params)   \
+  using name##_fn = ret(*) params;   \
+  name##_fn g_real_##name = nullptr; \
+  inline name##_fn real_##name() { return Resolve(g_real_##name, #name); }
+// pthread_cond_* have an old (2.2.5) and the current (2.3.2) version; dlsym may give the old.
+#define REAL_FN_V(name, ret, params, version) \
+  using name##_fn = ret(*) params;            \
+  name##_fn g_real_##name = nullptr;          \
+  inline name##_fn real_##name() { return Resolve(g_real_##name, #name, version); }
+
+REAL_FN(clock_gettime, int, (clockid_t, timespec*))
+REAL_FN(gettimeofday, int, (timeval*, void*))
+REAL_FN(clock_nanosleep, int, (clockid_t, int, const timespec*, timespec*))
+REAL_FN(nanosleep, int, (const timespec*, timespec*))
+REAL_FN(poll, int, (pollfd*, nfds_t, int))
+REAL_FN(ppoll, int, (pollfd*, nfds_t, const timespec*, const sigset_t*))
+REAL_FN(select, int, (int, fd_set*, fd_set*, fd_set*, timeval*))
+REAL_FN(pselect, int, (int, fd_set*, fd_set*, fd_set*, const timespec*, const sigset_t*))
+REAL_FN(epoll_wait, int, (int, epoll_event*, int, int))
+REAL_FN(epoll_pwait, int, (int, epoll_event*, int, int, const sigset_t*))
+REAL_FN(timerfd_create, int, (int, int))
+REAL_FN(timerfd_settime, int, (int, int, const itimerspec*, itimerspec*))
+REAL_FN(timerfd_gettime, int, (int, itimerspec*))
+REAL_FN(close, int, (int))
+REAL_FN(fork, pid_t, ())
+REAL_FN(pthread_create, int, (pthread_t*, const pthread_attr_t*, void* (*)(void*), void*))
+REAL_FN_V(pthread_cond_wait, int, (pthread_cond_t*, pthread_mutex_t*), "GLIBC_2.3.2")
+REAL_FN_V(pthread_cond_timedwait, int, (pthread_cond_t*, pthread_mutex_t*, const timespec*),
+          "GLIBC_2.3.2")
+REAL_FN(pthread_cond_clockwait, int,
+        (pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*))
+
+// ---- the page and this process's slots ----
+
+vt::Page* g_page = nullptr;
+int g_proc = -1;                 // this process's slot
+pthread_key_t g_thread_key;      // frees a thread's slot when it exits
+bool g_agent_started = false;    // this process has its agent (under g_agent_lock)
+pthread_mutex_t g_agent_lock = PTHREAD_MUTEX_INITIALIZER;
+thread_local int t_slot = -1;
+thread_local int t_wake_fd = -1;
+// The clock of each virtual timerfd (index: timer slot), for absolute settings.
+clockid_t g_timer_clock[vt::kMaxTimers];
+
+pid_t Tid() { return static_cast<pid_t>(::syscall(SYS_gettid)); }
+
+long Futex(std::atomic<std::uint32_t>* word, int op, std::uint32_t val) {
+  return ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(word), op, val, nullptr, nullptr, 0);
+}
+
+std::int64_t Now() { return g_page->now_ns.load(std::memory_order_acquire); }
+
+bool IsVirtualClock(clockid_t c) {
+  return c == CLOCK_MONOTONIC || c == CLOCK_MONOTONIC_RAW || c == CLOCK_MONOTONIC_COARSE ||
+         c == CLOCK_BOOTTIME || c == CLOCK_REALTIME || c == CLOCK_REALTIME_COARSE ||
+         c == CLOCK_TAI || c == CLOCK_BOOTTIME_ALARM || c == CLOCK_REALTIME_ALARM;
+}
+bool IsRealtimeClock(clockid_t c) {
+  return c == CLOCK_REALTIME || c == CLOCK_REALTIME_COARSE || c == CLOCK_TAI ||
+         c == CLOCK_REALTIME_ALARM;
+}
+
+std::int64_t NowOn(clockid_t c) {
+  return Now() + (IsRealtimeClock(c) ? g_page->realtime_offset_ns : 0);
+}
+/// An absolute time on clock c as a virtual monotonic deadline.
+std::int64_t DeadlineFromAbs(clockid_t c, const timespec& ts) {
+  return vt::ToNs(ts.tv_sec, ts.tv_nsec) - (IsRealtimeClock(c) ? g_page->realtime_offset_ns : 0);
+}
+std::int64_t DeadlineIn(std::int64_t ns) {
+  const std::int64_t now = Now();
+  return ns >= vt::kNoDeadline - now ? vt::kNoDeadline : now + ns;
+}
+timespec ToTimespec(std::int64_t ns) {
+  if (ns < 0) ns = 0;
+  return timespec{static_cast<time_t>(ns / 1000000000), static_cast<long>(ns % 1000000000)};
+}
+
+void Transition() {
+  g_page->transitions.fetch_add(1);
+  if (g_page->host_waiting.load() != 0) Futex(&g_page->transitions, FUTEX_WAKE, 1);
+}
+
+/// Claims a free thread slot for `tid` (0: a thread not started yet) in this process.
+int ClaimThreadSlot(pid_t tid) {
+  for (int i = 0; i < vt::kMaxThreads; ++i) {
+    vt::ThreadSlot& s = g_page->threads[i];
+    std::uint32_t expect = vt::kFree;
+    if (s.state.load() != vt::kFree || !s.state.compare_exchange_strong(expect, vt::kRunning)) {
+      continue;
+    }
+    s.kind.store(vt::kNone);
+    s.fired.store(0);
+    s.deadline_ns.store(vt::kNoDeadline);
+    s.calls.store(0);
+    s.last_call.store(vt::kCallNone);
+    s.wake_fd = -1;
+    s.pid.store(getpid());
+    s.tid.store(tid);
+    std::int32_t used = g_page->threads_used.load();
+    while (used < i + 1 && !g_page->threads_used.compare_exchange_weak(used, i + 1)) {
+    }
+    return i;
+  }
+  ::fprintf(stderr, "wheelhil vtime: more than %d threads in the firmware's processes\n",
+            vt::kMaxThreads);
+  ::abort();
+}
+
+void FreeThreadSlot(int i) {
+  vt::ThreadSlot& s = g_page->threads[i];
+  s.tid.store(0);
+  s.pid.store(0);
+  s.state.store(vt::kFree);
+  Transition();
+}
+
+/// The calling thread's slot (claimed at its first call for a thread the library did not see
+/// start: the main thread, threads created before the library was loaded).
+vt::ThreadSlot& Self() {
+  if (t_slot < 0) t_slot = ClaimThreadSlot(Tid());
+  return g_page->threads[t_slot];
+}
+
+void NoteCall(vt::LastCall what) {
+  vt::ThreadSlot& s = Self();
+  s.calls.fetch_add(1, std::memory_order_relaxed);
+  s.last_call.store(what, std::memory_order_relaxed);
+}
+
+void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
+  s.kind.store(kind);
+  s.fired.store(0);
+  s.deadline_ns.store(deadline);
+  s.calls.store(0, std::memory_order_relaxed);
+  s.state.store(vt::kWaiting);
+  Transition();
+}
+
+void EndWait(vt::ThreadSlot& s) {
+  s.state.store(vt::kRunning);
+  s.deadline_ns.store(vt::kNoDeadline);
+  Transition();
+}
+
+// ---- the agent: ends eventfd and condition-variable waits, fires timers ----
+
+void DrainEventFd(int fd) {
+  eventfd_t v = 0;
+  while (eventfd_read(fd, &v) == 0) {
+  }
+}
+
+void FireTimers() {
+  const int used = g_page->timers_used.load();
+  for (int i = 0; i < used; ++i) {
+    vt::TimerSlot& t = g_page->timers[i];
+    if (t.pid.load() != getpid() || t.fired.load() == 0) continue;
+    const std::int64_t now = Now();
+    const std::int64_t next = t.next_ns.load();
+    const std::int64_t interval = t.interval_ns.load();
+    std::uint64_t expirations = 1;
+    if (interval > 0) {
+      expirations += static_cast<std::uint64_t>((now - next) / interval);
+      t.next_ns.store(next + static_cast<std::int64_t>(expirations) * interval);
+    } else {
+      t.next_ns.store(vt::kNoDeadline);
+      t.state.store(vt::kTimerDisarmed);
+    }
+    t.fired.store(0);
+    eventfd_write(t.fd, expirations);
+  }
+}
+
+void FireWaits() {
+  const int used = g_page->threads_used.load();
+  for (int i = 0; i < used; ++i) {
+    vt::ThreadSlot& s = g_page->threads[i];
+    if (s.pid.load() != getpid() || s.fired.load() == 0) continue;
+    if (s.fired.exchange(0) == 0) continue;
+    if (s.kind.load() == vt::kFdWait && s.wake_fd >= 0) {
+      eventfd_write(s.wake_fd, 1);
+    } else if (s.kind.load() == vt::kCondWait) {
+      // Under the waiter's mutex: the waiter is inside pthread_cond_wait (it registered with the
+      // mutex held and the wait released it), so the broadcast cannot be missed.
+      auto* m = reinterpret_cast<pthread_mutex_t*>(s.mutex);
+      auto* c = reinterpret_cast<pthread_cond_t*>(s.cond);
+      if (m != nullptr && c != nullptr) {
+        pthread_mutex_lock(m);
+        pthread_cond_broadcast(c);
+        pthread_mutex_unlock(m);
+      }
+    }
+  }
+}
+
+void* AgentMain(void* arg) {
+  sigset_t all;
+  sigfillset(&all);
+  pthread_sigmask(SIG_BLOCK, &all, nullptr);
+  t_slot = static_cast<int>(reinterpret_cast<std::intptr_t>(arg));
+  vt::ThreadSlot& s = g_page->threads[t_slot];
+  s.tid.store(Tid());
+  for (;;) {
+    const std::uint32_t w = s.wake.load();
+    FireWaits();
+    FireTimers();
+    BeginWait(s, vt::kAgent, vt::kNoDeadline);
+    while (s.wake.load() == w) Futex(&s.wake, FUTEX_WAIT, w);
+    EndWait(s);
+  }
+  return nullptr;
+}
+
+void EnsureAgent() {
+  if (__atomic_load_n(&g_agent_started, __ATOMIC_ACQUIRE)) return;
+  pthread_mutex_lock(&g_agent_lock);
+  if (!g_agent_started) {
+    // The slot is claimed (running, tid 0) before the thread exists: the host does not take
+    // the process for blocked while its agent is starting.
+    const int slot = ClaimThreadSlot(0);
+    g_page->processes[g_proc].agent.store(slot);
+    pthread_t t;
+    pthread_attr_t attr;
+    pthread_attr_init(&attr);
+    pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+    pthread_attr_setstacksize(&attr, 64 * 1024);
+    if (real_pthread_create()(&t, &attr, AgentMain,
+                              reinterpret_cast<void*>(static_cast<std::intptr_t>(slot))) != 0) {
+      ::fprintf(stderr, "wheelhil vtime: cannot start the agent thread\n");
+      ::abort();
+    }
+    pthread_attr_destroy(&attr);
+    __atomic_store_n(&g_agent_started, true, __ATOMIC_RELEASE);
+  }
+  pthread_mutex_unlock(&g_agent_lock);
+}
+
+int WakeFd() {
+  if (t_wake_fd < 0) {
+    t_wake_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (t_wake_fd < 0) {
+      ::fprintf(stderr, "wheelhil vtime: eventfd: %s\n", strerror(errno));
+      ::abort();
+    }
+  }
+  return t_wake_fd;
+}
+
+// ---- waits ----
+
+/// Sleeps until virtual `deadline`; 0 or EINTR.
+int SleepUntil(std::int64_t deadline) {
+  vt::ThreadSlot& s = Self();
+  if (Now() >= deadline) {
+    NoteCall(vt::kCallPastDeadline);
+    return 0;
+  }
+  BeginWait(s, vt::kSleep, deadline);
+  int rc = 0;
+  for (;;) {
+    const std::uint32_t w = s.wake.load();
+    if (s.state.load() != vt::kWaiting || Now() >= deadline) break;
+    if (Futex(&s.wake, FUTEX_WAIT, w) < 0 && errno == EINTR) {
+      rc = EINTR;
+      break;
+    }
+  }
+  EndWait(s);
+  return rc;
+}
+
+/// poll() on `fds` until one is ready or virtual `deadline` (kNoDeadline: none) passed.
+int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask) {
+  vt::ThreadSlot& s = Self();
+  if (deadline == vt::kNoDeadline) {
+    BeginWait(s, vt::kFdWait, vt::kNoDeadline);
+    const int rc = real_ppoll()(fds, n, nullptr, mask);
+    const int err = errno;
+    EndWait(s);
+    errno = err;
+    return rc;
+  }
+  EnsureAgent();
+  const int wake = WakeFd();
+  pollfd stack[33];
+  pollfd* all = n + 1 <= 33 ? stack : static_cast<pollfd*>(::malloc((n + 1) * sizeof(pollfd)));
+  if (all == nullptr) {
+    errno = ENOMEM;
+    return -1;
+  }
+  for (;;) {
+    std::memcpy(all, fds, n * sizeof(pollfd));
+    all[n] = pollfd{wake, POLLIN, 0};
+    s.wake_fd = wake;
+    BeginWait(s, vt::kFdWait, deadline);
+    const int rc = real_ppoll()(all, n + 1, nullptr, mask);
+    const int err = errno;
+    EndWait(s);
+    if (rc < 0) {
+      if (all != stack) ::free(all);
+      errno = err;
+      return rc;
+    }
+    if (all[n].revents != 0) DrainEventFd(wake);
+    int ready = 0;
+    for (nfds_t i = 0; i < n; ++i) {
+      fds[i].revents = all[i].revents;
+      if (all[i].revents != 0) ++ready;
+    }
+    // A wake-up left from an earlier wait (its deadline fired as it ended) is spurious.
+    if (ready > 0 || Now() >= deadline) {
+      if (all != stack) ::free(all);
+      return ready;
+    }
+  }
+}
+
+/// Waits on condition variable c until virtual `deadline`: 0 (woken; possibly spuriously,
+/// as POSIX allows) or ETIMEDOUT.
+int CondWaitUntil(pthread_cond_t* c, pthread_mutex_t* m, std::int64_t deadline) {
+  vt::ThreadSlot& s = Self();
+  if (deadline != vt::kNoDeadline) {
+    if (Now() >= deadline) {
+      NoteCall(vt::kCallPastDeadline);
+      return ETIMEDOUT;
+    }
+    EnsureAgent();
+  }
+  s.cond = reinterpret_cast<std::uintptr_t>(c);
+  s.mutex = reinterpret_cast<std::uintptr_t>(m);
+  BeginWait(s, vt::kCondWait, deadline);
+  const int rc = real_pthread_cond_wait()(c, m);
+  EndWait(s);
+  if (rc == 0 && deadline != vt::kNoDeadline && Now() >= deadline) return ETIMEDOUT;
+  return rc;
+}
+
+// ---- virtual timerfds ----
+
+int TimerOf(int fd) {
+  if (fd < 0) return -1;
+  const int used = g_page->timers_used.load();
+  const pid_t me = getpid();
+  for (int i = 0; i < used; ++i) {
+    const vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() != vt::kTimerFree && t.fd == fd && t.pid.load() == me) return i;
+  }
+  return -1;
+}
+
+itimerspec TimerValue(const vt::TimerSlot& t) {
+  itimerspec v{};
+  const std::int64_t next = t.next_ns.load();
+  if (t.state.load() == vt::kTimerArmed && next != vt::kNoDeadline) {
+    v.it_value = ToTimespec(next - Now());
+    if (v.it_value.tv_sec == 0 && v.it_value.tv_nsec == 0) v.it_value.tv_nsec = 1;
+  }
+  v.it_interval = ToTimespec(t.interval_ns.load());
+  return v;
+}
+
+// ---- set-up ----
+
+void FreeStaleSlots(pid_t pid) {
+  // After an exec the process keeps its pid but not its threads, timers or agent.
+  for (int i = 0; i < vt::kMaxThreads; ++i) {
+    vt::ThreadSlot& s = g_page->threads[i];
+    if (s.state.load() != vt::kFree && s.pid.load() == pid) FreeThreadSlot(i);
+  }
+  for (int i = 0; i < vt::kMaxTimers; ++i) {
+    vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() != vt::kTimerFree && t.pid.load() == pid) t.state.store(vt::kTimerFree);
+  }
+}
+
+int ClaimProcessSlot(vt::ProcessState state, pid_t pid) {
+  for (int i = 0; i < vt::kMaxProcesses; ++i) {
+    vt::ProcessSlot& p = g_page->processes[i];
+    std::uint32_t expect = vt::kProcFree;
+    if (p.state.compare_exchange_strong(expect, vt::kProcStarting)) {
+      p.pid.store(pid);
+      p.agent.store(-1);
+      p.state.store(state);
+      return i;
+    }
+  }
+  ::fprintf(stderr, "wheelhil vtime: more than %d firmware processes\n", vt::kMaxProcesses);
+  ::abort();
+}
+
+void RegisterProcess() {
+  const pid_t me = getpid();
+  g_proc = -1;
+  for (int i = 0; i < vt::kMaxProcesses; ++i) {
+    vt::ProcessSlot& p = g_page->processes[i];
+    if (p.state.load() != vt::kProcFree && p.pid.load() == me) {
+      g_proc = i;
+      break;
+    }
+  }
+  // The host registers the firmware's first process before it knows its pid (-1).
+  for (int i = 0; g_proc < 0 && i < vt::kMaxProcesses; ++i) {
+    std::int32_t expect = vt::kFirstProcessPid;
+    if (g_page->processes[i].state.load() == vt::kProcStarting &&
+        g_page->processes[i].pid.compare_exchange_strong(expect, me)) {
+      g_proc = i;
+    }
+  }
+  FreeStaleSlots(me);
+  t_slot = ClaimThreadSlot(Tid());
+  if (g_proc >= 0) {
+    g_page->processes[g_proc].agent.store(-1);
+    g_page->processes[g_proc].state.store(vt::kProcAlive);
+  } else {
+    g_proc = ClaimProcessSlot(vt::kProcAlive, me);
+  }
+  Transition();
+}
+
+void OnThreadExit(void* value) {
+  const int slot = static_cast<int>(reinterpret_cast<std::intptr_t>(value)) - 1;
+  if (slot >= 0 && g_page != nullptr) FreeThreadSlot(slot);
+}
+
+__attribute__((constructor)) void Init() {
+  const char* path = ::getenv(vt::kPageEnv);
+  if (path == nullptr || *path == '\0') return;
+  const int fd = ::open(path, O_RDWR | O_CLOEXEC);
+  struct stat st {};
+  if (fd < 0 || ::fstat(fd, &st) != 0 || st.st_size < static_cast<off_t>(sizeof(vt::Page))) {
+    ::fprintf(stderr, "wheelhil vtime: cannot open the clock page %s (%s)\n", path,
+              fd < 0 ? strerror(errno) : "too small");
+    ::_exit(127);
+  }
+  void* p = ::mmap(nullptr, sizeof(vt::Page), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  ::close(fd);
+  if (p == MAP_FAILED) {
+    ::fprintf(stderr, "wheelhil vtime: cannot map the clock page %s (%s)\n", path,
+              strerror(errno));
+    ::_exit(127);
+  }
+  auto* page = static_cast<vt::Page*>(p);
+  if (page->magic != vt::kMagic || page->size != sizeof(vt::Page)) {
+    ::fprintf(stderr, "wheelhil vtime: %s is not a clock page of this version\n", path);
+    ::_exit(127);
+  }
+  pthread_key_create(&g_thread_key, OnThreadExit);
+  g_page = page;
+  RegisterProcess();
+}
+
+struct ThreadStart {
+  void* (*fn)(void*);
+  void* arg;
+  int slot;
+};
+
+void* ThreadTrampoline(void* raw) {
+  ThreadStart start = *static_cast<ThreadStart*>(raw);
+  ::free(raw);
+  t_slot = start.slot;
+  g_page->threads[t_slot].tid.store(Tid());
+  pthread_setspecific(g_thread_key, reinterpret_cast<void*>(static_cast<std::intptr_t>(t_slot) + 1));
+  Transition();
+  return start.fn(start.arg);
+}
+
+}  // namespace
+
+// ---- clocks ----
+
+VTIME_EXPORT int clock_gettime(clockid_t c, timespec* ts) {
+  if (g_page == nullptr || !IsVirtualClock(c)) return real_clock_gettime()(c, ts);
+  *ts = ToTimespec(NowOn(c));
+  NoteCall(vt::kCallClock);
+  return 0;
+}
+
+VTIME_EXPORT int gettimeofday(timeval* tv, void* tz) {
+  if (g_page == nullptr) return real_gettimeofday()(tv, tz);
+  const std::int64_t ns = NowOn(CLOCK_REALTIME);
+  tv->tv_sec = static_cast<time_t>(ns / 1000000000);
+  tv->tv_usec = static_cast<suseconds_t>(ns % 1000000000 / 1000);
+  if (tz != nullptr) std::memset(tz, 0, sizeof(struct timezone));
+  NoteCall(vt::kCallClock);
+  return 0;
+}
+
+VTIME_EXPORT time_t time(time_t* out) {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  if (out != nullptr) *out = ts.tv_sec;
+  return ts.tv_sec;
+}
+
+VTIME_EXPORT int timespec_get(timespec* ts, int base) {
+  if (base != TIME_UTC) return 0;
+  return clock_gettime(CLOCK_REALTIME, ts) == 0 ? base : 0;
+}
+
+// ---- sleeps ----
+
+VTIME_EXPORT int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) {
+  if (g_page == nullptr || !IsVirtualClock(c)) return real_clock_nanosleep()(c, flags, req, rem);
+  if (req == nullptr || req->tv_nsec < 0 || req->tv_nsec >= 1000000000) return EINVAL;
+  const std::int64_t deadline = (flags & TIMER_ABSTIME) ? DeadlineFromAbs(c, *req)
+                                                        : DeadlineIn(vt::ToNs(req->tv_sec, req->tv_nsec));
+  const int rc = SleepUntil(deadline);
+  if (rc == EINTR && rem != nullptr && !(flags & TIMER_ABSTIME)) *rem = ToTimespec(deadline - Now());
+  return rc;
+}
+
+VTIME_EXPORT int nanosleep(const timespec* req, timespec* rem) {
+  if (g_page == nullptr) return real_nanosleep()(req, rem);
+  const int rc = clock_nanosleep(CLOCK_MONOTONIC, 0, req, rem);
+  if (rc == 0) return 0;
+  errno = rc;
+  return -1;
+}
+
+VTIME_EXPORT int usleep(useconds_t us) {
+  const timespec req{static_cast<time_t>(us / 1000000), static_cast<long>(us % 1000000) * 1000};
+  return nanosleep(&req, nullptr);
+}
+
+VTIME_EXPORT unsigned sleep(unsigned s) {
+  timespec req{static_cast<time_t>(s), 0}, rem{};
+  if (nanosleep(&req, &rem) == 0) return 0;
+  return static_cast<unsigned>(rem.tv_sec + (rem.tv_nsec > 0 ? 1 : 0));
+}
+
+// ---- poll, select, epoll ----
+
+VTIME_EXPORT int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
+  if (g_page == nullptr) return real_ppoll()(fds, n, tmo, mask);
+  static const timespec kZero{0, 0};
+  if (tmo != nullptr && tmo->tv_sec == 0 && tmo->tv_nsec == 0) {
+    const int rc = real_ppoll()(fds, n, &kZero, mask);
+    if (rc == 0) NoteCall(vt::kCallPollZero);
+    return rc;
+  }
+  const std::int64_t deadline =
+      tmo == nullptr ? vt::kNoDeadline : DeadlineIn(vt::ToNs(tmo->tv_sec, tmo->tv_nsec));
+  const int rc = real_ppoll()(fds, n, &kZero, mask);
+  if (rc != 0) return rc;
+  return PollUntil(fds, n, deadline, mask);
+}
+
+VTIME_EXPORT int poll(pollfd* fds, nfds_t n, int timeout_ms) {
+  if (g_page == nullptr) return real_poll()(fds, n, timeout_ms);
+  if (timeout_ms < 0) return ppoll(fds, n, nullptr, nullptr);
+  const timespec tmo = ToTimespec(std::int64_t{timeout_ms} * 1000000);
+  return ppoll(fds, n, &tmo, nullptr);
+}
+
+namespace {
+
+int SelectVirtual(int nfds, fd_set* rd, fd_set* wr, fd_set* ex, std::int64_t timeout_ns,
+                  const sigset_t* mask) {
+  const fd_set none{};
+  const fd_set r0 = rd ? *rd : none, w0 = wr ? *wr : none, e0 = ex ? *ex : none;
+  timespec zero{0, 0};
+  int rc = real_pselect()(nfds, rd, wr, ex, &zero, mask);
+  if (rc != 0) return rc;
+  if (timeout_ns == 0) {
+    NoteCall(vt::kCallPollZero);
+    return 0;
+  }
+  const std::int64_t deadline = timeout_ns < 0 ? vt::kNoDeadline : DeadlineIn(timeout_ns);
+  pollfd fds[FD_SETSIZE];
+  for (;;) {
+    nfds_t n = 0;
+    for (int fd = 0; fd < nfds && fd < FD_SETSIZE; ++fd) {
+      short ev = 0;
+      if (FD_ISSET(fd, &r0)) ev |= POLLIN;
+      if (FD_ISSET(fd, &w0)) ev |= POLLOUT;
+      if (FD_ISSET(fd, &e0)) ev |= POLLPRI;
+      if (ev != 0) fds[n++] = pollfd{fd, ev, 0};
+    }
+    rc = PollUntil(fds, n, deadline, mask);
+    if (rc <= 0) {
+      if (rc == 0) {
+        if (rd) FD_ZERO(rd);
+        if (wr) FD_ZERO(wr);
+        if (ex) FD_ZERO(ex);
+      }
+      return rc;
+    }
+    // The kernel says which sets are ready (select's own semantics).
+    if (rd) *rd = r0;
+    if (wr) *wr = w0;
+    if (ex) *ex = e0;
+    rc = real_pselect()(nfds, rd, wr, ex, &zero, mask);
+    if (rc != 0) return rc;
+  }
+}
+
+}  // namespace
+
+VTIME_EXPORT int select(int nfds, fd_set* rd, fd_set* wr, fd_set* ex, timeval* tv) {
+  if (g_page == nullptr) return real_select()(nfds, rd, wr, ex, tv);
+  const std::int64_t ns = tv == nullptr ? -1 : vt::ToNs(tv->tv_sec, std::int64_t{tv->tv_usec} * 1000);
+  const int rc = SelectVirtual(nfds, rd, wr, ex, ns, nullptr);
+  if (rc == 0 && tv != nullptr) *tv = timeval{0, 0};  // as Linux: the time not slept
+  return rc;
+}
+
+VTIME_EXPORT int pselect(int nfds, fd_set* rd, fd_set* wr, fd_set* ex, const timespec* ts,
+                         const sigset_t* mask) {
+  if (g_page == nullptr) return real_pselect()(nfds, rd, wr, ex, ts, mask);
+  return SelectVirtual(nfds, rd, wr, ex, ts == nullptr ? -1 : vt::ToNs(ts->tv_sec, ts->tv_nsec),
+                       mask);
+}
+
+VTIME_EXPORT int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms,
+                             const sigset_t* mask) {
+  if (g_page == nullptr) return real_epoll_pwait()(epfd, ev, max, timeout_ms, mask);
+  int rc = real_epoll_pwait()(epfd, ev, max, 0, mask);
+  if (rc != 0) return rc;
+  if (timeout_ms == 0) {
+    NoteCall(vt::kCallPollZero);
+    return 0;
+  }
+  const std::int64_t deadline =
+      timeout_ms < 0 ? vt::kNoDeadline : DeadlineIn(std::int64_t{timeout_ms} * 1000000);
+  for (;;) {
+    // An epoll fd is readable while its ready list is not empty.
+    pollfd p{epfd, POLLIN, 0};
+    rc = PollUntil(&p, 1, deadline, mask);
+    if (rc <= 0) return rc;
+    rc = real_epoll_pwait()(epfd, ev, max, 0, mask);
+    if (rc != 0) return rc;
+  }
+}
+
+VTIME_EXPORT int epoll_wait(int epfd, epoll_event* ev, int max, int timeout_ms) {
+  if (g_page == nullptr) return real_epoll_wait()(epfd, ev, max, timeout_ms);
+  return epoll_pwait(epfd, ev, max, timeout_ms, nullptr);
+}
+
+// ---- timerfd ----
+
+VTIME_EXPORT int timerfd_create(int c, int flags) {
+  if (g_page == nullptr || !IsVirtualClock(c)) return real_timerfd_create()(c, flags);
+  if (flags & ~(TFD_NONBLOCK | TFD_CLOEXEC)) {
+    errno = EINVAL;
+    return -1;
+  }
+  const int fd = eventfd(0, ((flags & TFD_NONBLOCK) ? EFD_NONBLOCK : 0) |
+                                ((flags & TFD_CLOEXEC) ? EFD_CLOEXEC : 0));
+  if (fd < 0) return -1;
+  for (int i = 0; i < vt::kMaxTimers; ++i) {
+    vt::TimerSlot& t = g_page->timers[i];
+    std::uint32_t expect = vt::kTimerFree;
+    if (!t.state.compare_exchange_strong(expect, vt::kTimerDisarmed)) continue;
+    t.fired.store(0);
+    t.fd = fd;
+    t.next_ns.store(vt::kNoDeadline);
+    t.interval_ns.store(0);
+    t.pid.store(getpid());
+    g_timer_clock[i] = c;
+    std::int32_t used = g_page->timers_used.load();
+    while (used < i + 1 && !g_page->timers_used.compare_exchange_weak(used, i + 1)) {
+    }
+    return fd;
+  }
+  real_close()(fd);
+  errno = EMFILE;
+  return -1;
+}
+
+VTIME_EXPORT int timerfd_gettime(int fd, itimerspec* cur) {
+  const int i = g_page == nullptr ? -1 : TimerOf(fd);
+  if (i < 0) return real_timerfd_gettime()(fd, cur);
+  if (cur == nullptr) {
+    errno = EFAULT;
+    return -1;
+  }
+  *cur = TimerValue(g_page->timers[i]);
+  return 0;
+}
+
+VTIME_EXPORT int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
+  const int i = g_page == nullptr ? -1 : TimerOf(fd);
+  if (i < 0) return real_timerfd_settime()(fd, flags, nv, old);
+  if (nv == nullptr || nv->it_value.tv_nsec < 0 || nv->it_value.tv_nsec >= 1000000000 ||
+      nv->it_interval.tv_nsec < 0 || nv->it_interval.tv_nsec >= 1000000000) {
+    errno = nv == nullptr ? EFAULT : EINVAL;
+    return -1;
+  }
+  vt::TimerSlot& t = g_page->timers[i];
+  if (old != nullptr) *old = TimerValue(t);
+  EnsureAgent();
+  // Disarm first (the host no longer fires it), then the new setting; expirations not yet
+  // read are discarded, as timerfd_settime(2) does.
+  t.state.store(vt::kTimerDisarmed);
+  t.next_ns.store(vt::kNoDeadline);
+  t.fired.store(0);
+  DrainEventFd(fd);
+  const std::int64_t value = vt::ToNs(nv->it_value.tv_sec, nv->it_value.tv_nsec);
+  if (value == 0) return 0;
+  const std::int64_t next = (flags & TFD_TIMER_ABSTIME)
+                                ? DeadlineFromAbs(g_timer_clock[i], nv->it_value)
+                                : DeadlineIn(value);
+  t.interval_ns.store(vt::ToNs(nv->it_interval.tv_sec, nv->it_interval.tv_nsec));
+  t.next_ns.store(next);
+  t.state.store(vt::kTimerArmed);
+  return 0;
+}
+
+VTIME_EXPORT int close(int fd) {
+  if (g_page != nullptr) {
+    const int i = TimerOf(fd);
+    if (i >= 0) {
+      g_page->timers[i].state.store(vt::kTimerFree);
+      g_page->timers[i].pid.store(0);
+    }
+  }
+  return real_close()(fd);
+}
+
+// ---- threads, condition variables, processes ----
+
+VTIME_EXPORT int pthread_create(pthread_t* t, const pthread_attr_t* attr, void* (*fn)(void*),
+                                void* arg) {
+  if (g_page == nullptr) return real_pthread_create()(t, attr, fn, arg);
+  auto* start = static_cast<ThreadStart*>(::malloc(sizeof(ThreadStart)));
+  if (start == nullptr) return EAGAIN;
+  // Claimed before the thread exists (tid 0): the host waits for it to start.
+  *start = ThreadStart{fn, arg, ClaimThreadSlot(0)};
+  const int slot = start->slot;
+  const int rc = real_pthread_create()(t, attr, ThreadTrampoline, start);
+  if (rc != 0) {
+    ::free(start);
+    FreeThreadSlot(slot);
+  }
+  return rc;
+}
+
+VTIME_EXPORT int pthread_cond_wait(pthread_cond_t* c, pthread_mutex_t* m) {
+  if (g_page == nullptr) return real_pthread_cond_wait()(c, m);
+  return CondWaitUntil(c, m, vt::kNoDeadline);
+}
+
+VTIME_EXPORT int pthread_cond_clockwait(pthread_cond_t* c, pthread_mutex_t* m, clockid_t clk,
+                                        const timespec* abstime) {
+  if (g_page == nullptr || !IsVirtualClock(clk)) return real_pthread_cond_clockwait()(c, m, clk, abstime);
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
+  return CondWaitUntil(c, m, DeadlineFromAbs(clk, *abstime));
+}
+
+VTIME_EXPORT int pthread_cond_timedwait(pthread_cond_t* c, pthread_mutex_t* m,
+                                        const timespec* abstime) {
+  if (g_page == nullptr) return real_pthread_cond_timedwait()(c, m, abstime);
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
+  // glibc keeps the clock of pthread_condattr_setclock in bit 0 of __wrefs (1: monotonic).
+  const clockid_t clk = (c->__data.__wrefs & 1) ? CLOCK_MONOTONIC : CLOCK_REALTIME;
+  return CondWaitUntil(c, m, DeadlineFromAbs(clk, *abstime));
+}
+
+VTIME_EXPORT pid_t fork() {
+  if (g_page == nullptr) return real_fork()();
+  // The child's process slot exists before the child does (pid 0 = fork in progress), so the
+  // host never takes the firmware for blocked while a child it has not seen yet runs.
+  const int slot = ClaimProcessSlot(vt::kProcStarting, 0);
+  const pid_t pid = real_fork()();
+  if (pid == 0) {
+    t_slot = ClaimThreadSlot(Tid());
+    t_wake_fd = -1;
+    g_agent_started = false;
+    g_agent_lock = PTHREAD_MUTEX_INITIALIZER;
+    g_proc = slot;
+    g_page->processes[slot].pid.store(getpid());
+    g_page->processes[slot].state.store(vt::kProcAlive);
+    Transition();
+  } else if (pid > 0) {
+    g_page->processes[slot].pid.store(pid);
+  } else {
+    g_page->processes[slot].state.store(vt::kProcFree);
+  }
+  return pid;
+}

@@ -1,0 +1,125 @@
+#pragma once
+/// The shared clock page of virtual time: how the emulator (the clock's host,
+/// emulator/firmware/virtual_clock.h) and the firmware's processes (the interposition library
+/// bus/vtime_interpose.cc, libwheelhil_vtime.so) share one clock. See docs/virtual-time.md.
+///
+/// The host creates the page as a file in the run's private runtime directory and names it in
+/// the firmware's environment (kPageEnv). Every process of the firmware maps it shared. The
+/// host alone moves `now_ns`; the library reads it for every clock call and turns every timed
+/// wait into a wait without timeout plus a deadline published in the thread's slot, so the
+/// host knows the earliest instant the firmware needs and when all of it is blocked.
+///
+/// Wake-ups: a thread in a plain sleep (kSleep) or the process's agent (kAgent) waits on its
+/// slot's `wake` futex word, which only the host bumps. A wait on file descriptors (kFdWait)
+/// or a condition variable (kCondWait) cannot wait on a futex: the host marks it `fired` and
+/// wakes the process's agent thread, which writes the thread's eventfd or broadcasts its
+/// condition variable. Virtual timerfds are eventfds the agent writes the expirations to.
+///
+/// Slot states: whoever ends a wait sets the slot kRunning before the waiter can run: the
+/// waiter itself (its wait returned) or the host (a deadline it reached), by compare-and-swap
+/// from kWaiting; every wait entry and exit bumps `transitions` (a futex word the host may wait
+/// on). Plain C layout, no C++ runtime: the library includes it.
+
+#include <atomic>
+#include <cstdint>
+
+namespace wheelhil::bus::vtime {
+
+inline constexpr std::uint32_t kMagic = 0x31545657u;  // "WVT1"
+inline constexpr char kPageEnv[] = "WHEELHIL_VTIME";
+inline constexpr char kPageName[] = "vtime.page";
+inline constexpr int kMaxProcesses = 64;
+inline constexpr int kMaxThreads = 256;
+inline constexpr int kMaxTimers = 128;
+inline constexpr std::int64_t kNoDeadline = INT64_MAX;
+/// The pid of a process slot the host claimed for the firmware before it was started.
+inline constexpr std::int32_t kFirstProcessPid = -1;
+
+enum SlotState : std::uint32_t {
+  kFree = 0,
+  kRunning = 1,  ///< Running, or blocked where the library does not see it.
+  kWaiting = 2,  ///< In a wait of the library (kind, deadline below).
+};
+
+enum WaitKind : std::uint32_t {
+  kNone = 0,
+  kSleep = 1,     ///< Futex on `wake`: only the host ends it.
+  kFdWait = 2,    ///< poll/select/epoll on the thread's fds + its eventfd.
+  kCondWait = 3,  ///< A condition variable (the agent broadcasts it at the deadline).
+  kAgent = 4,     ///< The process's agent, idle: only the host ends it.
+};
+
+/// What a thread last called that did not block (for the report of a thread that never does).
+enum LastCall : std::uint32_t {
+  kCallNone = 0,
+  kCallClock = 1,     ///< clock_gettime / gettimeofday / time
+  kCallPollZero = 2,  ///< poll/select/epoll with a zero timeout
+  kCallPastDeadline = 3,
+  kCallCount = 4,
+};
+
+enum ProcessState : std::uint32_t {
+  kProcFree = 0,
+  kProcStarting = 1,  ///< Forked or spawned; its library has not registered it yet.
+  kProcAlive = 2,
+};
+
+struct ProcessSlot {
+  std::atomic<std::uint32_t> state{kProcFree};
+  std::atomic<std::int32_t> pid{0};  ///< 0 while a fork is in progress.
+  std::atomic<std::int32_t> agent{-1};  ///< Thread slot of its agent (-1: none yet).
+  std::uint32_t reserved = 0;
+};
+
+struct alignas(64) ThreadSlot {
+  std::atomic<std::uint32_t> state{kFree};
+  std::atomic<std::uint32_t> wake{0};   ///< Futex word (kSleep, kAgent).
+  std::atomic<std::uint32_t> kind{kNone};
+  std::atomic<std::uint32_t> fired{0};  ///< Host -> agent: the deadline of this wait passed.
+  std::atomic<std::int64_t> deadline_ns{kNoDeadline};  ///< Virtual CLOCK_MONOTONIC.
+  std::atomic<std::int32_t> pid{0};
+  std::atomic<std::int32_t> tid{0};     ///< 0: created, not started yet.
+  std::atomic<std::uint64_t> calls{0};  ///< Non-blocking calls since its last wait.
+  std::atomic<std::uint32_t> last_call{kCallNone};
+  // Process-local, written by the thread before it waits, read by its process's agent.
+  std::int32_t wake_fd = -1;  ///< kFdWait: the thread's eventfd.
+  std::uint64_t cond = 0;     ///< kCondWait: pthread_cond_t*
+  std::uint64_t mutex = 0;    ///< kCondWait: pthread_mutex_t*
+};
+
+enum TimerState : std::uint32_t { kTimerFree = 0, kTimerDisarmed = 1, kTimerArmed = 2 };
+
+struct alignas(64) TimerSlot {
+  std::atomic<std::uint32_t> state{kTimerFree};
+  std::atomic<std::uint32_t> fired{0};  ///< Host -> agent: next_ns passed.
+  std::atomic<std::int32_t> pid{0};
+  std::int32_t fd = -1;  ///< The eventfd the program sees as its timerfd (process-local).
+  std::atomic<std::int64_t> next_ns{kNoDeadline};
+  std::atomic<std::int64_t> interval_ns{0};
+};
+
+struct Page {
+  std::uint32_t magic = kMagic;
+  std::uint32_t size = 0;  ///< sizeof(Page), checked by the library.
+  /// Virtual CLOCK_MONOTONIC (and BOOTTIME), ns. Only the host writes it.
+  alignas(64) std::atomic<std::int64_t> now_ns{0};
+  /// CLOCK_REALTIME = now_ns + realtime_offset_ns.
+  std::int64_t realtime_offset_ns = 0;
+  /// Bumped on every wait entry and exit (futex word).
+  alignas(64) std::atomic<std::uint32_t> transitions{0};
+  /// The host sleeps on `transitions`: waiters then wake it.
+  std::atomic<std::uint32_t> host_waiting{0};
+  /// One past the highest thread / timer slot ever claimed (bounds the host's scans).
+  std::atomic<std::int32_t> threads_used{0};
+  std::atomic<std::int32_t> timers_used{0};
+  ProcessSlot processes[kMaxProcesses];
+  ThreadSlot threads[kMaxThreads];
+  TimerSlot timers[kMaxTimers];
+};
+
+inline std::int64_t ToNs(std::int64_t sec, std::int64_t nsec) { return sec * 1000000000 + nsec; }
+
+static_assert(std::atomic<std::int64_t>::is_always_lock_free);
+static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
+
+}  // namespace wheelhil::bus::vtime

@@ -1,0 +1,390 @@
+#include "emulator/firmware/virtual_clock.h"
+
+#include <elf.h>
+#include <fcntl.h>
+#include <linux/futex.h>
+#include <sys/mman.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <new>
+#include <system_error>
+
+#include <fmt/format.h>
+
+#include "bus/vtime_protocol.h"
+
+namespace wheelhil::emulator::firmware {
+
+namespace vt = bus::vtime;
+
+namespace {
+
+void FutexWake(std::atomic<std::uint32_t>* word) {
+  ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(word), FUTEX_WAKE, 1, nullptr, nullptr,
+            0);
+}
+
+// Reads a /proc file from its start; "" when it is gone.
+std::string ReadAt0(int fd) {
+  char buf[512];
+  const ssize_t n = ::pread(fd, buf, sizeof(buf) - 1, 0);
+  return n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
+}
+
+const char* LastCallName(std::uint32_t c) {
+  switch (c) {
+    case vt::kCallClock: return "a clock read";
+    case vt::kCallPollZero: return "a poll/select/epoll with zero timeout";
+    case vt::kCallPastDeadline: return "a wait for a deadline already past";
+    default: return "nothing the library sees";
+  }
+}
+
+}  // namespace
+
+VirtualClock::VirtualClock(const std::string& dir) : path_(dir + "/" + vt::kPageName) {
+  const int fd = ::open(path_.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  if (fd < 0) throw std::system_error(errno, std::generic_category(), "create " + path_);
+  if (::ftruncate(fd, sizeof(vt::Page)) != 0) {
+    const int err = errno;
+    ::close(fd);
+    throw std::system_error(err, std::generic_category(), "ftruncate " + path_);
+  }
+  void* p = ::mmap(nullptr, sizeof(vt::Page), PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  const int err = errno;
+  ::close(fd);
+  if (p == MAP_FAILED) throw std::system_error(err, std::generic_category(), "mmap " + path_);
+  page_ = new (p) vt::Page();
+  page_->size = sizeof(vt::Page);
+  page_->now_ns.store(kMonotonicAtStartNs);
+  page_->realtime_offset_ns = kRealtimeAtStartNs - kMonotonicAtStartNs;
+  files_.resize(vt::kMaxThreads);
+}
+
+VirtualClock::~VirtualClock() {
+  for (auto& f : files_) {
+    if (f.stat_fd >= 0) ::close(f.stat_fd);
+    if (f.schedstat_fd >= 0) ::close(f.schedstat_fd);
+  }
+  if (page_ != nullptr) ::munmap(page_, sizeof(vt::Page));
+  ::unlink(path_.c_str());
+}
+
+std::vector<std::pair<std::string, std::string>> VirtualClock::ChildEnvironment(
+    const std::string& vtime_library) const {
+  return {{vt::kPageEnv, path_}, {"WHEELHIL_VTIME_LIB", vtime_library}};
+}
+
+void VirtualClock::ExpectFirstProcess() {
+  for (int i = 0; i < vt::kMaxProcesses; ++i) {
+    vt::ProcessSlot& p = page_->processes[i];
+    std::uint32_t expect = vt::kProcFree;
+    if (p.state.compare_exchange_strong(expect, vt::kProcStarting)) {
+      p.pid.store(vt::kFirstProcessPid);
+      first_process_slot_ = i;
+      return;
+    }
+  }
+}
+
+void VirtualClock::SetFirstProcessPid(pid_t pid) {
+  if (first_process_slot_ < 0) return;
+  std::int32_t expect = vt::kFirstProcessPid;
+  page_->processes[first_process_slot_].pid.compare_exchange_strong(expect, pid);
+}
+
+void VirtualClock::SetNow(std::int64_t t_ns) {
+  const std::int64_t mono = kMonotonicAtStartNs + t_ns;
+  if (mono > page_->now_ns.load()) page_->now_ns.store(mono, std::memory_order_release);
+}
+
+std::int64_t VirtualClock::now_ns() const { return page_->now_ns.load() - kMonotonicAtStartNs; }
+
+std::int64_t VirtualClock::NextDeadlineNs() const {
+  std::int64_t next = vt::kNoDeadline;
+  const int threads = page_->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    const vt::ThreadSlot& s = page_->threads[i];
+    if (s.state.load() == vt::kWaiting) next = std::min(next, s.deadline_ns.load());
+  }
+  const int timers = page_->timers_used.load();
+  for (int i = 0; i < timers; ++i) {
+    const vt::TimerSlot& t = page_->timers[i];
+    if (t.state.load() == vt::kTimerArmed && t.fired.load() == 0) {
+      next = std::min(next, t.next_ns.load());
+    }
+  }
+  if (next == vt::kNoDeadline) return next;
+  return std::max(next, page_->now_ns.load()) - kMonotonicAtStartNs;
+}
+
+int VirtualClock::WakeDue() {
+  const std::int64_t now = page_->now_ns.load();
+  int ended = 0;
+  pid_t agents[vt::kMaxProcesses];
+  int n_agents = 0;
+  auto need_agent = [&](pid_t pid) {
+    if (std::find(agents, agents + n_agents, pid) == agents + n_agents) agents[n_agents++] = pid;
+  };
+  const int threads = page_->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = page_->threads[i];
+    if (s.state.load() != vt::kWaiting || s.deadline_ns.load() > now) continue;
+    std::uint32_t expect = vt::kWaiting;
+    if (!s.state.compare_exchange_strong(expect, vt::kRunning)) continue;  // it woke itself
+    ++ended;
+    const std::uint32_t kind = s.kind.load();
+    if (kind == vt::kFdWait || kind == vt::kCondWait) {
+      s.fired.store(1);
+      need_agent(s.pid.load());
+    } else {
+      s.wake.fetch_add(1);
+      FutexWake(&s.wake);
+    }
+  }
+  const int timers = page_->timers_used.load();
+  for (int i = 0; i < timers; ++i) {
+    vt::TimerSlot& t = page_->timers[i];
+    if (t.state.load() != vt::kTimerArmed || t.fired.load() != 0 || t.next_ns.load() > now) {
+      continue;
+    }
+    t.fired.store(1);
+    ++ended;
+    need_agent(t.pid.load());
+  }
+  for (int a = 0; a < n_agents; ++a) {
+    for (int p = 0; p < vt::kMaxProcesses; ++p) {
+      vt::ProcessSlot& proc = page_->processes[p];
+      if (proc.state.load() != vt::kProcAlive || proc.pid.load() != agents[a]) continue;
+      const int slot = proc.agent.load();
+      if (slot < 0) break;
+      vt::ThreadSlot& s = page_->threads[slot];
+      s.wake.fetch_add(1);
+      std::uint32_t expect = vt::kWaiting;
+      s.state.compare_exchange_strong(expect, vt::kRunning);
+      FutexWake(&s.wake);
+      break;
+    }
+  }
+  return ended;
+}
+
+bool VirtualClock::ProcessAlive(pid_t pid) const {
+  if (pid <= 0) return false;
+  const std::string stat = [&] {
+    const int fd = ::open(fmt::format("/proc/{}/stat", pid).c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return std::string();
+    std::string s = ReadAt0(fd);
+    ::close(fd);
+    return s;
+  }();
+  const auto close_paren = stat.rfind(')');
+  if (close_paren == std::string::npos || close_paren + 2 >= stat.size()) return false;
+  const char state = stat[close_paren + 2];
+  return state != 'Z' && state != 'X';
+}
+
+VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
+                                               std::uint64_t* runs) {
+  ProcFiles& f = files_[static_cast<std::size_t>(slot)];
+  if (f.tid != tid) {
+    if (f.stat_fd >= 0) ::close(f.stat_fd);
+    if (f.schedstat_fd >= 0) ::close(f.schedstat_fd);
+    f = ProcFiles{};
+    f.tid = tid;
+    const std::string dir = fmt::format("/proc/{}/task/{}/", pid, tid);
+    f.stat_fd = ::open((dir + "stat").c_str(), O_RDONLY | O_CLOEXEC);
+    f.schedstat_fd = ::open((dir + "schedstat").c_str(), O_RDONLY | O_CLOEXEC);
+  }
+  if (f.stat_fd < 0) return Kernel::kGone;
+  const std::string stat = ReadAt0(f.stat_fd);
+  const auto close_paren = stat.rfind(')');
+  if (close_paren == std::string::npos || close_paren + 2 >= stat.size()) return Kernel::kGone;
+  const char state = stat[close_paren + 2];
+  if (state == 'Z' || state == 'X') return Kernel::kGone;
+  if (runs != nullptr) {
+    // "run ns, wait ns, timeslices": the last counts every time the thread got a CPU.
+    const std::string sched = f.schedstat_fd >= 0 ? ReadAt0(f.schedstat_fd) : std::string();
+    const auto last_space = sched.rfind(' ');
+    *runs = last_space == std::string::npos ? 0 : std::strtoull(sched.c_str() + last_space + 1,
+                                                                nullptr, 10);
+  }
+  return state == 'S' ? Kernel::kAsleep : Kernel::kRunning;
+}
+
+void VirtualClock::FreeDeadThread(int slot) {
+  vt::ThreadSlot& s = page_->threads[slot];
+  s.tid.store(0);
+  s.pid.store(0);
+  s.state.store(vt::kFree);
+}
+
+bool VirtualClock::Blocked() {
+  const std::uint32_t t0 = page_->transitions.load();
+  transitions_seen_ = t0;
+  for (int p = 0; p < vt::kMaxProcesses; ++p) {
+    vt::ProcessSlot& proc = page_->processes[p];
+    const std::uint32_t st = proc.state.load();
+    if (st == vt::kProcFree) continue;
+    const pid_t pid = proc.pid.load();
+    if (st == vt::kProcStarting) {
+      if (pid > 0 && !ProcessAlive(pid)) {
+        proc.state.store(vt::kProcFree);
+        continue;
+      }
+      return false;  // forked or started, its library not there yet
+    }
+    if (!ProcessAlive(pid)) proc.state.store(vt::kProcFree);
+  }
+  const int threads = page_->threads_used.load();
+  bool blocked = true;
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = page_->threads[i];
+    const std::uint32_t st = s.state.load();
+    if (st == vt::kFree) continue;
+    const pid_t pid = s.pid.load();
+    const pid_t tid = s.tid.load();
+    if (tid == 0) return false;  // created, not started
+    if (st == vt::kWaiting) {
+      const std::uint32_t kind = s.kind.load();
+      if (kind == vt::kSleep || kind == vt::kAgent) continue;  // only WakeDue ends these
+      // An fd or a condition variable may have woken it before it could say so.
+      const Kernel k = KernelState(i, pid, tid, nullptr);
+      if (k == Kernel::kGone) {
+        FreeDeadThread(i);
+      } else if (k == Kernel::kRunning) {
+        return false;
+      }
+      continue;
+    }
+    // Running as far as the library knows: blocked only if asleep in the kernel and it did not
+    // run since it was last seen asleep.
+    std::uint64_t runs = 0;
+    const Kernel k = KernelState(i, pid, tid, &runs);
+    ProcFiles& f = files_[static_cast<std::size_t>(i)];
+    if (k == Kernel::kGone) {
+      FreeDeadThread(i);
+    } else if (k == Kernel::kRunning) {
+      f.runs_seen = UINT64_MAX;
+      return false;
+    } else if (f.runs_seen != runs) {
+      f.runs_seen = runs;
+      blocked = false;  // look again
+    }
+  }
+  return blocked && page_->transitions.load() == t0;
+}
+
+void VirtualClock::WaitForChange(int timeout_us) {
+  page_->host_waiting.store(1);
+  if (page_->transitions.load() == transitions_seen_) {
+    const timespec ts{0, static_cast<long>(timeout_us) * 1000};
+    ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&page_->transitions), FUTEX_WAIT,
+              transitions_seen_, &ts, nullptr, 0);
+  }
+  page_->host_waiting.store(0);
+}
+
+std::vector<std::string> VirtualClock::RunningThreads() {
+  std::vector<std::string> out;
+  const int threads = page_->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = page_->threads[i];
+    if (s.state.load() != vt::kRunning) continue;
+    const pid_t pid = s.pid.load();
+    const pid_t tid = s.tid.load();
+    if (KernelState(i, pid, tid, nullptr) != Kernel::kRunning) continue;
+    std::string name = "?";
+    const int fd = ::open(fmt::format("/proc/{}/task/{}/comm", pid, tid).c_str(),
+                          O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+      name = ReadAt0(fd);
+      ::close(fd);
+      while (!name.empty() && name.back() == '\n') name.pop_back();
+    }
+    out.push_back(fmt::format("thread '{}' (pid {}, tid {}) last called {} ({} such calls since "
+                              "its last wait)",
+                              name, pid, tid, LastCallName(s.last_call.load()), s.calls.load()));
+  }
+  return out;
+}
+
+pid_t VirtualClock::UnregisteredProcess() const {
+  for (int p = 0; p < vt::kMaxProcesses; ++p) {
+    const vt::ProcessSlot& proc = page_->processes[p];
+    if (proc.state.load() == vt::kProcStarting) return proc.pid.load();
+  }
+  return 0;
+}
+
+namespace {
+
+// The program a shell command line runs: its first word after `exec`, `env` and assignments.
+std::string ProgramOf(const std::string& command) {
+  std::size_t i = 0;
+  for (;;) {
+    while (i < command.size() && std::isspace(static_cast<unsigned char>(command[i]))) ++i;
+    std::size_t j = i;
+    while (j < command.size() && !std::isspace(static_cast<unsigned char>(command[j]))) ++j;
+    const std::string word = command.substr(i, j - i);
+    if (word.empty()) return word;
+    if (word == "exec" || word == "env" || word.find('=') != std::string::npos) {
+      i = j;
+      continue;
+    }
+    return word;
+  }
+}
+
+std::string ResolveOnPath(const std::string& program) {
+  if (program.find('/') != std::string::npos) return program;
+  const char* path = std::getenv("PATH");
+  std::string dirs = path != nullptr ? path : "/usr/bin:/bin";
+  for (std::size_t start = 0; start <= dirs.size();) {
+    const std::size_t end = std::min(dirs.find(':', start), dirs.size());
+    const std::string candidate = dirs.substr(start, end - start) + "/" + program;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    start = end + 1;
+  }
+  return {};
+}
+
+}  // namespace
+
+std::string WhyNotVirtualClock(const std::string& command) {
+  const std::string program = ProgramOf(command);
+  const std::string file = program.empty() ? std::string() : ResolveOnPath(program);
+  if (file.empty()) return {};
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return {};
+  Elf64_Ehdr eh{};
+  bool is_static = false;
+  if (::pread(fd, &eh, sizeof(eh), 0) == static_cast<ssize_t>(sizeof(eh)) &&
+      std::memcmp(eh.e_ident, ELFMAG, SELFMAG) == 0 && eh.e_ident[EI_CLASS] == ELFCLASS64 &&
+      eh.e_phentsize == sizeof(Elf64_Phdr)) {
+    is_static = true;
+    for (int i = 0; i < eh.e_phnum; ++i) {
+      Elf64_Phdr ph{};
+      if (::pread(fd, &ph, sizeof(ph),
+                  static_cast<off_t>(eh.e_phoff + static_cast<std::uint64_t>(i) * sizeof(ph))) !=
+          static_cast<ssize_t>(sizeof(ph))) {
+        break;
+      }
+      if (ph.p_type == PT_INTERP) is_static = false;
+    }
+  }
+  ::close(fd);
+  if (!is_static) return {};
+  return fmt::format("{} is a statically linked executable: no library can be preloaded into it, "
+                     "so its clock cannot be the run's (link it dynamically, or run it with "
+                     "--realtime)",
+                     file);
+}
+
+}  // namespace wheelhil::emulator::firmware

@@ -1,0 +1,95 @@
+#pragma once
+/// The host side of the firmware's virtual clock (bus/vtime_protocol.h, docs/virtual-time.md).
+/// It creates the clock page in the run's private runtime directory, moves the firmware's time
+/// (SetNow), says when the firmware next needs the clock (NextDeadlineNs), ends the waits that
+/// reached their deadline (WakeDue), and tells whether every thread of every firmware process
+/// is blocked (Blocked): in a wait of the library that only the clock can end, or asleep in
+/// the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition of any thread while
+/// it looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
+/// kMonotonicAtStartNs + run ns and its CLOCK_REALTIME kRealtimeAtStartNs + run ns, whatever
+/// the host's clocks say, so a run is the same on every machine.
+/// Thread-compatible: the run's thread only.
+
+#include <sys/types.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace wheelhil::bus::vtime {
+struct Page;
+}
+
+namespace wheelhil::emulator::firmware {
+
+class VirtualClock {
+ public:
+  /// 10 s of uptime at the run start: programs that take 0 for "never" see no zero.
+  static constexpr std::int64_t kMonotonicAtStartNs = 10'000'000'000;
+  /// 2026-01-01T00:00:00Z.
+  static constexpr std::int64_t kRealtimeAtStartNs = 1'767'225'600'000'000'000;
+
+  /// Creates `<dir>/vtime.page`. Throws std::system_error when it cannot.
+  explicit VirtualClock(const std::string& dir);
+  ~VirtualClock();
+  VirtualClock(const VirtualClock&) = delete;
+  VirtualClock& operator=(const VirtualClock&) = delete;
+
+  /// The environment that puts a child on this clock (with the preload of the library).
+  std::vector<std::pair<std::string, std::string>> ChildEnvironment(
+      const std::string& vtime_library) const;
+  /// Before the firmware is started: its first process counts as running until its library
+  /// registered it (or it exited).
+  void ExpectFirstProcess();
+  /// After the start: the pid of that process.
+  void SetFirstProcessPid(pid_t pid);
+
+  /// Moves the firmware's clock to run time t_ns (never backwards).
+  void SetNow(std::int64_t t_ns);
+  std::int64_t now_ns() const;
+  /// The earliest deadline of a waiting thread or an armed timer, in run ns (at least now);
+  /// INT64_MAX when there is none.
+  std::int64_t NextDeadlineNs() const;
+  /// Ends every wait whose deadline is now or past and fires the timers due. Returns the
+  /// number of waits ended and timers fired.
+  int WakeDue();
+
+  /// True when every thread of the firmware is blocked (see above). A thread asleep in the
+  /// kernel outside the library's waits counts once it was seen asleep twice without running
+  /// in between, so a first look at such a thread returns false.
+  bool Blocked();
+  /// Sleeps until a thread of the firmware enters or leaves a wait, at most timeout_us.
+  void WaitForChange(int timeout_us);
+
+  /// The threads that are not blocked: "name (tid N) last called X (K calls since its last
+  /// wait)", for the report of a firmware that does not block.
+  std::vector<std::string> RunningThreads();
+  /// A process slot still waiting for its library (a static binary, a program that clears
+  /// LD_PRELOAD): its pid, else 0.
+  pid_t UnregisteredProcess() const;
+
+ private:
+  enum class Kernel { kAsleep, kRunning, kGone };
+  struct ProcFiles {
+    pid_t tid = 0;
+    int stat_fd = -1;
+    int schedstat_fd = -1;
+    std::uint64_t runs_seen = UINT64_MAX;  // schedstat timeslices when last seen asleep
+  };
+  Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
+  void FreeDeadThread(int slot);
+  bool ProcessAlive(pid_t pid) const;
+
+  std::string path_;
+  bus::vtime::Page* page_ = nullptr;
+  std::vector<ProcFiles> files_;
+  std::uint32_t transitions_seen_ = 0;
+  int first_process_slot_ = -1;
+};
+
+/// Why `command` (a shell command line) cannot run on the virtual clock: its program is a
+/// statically linked executable, into which no library can be preloaded. Empty when nothing
+/// speaks against it (a dynamic executable, a script, a program not found on PATH).
+std::string WhyNotVirtualClock(const std::string& command);
+
+}  // namespace wheelhil::emulator::firmware
