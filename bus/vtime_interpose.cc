@@ -205,9 +205,13 @@ void EndWait(vt::ThreadSlot& s) {
 
 // ---- the agent: ends eventfd and condition-variable waits, fires timers ----
 
+/// Empties an eventfd without blocking, whether it was opened O_NONBLOCK or not (a virtual
+/// timerfd has the program's flags).
 void DrainEventFd(int fd) {
+  static const timespec kZero{0, 0};
+  pollfd p{fd, POLLIN, 0};
   eventfd_t v = 0;
-  while (eventfd_read(fd, &v) == 0) {
+  while (real_ppoll()(&p, 1, &kZero, nullptr) == 1 && (p.revents & POLLIN) && eventfd_read(fd, &v) == 0) {
   }
 }
 

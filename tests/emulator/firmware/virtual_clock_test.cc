@@ -1,0 +1,176 @@
+// The virtual clock end to end, without a run: the test is the clock's host
+// (emulator/firmware/virtual_clock.h) and tests/emulator/firmware/vtime_probe.c, preloaded with
+// libwheelhil_vtime.so, waits in each way the library intercepts. Time moves only when the probe
+// is blocked, straight to its next deadline, so each wait must end exactly at its virtual
+// deadline, and 30 s of sleep must take far less than 30 s of wall time.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bus/ucan_runtime_dir.h"
+#include "emulator/firmware/virtual_clock.h"
+
+namespace wheelhil::emulator::firmware {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+const std::string kLib = std::string(WHEELHIL_BINARY_DIR) + "/lib/libwheelhil_vtime.so";
+const std::string kProbe = std::string(WHEELHIL_BINARY_DIR) + "/bin/vtime_probe";
+
+struct ProbeRun {
+  int exit_status = -1;
+  bool finished = false;       // exited within the wall-clock limit
+  double wall_s = 0;
+  std::int64_t virtual_ns = 0;  // the clock when it exited
+  std::vector<std::string> running;  // RunningThreads() when it did not block
+  std::map<std::string, std::pair<std::int64_t, long>> waits;  // label -> (elapsed ns, result)
+  std::string out;
+};
+
+// Runs the probe on a fresh clock: whenever it is blocked, the clock moves to its next deadline.
+ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
+  const std::string dir = bus::CreateTempUcanRuntimeDir("wheelhil-vtime-test-");
+  ProbeRun r;
+  {
+    VirtualClock clock(dir);
+    clock.ExpectFirstProcess();
+    const std::string out_path = dir + "/out.txt";
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      const int fd = ::open(out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+      ::dup2(fd, 1);
+      for (const auto& [k, v] : clock.ChildEnvironment(kLib)) ::setenv(k.c_str(), v.c_str(), 1);
+      ::setenv("LD_PRELOAD", kLib.c_str(), 1);
+      ::execl(kProbe.c_str(), kProbe.c_str(), what.c_str(), nullptr);
+      ::_exit(127);
+    }
+    clock.SetFirstProcessPid(pid);
+    const auto t0 = Clock::now();
+    int status = 0;
+    for (;;) {
+      if (::waitpid(pid, &status, WNOHANG) == pid) {
+        r.finished = true;
+        r.exit_status = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+        break;
+      }
+      r.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (r.wall_s > wall_limit_s) {
+        r.running = clock.RunningThreads();
+        ::kill(pid, SIGKILL);
+        ::waitpid(pid, &status, 0);
+        break;
+      }
+      clock.WakeDue();
+      if (!clock.Blocked()) {
+        clock.WaitForChange(200);
+        continue;
+      }
+      const std::int64_t next = clock.NextDeadlineNs();
+      if (next != INT64_MAX) clock.SetNow(next);
+    }
+    r.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    r.virtual_ns = clock.now_ns();
+    std::ifstream in(out_path);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    r.out = ss.str();
+  }
+  std::istringstream lines(r.out);
+  std::string label;
+  std::int64_t ns = 0;
+  long result = 0;
+  std::string line;
+  while (std::getline(lines, line)) {
+    std::istringstream words(line);
+    if (words >> label >> ns >> result) r.waits[label] = {ns, result};
+  }
+  fs::remove_all(dir);
+  return r;
+}
+
+constexpr std::int64_t kMs = 1'000'000;
+
+TEST(VirtualClock, SleepsEndAtTheirVirtualDeadlinesWithoutTheWallClock) {
+  const ProbeRun r = RunProbe("sleeps");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("start").first, 0);
+  EXPECT_EQ(r.waits.at("sleep30").first, 30'000 * kMs);
+  EXPECT_EQ(r.waits.at("nanosleep").first, 30'250 * kMs);
+  EXPECT_EQ(r.waits.at("nanosleep").second, 0);
+  EXPECT_EQ(r.waits.at("usleep").first, 30'250 * kMs + 1'500'000);
+  EXPECT_EQ(r.waits.at("clock_nanosleep_abs").first, 32'250 * kMs + 1'500'000);
+  // 32 s of virtual sleeps; a host that waited for them would need that long.
+  EXPECT_LT(r.wall_s, 16.0);
+  // CLOCK_REALTIME is the fixed start epoch plus the run's time, not the host's date.
+  EXPECT_THAT(r.out, ::testing::HasSubstr(
+                         "realtime_s " + std::to_string(VirtualClock::kRealtimeAtStartNs /
+                                                            1'000'000'000 + 32)));
+}
+
+TEST(VirtualClock, PollSelectAndEpollTimeoutsAreVirtual) {
+  const ProbeRun r = RunProbe("polls");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("poll"), std::make_pair(5 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("select"), std::make_pair(20 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("epoll_wait"), std::make_pair(23 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("ppoll"), std::make_pair(30 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("poll_ready"), std::make_pair(30 * kMs, 1L));
+}
+
+TEST(VirtualClock, TimerfdTicksOnTheVirtualClockAndCountsOverruns) {
+  const ProbeRun r = RunProbe("timerfd");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  // A blocking read() waits in the kernel, outside the library: the clock still sees it blocked.
+  EXPECT_EQ(r.waits.at("tick"), std::make_pair(47 * kMs, 1L));  // the last of 7, 27, 47 ms
+  EXPECT_THAT(r.out, ::testing::HasSubstr("remaining_ns 20000000"));
+  // 45 ms of sleep from 47 ms: expirations at 67 and 87 ms, read at 92 ms.
+  EXPECT_EQ(r.waits.at("overrun"), std::make_pair(92 * kMs, 2L));
+}
+
+TEST(VirtualClock, ConditionVariableTimeoutsAreVirtualAndSignalsStillWake) {
+  const ProbeRun r = RunProbe("cond");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("clockwait"), std::make_pair(50 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("timedwait"), std::make_pair(70 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("signalled"), std::make_pair(80 * kMs, 1L));
+}
+
+TEST(VirtualClock, AThreadThatNeverBlocksIsNamedWithItsLastCall) {
+  const ProbeRun r = RunProbe("spin", 1.0);
+  EXPECT_FALSE(r.finished);
+  EXPECT_EQ(r.virtual_ns, 0);  // time never moved
+  ASSERT_EQ(r.running.size(), 1u) << r.out;
+  EXPECT_THAT(r.running[0], ::testing::HasSubstr("thread 'vtime_probe'"));
+  EXPECT_THAT(r.running[0], ::testing::HasSubstr("last called a clock read"));
+}
+
+TEST(VirtualClock, AStaticBinaryIsRefusedWithTheReason) {
+  EXPECT_EQ(WhyNotVirtualClock(kProbe + " sleeps"), "");
+  EXPECT_EQ(WhyNotVirtualClock("exec env A=1 /bin/sh -c true"), "");
+  EXPECT_EQ(WhyNotVirtualClock("no-such-program-here --x"), "");
+  const std::string static_probe = std::string(WHEELHIL_BINARY_DIR) + "/bin/vtime_probe_static";
+  EXPECT_THAT(WhyNotVirtualClock(static_probe + " sleeps"),
+              ::testing::HasSubstr("is a statically linked executable"));
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::firmware

@@ -1,0 +1,140 @@
+/* A program that waits in every way the virtual clock intercepts and prints, for each wait, the
+ * virtual CLOCK_MONOTONIC time it ended at (ns since its start) and what it returned:
+ *   <label> <elapsed_ns> <result>
+ * Run by tests/emulator/firmware/virtual_clock_test.cc with libwheelhil_vtime.so preloaded and
+ * the test as the clock's host. argv[1] picks the case. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <poll.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/select.h>
+#include <sys/time.h>
+#include <sys/timerfd.h>
+#include <time.h>
+#include <unistd.h>
+
+static int64_t g_start;
+
+static int64_t mono(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static void report(const char* label, long result) {
+  printf("%s %lld %ld\n", label, (long long)(mono() - g_start), result);
+  fflush(stdout);
+}
+
+static pthread_mutex_t g_m = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t g_c = PTHREAD_COND_INITIALIZER;
+static int g_flag = 0;
+
+static void* signaller(void* arg) {
+  (void)arg;
+  usleep(10000);
+  pthread_mutex_lock(&g_m);
+  g_flag = 1;
+  pthread_cond_signal(&g_c);
+  pthread_mutex_unlock(&g_m);
+  return NULL;
+}
+
+int main(int argc, char** argv) {
+  if (argc < 2) return 2;
+  g_start = mono();
+  const char* what = argv[1];
+  if (strcmp(what, "sleeps") == 0) {
+    report("start", 0);
+    sleep(30);
+    report("sleep30", 0);
+    struct timespec req = {0, 250000000};
+    report("nanosleep", nanosleep(&req, NULL));
+    report("usleep", usleep(1500));
+    struct timespec abs;
+    clock_gettime(CLOCK_MONOTONIC, &abs);
+    abs.tv_sec += 2;
+    report("clock_nanosleep_abs", clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &abs, NULL));
+    struct timeval tv;
+    gettimeofday(&tv, NULL);
+    printf("realtime_s %lld\n", (long long)tv.tv_sec);
+  } else if (strcmp(what, "polls") == 0) {
+    int p[2];
+    if (pipe(p) != 0) return 1;
+    struct pollfd pf = {p[0], POLLIN, 0};
+    report("poll", poll(&pf, 1, 5));
+    fd_set rd;
+    FD_ZERO(&rd);
+    FD_SET(p[0], &rd);
+    struct timeval tv = {0, 15000};
+    report("select", select(p[0] + 1, &rd, NULL, NULL, &tv));
+    const int ep = epoll_create1(0);
+    struct epoll_event ev = {.events = EPOLLIN, .data.fd = p[0]};
+    epoll_ctl(ep, EPOLL_CTL_ADD, p[0], &ev);
+    struct epoll_event out;
+    report("epoll_wait", epoll_wait(ep, &out, 1, 3));
+    struct timespec ts = {0, 7000000};
+    report("ppoll", ppoll(&pf, 1, &ts, NULL));
+    // Readiness before the deadline ends the wait at once.
+    if (write(p[1], "x", 1) != 1) return 1;
+    report("poll_ready", poll(&pf, 1, 1000));
+  } else if (strcmp(what, "timerfd") == 0) {
+    const int t = timerfd_create(CLOCK_MONOTONIC, 0);
+    struct itimerspec its = {.it_interval = {0, 20000000}, .it_value = {0, 7000000}};
+    timerfd_settime(t, 0, &its, NULL);
+    for (int i = 0; i < 3; ++i) {
+      uint64_t n = 0;
+      if (read(t, &n, sizeof(n)) != sizeof(n)) return 1;
+      report("tick", (long)n);
+    }
+    struct itimerspec cur;
+    timerfd_gettime(t, &cur);
+    printf("remaining_ns %ld\n", cur.it_value.tv_nsec);
+    // Two periods slept through: one read returns both expirations.
+    usleep(45000);
+    uint64_t n = 0;
+    if (read(t, &n, sizeof(n)) != sizeof(n)) return 1;
+    report("overrun", (long)n);
+    close(t);
+  } else if (strcmp(what, "cond") == 0) {
+    pthread_mutex_lock(&g_m);
+    struct timespec abs;
+    clock_gettime(CLOCK_MONOTONIC, &abs);
+    abs.tv_nsec += 50000000;
+    if (abs.tv_nsec >= 1000000000) {
+      abs.tv_sec += 1;
+      abs.tv_nsec -= 1000000000;
+    }
+    int rc;
+    do rc = pthread_cond_clockwait(&g_c, &g_m, CLOCK_MONOTONIC, &abs);
+    while (rc == 0);
+    report("clockwait", rc == ETIMEDOUT);
+    clock_gettime(CLOCK_REALTIME, &abs);
+    abs.tv_nsec += 20000000;
+    if (abs.tv_nsec >= 1000000000) {
+      abs.tv_sec += 1;
+      abs.tv_nsec -= 1000000000;
+    }
+    do rc = pthread_cond_timedwait(&g_c, &g_m, &abs);
+    while (rc == 0);
+    report("timedwait", rc == ETIMEDOUT);
+    // Another thread signals after 10 ms of its own sleep: the untimed wait ends then.
+    pthread_t t;
+    pthread_create(&t, NULL, signaller, NULL);
+    while (!g_flag) pthread_cond_wait(&g_c, &g_m);
+    pthread_mutex_unlock(&g_m);
+    report("signalled", 1);
+    pthread_join(t, NULL);
+  } else if (strcmp(what, "spin") == 0) {
+    report("start", 0);
+    for (;;) mono();
+  } else {
+    return 2;
+  }
+  return 0;
+}

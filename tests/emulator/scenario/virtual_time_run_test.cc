@@ -1,0 +1,146 @@
+// Runs on the firmware's virtual clock (timing.clock: virtual; docs/virtual-time.md), end to
+// end through RunScenario: a customer's firmware (tests/customer_firmware/) that knows nothing
+// of wheelhil is the CANopen master and SYNC producer and publishes its pose in its own frames;
+// the reference firmware runs with its shipped config (SYNC producer, cycle deadline on).
+// Same scenario and seed -> byte-identical can.log; a firmware that never blocks ends the run
+// with its thread named.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "emulator/scenario/runner.h"
+#include "emulator/scenario/scenario.h"
+#include "tests/emulator/scenario/runner_test_support.h"
+
+namespace wheelhil::emulator::scenario {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using testing::Slurp;
+
+const std::string kCustomerC =
+    std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/customer_firmware/c_epoll_odometry.yaml";
+
+class VirtualTimeRun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / fs::path("wheelhil_vtime_run_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+// The payload of the last frame with `id` in a candump -L log ("(t) iface ID#HEX").
+std::vector<std::uint8_t> LastPayload(const std::string& log, const std::string& id) {
+  std::vector<std::uint8_t> out;
+  std::istringstream lines(log);
+  std::string line;
+  const std::string key = " " + id + "#";
+  while (std::getline(lines, line)) {
+    const auto at = line.find(key);
+    if (at == std::string::npos) continue;
+    out.clear();
+    const std::string hex = line.substr(at + key.size());
+    for (std::size_t i = 0; i + 1 < hex.size(); i += 2) {
+      out.push_back(static_cast<std::uint8_t>(std::stoi(hex.substr(i, 2), nullptr, 16)));
+    }
+  }
+  return out;
+}
+
+std::int32_t I32(const std::vector<std::uint8_t>& d, std::size_t at) {
+  return static_cast<std::int32_t>(std::uint32_t{d[at]} | std::uint32_t{d[at + 1]} << 8 |
+                                   std::uint32_t{d[at + 2]} << 16 | std::uint32_t{d[at + 3]} << 24);
+}
+
+// The last row's x of truth.csv (t_s,x_m,...).
+double FinalTruthX(const fs::path& dir) {
+  std::istringstream lines(Slurp(dir / "truth.csv"));
+  std::string line, last;
+  while (std::getline(lines, line)) {
+    if (!line.empty()) last = line;
+  }
+  return std::stod(last.substr(last.find(',') + 1));
+}
+
+TEST_F(VirtualTimeRun, CustomerCFirmwareIsTheMasterAndItsRunsAreByteIdentical) {
+  const Scenario s = LoadScenarioFile(kCustomerC);
+  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  const std::string log = Slurp(dir_ / "a" / "can.log");
+  EXPECT_EQ(log, Slurp(dir_ / "b" / "can.log"));
+  // Its own CANopen start-up: TPDO1 made synchronous by SDO, NMT start, then SYNC every 10 ms.
+  EXPECT_THAT(log, HasSubstr(" 601#2F00180201000000"));
+  EXPECT_THAT(log, HasSubstr(" 581#6000180200000000"));
+  EXPECT_THAT(log, HasSubstr(" 000#0100"));
+  EXPECT_THAT(log, HasSubstr(" 080#"));
+  // Every SYNC on the bus is the firmware's: one per 10 ms of its timerfd, counted in the report.
+  const nlohmann::json report = testing::ReportWithoutWall(dir_ / "a");
+  EXPECT_GT(report["cycles"].get<int>(), 400);
+  // Its pose frame: the odometry of 1 m straight, within a few encoder counts (0.24 mm each).
+  const auto pose = LastPayload(log, "3A0");
+  ASSERT_EQ(pose.size(), 8u);
+  EXPECT_NEAR(I32(pose, 0) * 1e-4, FinalTruthX(dir_ / "a"), 0.005);
+  EXPECT_NEAR(I32(pose, 4) * 1e-4, 0.0, 0.005);
+}
+
+TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --spin-after-s 0.5";
+  s.timing.timeout_s = 1.0;
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "spin"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("did not block within 1 s of wall time"));
+  EXPECT_THAT(r.failure, HasSubstr("thread 'c_epoll_odometr'"));
+  EXPECT_THAT(r.failure, HasSubstr("zero timeout"));
+  EXPECT_THAT(Slurp(dir_ / "spin" / "events.jsonl"), HasSubstr("\"firmware_not_blocking\""));
+  // What was recorded before stays: the start-up and half a second of cycles.
+  EXPECT_THAT(Slurp(dir_ / "spin" / "can.log"), HasSubstr(" 3A0#"));
+}
+
+TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                "/scenarios/smoke/paper000_slip_short.yaml");
+  s.timing.virtual_clock = true;
+  s.timing.firmware_produces_sync = true;
+  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  EXPECT_EQ(a.exit_code, 0) << a.report["expectations"].dump();
+  EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
+  EXPECT_EQ(testing::ReportWithoutWall(dir_ / "a"), testing::ReportWithoutWall(dir_ / "b"));
+  // Its config went through unchanged: it produces SYNC and keeps its cycle deadline.
+  const std::string cfg = Slurp(dir_ / "a" / "firmware_config.yaml");
+  EXPECT_THAT(cfg, HasSubstr("produce: true"));
+  EXPECT_THAT(cfg, HasSubstr("deadline_s: 0.2"));
+  EXPECT_EQ(a.report["cycles"].get<int>(), 38);  // 9.5 s at 4 Hz
+}
+
+TEST_F(VirtualTimeRun, AStaticFirmwareIsRefusedBeforeTheRun) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command = std::string(WHEELHIL_BINARY_DIR) + "/bin/vtime_probe_static sleeps";
+  EXPECT_THROW(
+      {
+        try {
+          RunScenario(s, testing::BuildTreeRunOptions(dir_ / "static"));
+        } catch (const std::invalid_argument& e) {
+          EXPECT_THAT(e.what(), HasSubstr("statically linked"));
+          throw;
+        }
+      },
+      std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::scenario
