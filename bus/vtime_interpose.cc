@@ -426,11 +426,11 @@ itimerspec TimerValue(const vt::TimerSlot& t) {
 
 // ---- set-up ----
 
-void FreeStaleSlots(pid_t pid) {
+void FreeStaleSlots(pid_t pid, int keep) {
   // After an exec the process keeps its pid but not its threads, timers or agent.
   for (int i = 0; i < vt::kMaxThreads; ++i) {
     vt::ThreadSlot& s = g_page->threads[i];
-    if (s.state.load() != vt::kFree && s.pid.load() == pid) FreeThreadSlot(i);
+    if (i != keep && s.state.load() != vt::kFree && s.pid.load() == pid) FreeThreadSlot(i);
   }
   for (int i = 0; i < vt::kMaxTimers; ++i) {
     vt::TimerSlot& t = g_page->timers[i];
@@ -471,8 +471,9 @@ void RegisterProcess() {
       g_proc = i;
     }
   }
-  FreeStaleSlots(me);
+  // The new main thread's slot first: the process is never without a running thread.
   t_slot = ClaimThreadSlot(Tid());
+  FreeStaleSlots(me, t_slot);
   if (g_proc >= 0) {
     g_page->processes[g_proc].agent.store(-1);
     g_page->processes[g_proc].state.store(vt::kProcAlive);

@@ -289,6 +289,8 @@ void Run::StartFirmware() {
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",
                              o_.bin_dir);
+  cmd = firmware::Substitute(cmd, "${SCENARIO_DIR}",
+                             fs::absolute(s_.source_path).parent_path().string());
   std::vector<std::pair<std::string, std::string>> env;
   if (link_->private_bus() && o_.ucan_child_env) env = o_.ucan_child_env(link_->runtime_dir());
   env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);

@@ -95,6 +95,31 @@ TEST_F(VirtualTimeRun, CustomerCFirmwareIsTheMasterAndItsRunsAreByteIdentical) {
   EXPECT_NEAR(I32(pose, 4) * 1e-4, 0.0, 0.005);
 }
 
+// The same robot and motion under the C++ and the Python customer firmware: each run twice gives
+// the same bytes, and each firmware's own pose frame ends where the robot did.
+void ExpectCustomerRun(const fs::path& dir, const std::string& scenario, const std::string& id) {
+  const Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                      "/tests/data/customer_firmware/" + scenario);
+  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  const std::string log = Slurp(dir / "a" / "can.log");
+  EXPECT_EQ(log, Slurp(dir / "b" / "can.log"));
+  EXPECT_THAT(log, HasSubstr(" 000#0100"));
+  const auto pose = LastPayload(log, id);
+  ASSERT_EQ(pose.size(), 8u) << id;
+  EXPECT_NEAR(I32(pose, 0) * 1e-4, FinalTruthX(dir / "a"), 0.005);
+}
+
+TEST_F(VirtualTimeRun, CustomerCppFirmwareWithConditionVariableTimingIsByteIdentical) {
+  ExpectCustomerRun(dir_, "cpp_cv_odometry.yaml", "3B0");
+}
+
+TEST_F(VirtualTimeRun, CustomerPythonCanFirmwareIsByteIdentical) {
+  ExpectCustomerRun(dir_, "python_can_odometry.yaml", "3C0");
+}
+
 TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   Scenario s = LoadScenarioFile(kCustomerC);
   s.firmware.command += " --spin-after-s 0.5";
