@@ -312,6 +312,7 @@ struct UcanBroker::Impl {
   Fd spare_fd;  // released to refuse a connection when the process is out of fds
   std::uint64_t refused_connections = 0;
   std::uint64_t activity = 0;  // events handled and frames routed (see UcanBroker::activity)
+  std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
   mutable std::mutex mu;
@@ -482,6 +483,7 @@ struct UcanBroker::Impl {
   void Kill(Client* c) {
     if (c->dead) return;
     c->dead = true;
+    ++client_progress;
     if (c->rings) c->rings->header->closed.store(1);
     if (!c->local) ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
   }
@@ -523,6 +525,7 @@ struct UcanBroker::Impl {
         continue;
       }
       if (fd < 0) return;  // EAGAIN
+      ++client_progress;  // its request is read and answered by a later pass
       auto c = std::make_unique<Client>();
       c->fd = Fd(fd);
       c->id = next_id++;
@@ -563,6 +566,7 @@ struct UcanBroker::Impl {
       std::memcpy(CMSG_DATA(cm), &pass_fd, sizeof(int));
     }
     [[maybe_unused]] ssize_t n = ::sendmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
+    ++client_progress;
   }
 
   bool SetOptions(Client* c, const Request& req, const std::uint8_t* filters_bytes,
@@ -952,6 +956,7 @@ struct UcanBroker::Impl {
         return;
       }
       c->queue.PopFront(static_cast<std::size_t>(sent));
+      if (sent > 0) ++client_progress;
       if (sent < n) break;
     }
     const bool want_out = !c->queue.empty();
@@ -974,6 +979,7 @@ struct UcanBroker::Impl {
           const std::uint64_t bell = 1;
           [[maybe_unused]] ssize_t n =
               ::send(c->fd.get(), &bell, sizeof(bell), MSG_DONTWAIT | MSG_NOSIGNAL);
+          ++client_progress;
         }
         continue;
       }
@@ -1210,6 +1216,11 @@ bool UcanBroker::Pump(int timeout_ms) {
 std::uint64_t UcanBroker::activity() const {
   std::lock_guard lk(impl_->mu);
   return impl_->activity;
+}
+
+std::uint64_t UcanBroker::client_progress() const {
+  std::lock_guard lk(impl_->mu);
+  return impl_->client_progress;
 }
 
 void UcanBroker::SetReceiveClock(std::function<std::int64_t()> clock_ns) {

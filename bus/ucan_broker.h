@@ -97,6 +97,10 @@ class UcanBroker {
   /// Grows with every connection event handled and every frame routed: equal before and after
   /// a Pump() means that pass moved nothing.
   std::uint64_t activity() const;
+  /// Grows with everything that can wake a program blocked on a broker socket: writes to a
+  /// client (frames, doorbells, replies), a connection accepted (answered by a later pass), a
+  /// client dropped. Equal before and after a Pump(): that pass woke no client.
+  std::uint64_t client_progress() const;
   /// The receive timestamps' clock (ns; default CLOCK_REALTIME), e.g. a run's virtual clock.
   /// Set it before traffic, or from the thread that pumps.
   void SetReceiveClock(std::function<std::int64_t()> clock_ns);

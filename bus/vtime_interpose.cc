@@ -605,10 +605,9 @@ VTIME_EXPORT int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_
     if (rc == 0) NoteCall(vt::kCallPollZero);
     return rc;
   }
+  // No zero-timeout look first: a wait on fds that are ready ends at once (one system call).
   const std::int64_t deadline =
       tmo == nullptr ? vt::kNoDeadline : DeadlineIn(vt::ToNs(tmo->tv_sec, tmo->tv_nsec));
-  const int rc = real_ppoll()(fds, n, &kZero, mask);
-  if (rc != 0) return rc;
   return PollUntil(fds, n, deadline, mask);
 }
 
@@ -681,11 +680,11 @@ VTIME_EXPORT int pselect(int nfds, fd_set* rd, fd_set* wr, fd_set* ex, const tim
 VTIME_EXPORT int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms,
                              const sigset_t* mask) {
   if (g_page == nullptr) return real_epoll_pwait()(epfd, ev, max, timeout_ms, mask);
-  int rc = real_epoll_pwait()(epfd, ev, max, 0, mask);
-  if (rc != 0) return rc;
+  int rc = 0;
   if (timeout_ms == 0) {
-    NoteCall(vt::kCallPollZero);
-    return 0;
+    rc = real_epoll_pwait()(epfd, ev, max, 0, mask);
+    if (rc == 0) NoteCall(vt::kCallPollZero);
+    return rc;
   }
   const std::int64_t deadline =
       timeout_ms < 0 ? vt::kNoDeadline : DeadlineIn(std::int64_t{timeout_ms} * 1000000);

@@ -179,19 +179,23 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   if (clock.WakeDue() == 0 && firmware_blocked_) return true;
   firmware_blocked_ = false;
   const auto t0 = Clock::now();
-  bool reported = false;
+  bool checked_exit = false;
+  // One broker pass; true when it wrote to a client (which may wake a firmware thread).
   auto pass = [&] {
-    const std::uint64_t before = broker_->activity();
+    const std::uint64_t before = broker_->client_progress();
     Pump(0);
     bus::CanFrame f;
     while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
-    return broker_->activity() != before;
+    return broker_->client_progress() != before;
   };
+  pass();  // what the run sent since the last settle
   for (;;) {
-    const bool moved = pass();
     if (run_.failed()) return false;
-    // A frame written right before its writer blocked is routed by one more pass.
-    if (!moved && clock.Blocked() && !pass()) {
+    if (clock.Blocked()) {
+      // Every thread was blocked: frames written before that are in the broker's queues. If
+      // routing them wakes nobody, the firmware stays blocked.
+      if (pass()) continue;
+      if (run_.failed()) return false;
       if (process.running() && process.Exited()) {
         run_.Fail("the firmware exited during the run (see firmware.log)");
         return false;
@@ -199,10 +203,9 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       firmware_blocked_ = true;
       return true;
     }
-    if (moved) continue;
     const double wall = WallSeconds(t0);
-    if (wall > 1.0 && !reported) {
-      reported = true;
+    if (wall > 1.0 && !checked_exit) {
+      checked_exit = true;
       if (process.running() && process.Exited()) {
         run_.Fail("the firmware exited during the run (see firmware.log)");
         return false;

@@ -220,6 +220,16 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
 
 void VirtualClock::FreeDeadThread(int slot) {
   vt::ThreadSlot& s = page_->threads[slot];
+  // A thread gone: perhaps its whole process (the slot of an exited process is freed here,
+  // not looked at on every check).
+  const pid_t pid = s.pid.load();
+  if (!ProcessAlive(pid)) {
+    for (auto& proc : page_->processes) {
+      if (proc.state.load() == vt::kProcAlive && proc.pid.load() == pid) {
+        proc.state.store(vt::kProcFree);
+      }
+    }
+  }
   s.tid.store(0);
   s.pid.store(0);
   s.state.store(vt::kFree);
@@ -240,7 +250,6 @@ bool VirtualClock::Blocked() {
       }
       return false;  // forked or started, its library not there yet
     }
-    if (!ProcessAlive(pid)) proc.state.store(vt::kProcFree);
   }
   const int threads = page_->threads_used.load();
   bool blocked = true;

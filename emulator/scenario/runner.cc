@@ -392,7 +392,7 @@ void Run::RunPhases() {
     }
   }
   handshake_->ExpectSyncAnswers(std::move(answers));
-  if (lockstep_ && !virtual_time_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
+  if (lockstep_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
   tick.Start({.motion = true,
               .record_truth = true,
               .wait_boot_answers = false,
@@ -456,7 +456,7 @@ RunResult Run::Execute() {
   }
   lockstep_ = s_.timing.lockstep && !o_.realtime;
   virtual_time_ = lockstep_ && s_.timing.virtual_clock && !s_.firmware.command.empty();
-  if (lockstep_ && !virtual_time_) cpus_.ConfineToOneCpu(o_.cpu);
+  if (lockstep_) cpus_.ConfineToOneCpu(o_.cpu);
   wall0_ = Clock::now();
   last_progress_ = wall0_;
   Build();
