@@ -220,17 +220,7 @@ void FireTimers() {
   for (int i = 0; i < used; ++i) {
     vt::TimerSlot& t = g_page->timers[i];
     if (t.pid.load() != getpid() || t.fired.load() == 0) continue;
-    const std::int64_t now = Now();
-    const std::int64_t next = t.next_ns.load();
-    const std::int64_t interval = t.interval_ns.load();
-    std::uint64_t expirations = 1;
-    if (interval > 0) {
-      expirations += static_cast<std::uint64_t>((now - next) / interval);
-      t.next_ns.store(next + static_cast<std::int64_t>(expirations) * interval);
-    } else {
-      t.next_ns.store(vt::kNoDeadline);
-      t.state.store(vt::kTimerDisarmed);
-    }
+    const std::uint64_t expirations = vt::ExpireTimer(t, Now());
     t.fired.store(0);
     eventfd_write(t.fd, expirations);
   }
@@ -366,7 +356,10 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
       errno = err;
       return rc;
     }
-    if (all[n].revents != 0) DrainEventFd(wake);
+    if (all[n].revents != 0) {
+      eventfd_t v = 0;
+      eventfd_read(wake, &v);  // EFD_NONBLOCK
+    }
     int ready = 0;
     for (nfds_t i = 0; i < n; ++i) {
       fds[i].revents = all[i].revents;
@@ -720,6 +713,7 @@ VTIME_EXPORT int timerfd_create(int c, int flags) {
     if (!t.state.compare_exchange_strong(expect, vt::kTimerDisarmed)) continue;
     t.fired.store(0);
     t.fd = fd;
+    t.generation.fetch_add(1);
     t.next_ns.store(vt::kNoDeadline);
     t.interval_ns.store(0);
     t.pid.store(getpid());

@@ -11,9 +11,10 @@
 ///
 /// Wake-ups: a thread in a plain sleep (kSleep) or the process's agent (kAgent) waits on its
 /// slot's `wake` futex word, which only the host bumps. A wait on file descriptors (kFdWait)
-/// or a condition variable (kCondWait) cannot wait on a futex: the host marks it `fired` and
-/// wakes the process's agent thread, which writes the thread's eventfd or broadcasts its
-/// condition variable. Virtual timerfds are eventfds the agent writes the expirations to.
+/// waits on the thread's eventfd too, and a virtual timerfd is an eventfd: the host writes
+/// them itself when it could take a copy of the fd (pidfd_getfd), else it marks the wait or
+/// timer `fired` and wakes the process's agent thread, which writes them. A condition variable
+/// (kCondWait) is always broadcast by the agent.
 ///
 /// Slot states: whoever ends a wait sets the slot kRunning before the waiter can run: the
 /// waiter itself (its wait returned) or the host (a deadline it reached), by compare-and-swap
@@ -94,6 +95,9 @@ struct alignas(64) TimerSlot {
   std::atomic<std::uint32_t> fired{0};  ///< Host -> agent: next_ns passed.
   std::atomic<std::int32_t> pid{0};
   std::int32_t fd = -1;  ///< The eventfd the program sees as its timerfd (process-local).
+  /// Bumped by every timerfd_create on this slot: a host that holds a copy of `fd` (pidfd_getfd)
+  /// knows when it is another timer's.
+  std::atomic<std::uint32_t> generation{0};
   std::atomic<std::int64_t> next_ns{kNoDeadline};
   std::atomic<std::int64_t> interval_ns{0};
 };
@@ -118,6 +122,23 @@ struct Page {
 };
 
 inline std::int64_t ToNs(std::int64_t sec, std::int64_t nsec) { return sec * 1000000000 + nsec; }
+
+/// A timer whose next_ns is at or before `now` expires: returns the expirations since then
+/// (what a read of the timerfd returns) and moves next_ns on, or disarms a one-shot timer.
+/// Whoever writes the timer's eventfd (host or agent) calls it, once per firing.
+inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
+  const std::int64_t next = t.next_ns.load();
+  const std::int64_t interval = t.interval_ns.load();
+  std::uint64_t expirations = 1;
+  if (interval > 0) {
+    expirations += static_cast<std::uint64_t>((now - next) / interval);
+    t.next_ns.store(next + static_cast<std::int64_t>(expirations) * interval);
+  } else {
+    t.next_ns.store(kNoDeadline);
+    t.state.store(kTimerDisarmed);
+  }
+  return expirations;
+}
 
 static_assert(std::atomic<std::int64_t>::is_always_lock_free);
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free);

@@ -129,6 +129,11 @@ const std::vector<std::string>& BenchScenarios() {
   return k;
 }
 
+const std::vector<std::string>& VirtualTimeBenchScenarios() {
+  static const std::vector<std::string> k = {"paper000", "paper002"};
+  return k;
+}
+
 std::vector<std::string> DocumentedMetricKeys() {
   std::vector<std::string> keys;
   for (const auto& p : BenchPlatforms()) {
@@ -140,6 +145,11 @@ std::vector<std::string> DocumentedMetricKeys() {
     keys.push_back(fmt::format("lockstep.{}.rtf", s));
     keys.push_back(fmt::format("lockstep.{}.vcan_rtf", s));
   }
+  for (const auto& s : VirtualTimeBenchScenarios()) {
+    keys.push_back(fmt::format("virtual_time.{}.rtf", s));
+  }
+  keys.push_back("virtual_time.customer_c.rtf");
+  keys.push_back("virtual_time.customer_python.rtf");
   for (const char* k : {"bus.ucan_frames_per_s",
                         "bus.ucan_fanout4_frames_per_s",
                         "bus.vcan_frames_per_s",

@@ -47,6 +47,8 @@ const nlohmann::json* GetPath(const nlohmann::json& report, std::string_view dot
 const std::vector<std::string>& BenchPlatforms();
 /// Paper scenarios of the lockstep rows.
 const std::vector<std::string>& BenchScenarios();
+/// Those also measured on the firmware's virtual clock (virtual_time.<paper>.rtf).
+const std::vector<std::string>& VirtualTimeBenchScenarios();
 /// Every documented numeric key (finite number or "unavailable: ...").
 std::vector<std::string> DocumentedMetricKeys();
 /// Every documented text key (machine facts, notes).

@@ -100,7 +100,8 @@ struct LockstepRun {
 /// kQuickLockstepSimS (written like a campaign run's). A run that reports a failure (e.g. the
 /// firmware never answered) gives that failure as the reason, never a number.
 LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_exe,
-                                const std::string& file, const std::string& iface) {
+                                const std::string& file, const std::string& iface,
+                                const std::vector<campaign::Override>& overrides = {}) {
   LockstepRun out;
   const std::string what =
       fmt::format("`wheelhil run {}{}`", std::filesystem::path(file).filename().string(),
@@ -113,13 +114,14 @@ LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_e
     return out;
   }
   std::string scenario = file;
-  if (o.quick) {
+  if (o.quick || !overrides.empty()) {
     try {
       campaign::CampaignSpec spec;
       spec.file = file;
       spec.name = "bench_quick_lockstep";
       spec.base_scenario = std::filesystem::absolute(file);
-      spec.overrides.push_back({"timing.duration_s", kQuickLockstepSimS, 0});
+      spec.overrides = overrides;
+      if (o.quick) spec.overrides.push_back({"timing.duration_s", kQuickLockstepSimS, 0});
       scenario = dir + "/scenario.yaml";
       campaign::WriteRunScenario(spec, campaign::RunSpec{}, scenario);
     } catch (const std::exception& e) {
@@ -183,6 +185,37 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
               std::filesystem::path(file).filename().string());
       if (r.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.sim_s", s), r.sim_s);
       lockstep_mib = std::max(lockstep_mib, r.max_rss_mib);
+    }
+    // The same scenario right after, on the firmware's virtual clock with the firmware as SYNC
+    // producer (its shipped config): the two rows are measured interleaved.
+    const std::string vkey = fmt::format("virtual_time.{}.rtf", s);
+    if (std::find(VirtualTimeBenchScenarios().begin(), VirtualTimeBenchScenarios().end(), s) !=
+        VirtualTimeBenchScenarios().end()) {
+      const LockstepRun v = RunLockstepScenario(
+          o, self_exe, file, "",
+          {{"timing.clock", "virtual", 0}, {"timing.sync_producer", "firmware", 0}});
+      SetPath(report, vkey, v.rtf);
+    }
+  }
+  // Firmwares written as customers write them (tests/customer_firmware/, built in the build tree
+  // only), on the virtual clock.
+  for (const auto& [key, name] : {std::pair<std::string, std::string>{"customer_c",
+                                                                        "c_epoll_odometry"},
+                                  {"customer_python", "python_can_odometry"}}) {
+    const std::string row = fmt::format("virtual_time.{}.rtf", key);
+    const std::string file = o.source_dir + "/tests/data/customer_firmware/" + name + ".yaml";
+    if (!unavailable.empty()) {
+      SetPath(report, row, Unavailable(unavailable));
+    } else if (!std::filesystem::exists(file)) {
+      SetPath(report, row, Unavailable("no " + file + " (a source tree is needed)"));
+    } else if (name == "c_epoll_odometry" &&
+               !std::filesystem::exists(std::filesystem::path(self_exe).parent_path() / name)) {
+      SetPath(report, row, Unavailable("no " + name + " next to wheelhil (a build tree is needed)"));
+    } else {
+      // Whole (5 s of motion): a cut copy would move the file that ${SCENARIO_DIR} names.
+      BenchOptions whole = o;
+      whole.quick = false;
+      SetPath(report, row, RunLockstepScenario(whole, self_exe, file, "").rtf);
     }
   }
   if (lockstep_mib > 0) {

@@ -3,6 +3,7 @@
 #include <elf.h>
 #include <fcntl.h>
 #include <linux/futex.h>
+#include <sys/eventfd.h>
 #include <sys/mman.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -68,6 +69,8 @@ VirtualClock::VirtualClock(const std::string& dir) : path_(dir + "/" + vt::kPage
 }
 
 VirtualClock::~VirtualClock() {
+  for (const FdCopy& c : fd_copies_) ::close(c.local_fd);
+  for (const auto& [pid, fd] : pidfds_) ::close(fd);
   for (auto& f : files_) {
     if (f.stat_fd >= 0) ::close(f.stat_fd);
     if (f.schedstat_fd >= 0) ::close(f.schedstat_fd);
@@ -140,7 +143,13 @@ int VirtualClock::WakeDue() {
     if (!s.state.compare_exchange_strong(expect, vt::kRunning)) continue;  // it woke itself
     ++ended;
     const std::uint32_t kind = s.kind.load();
-    if (kind == vt::kFdWait || kind == vt::kCondWait) {
+    if (kind == vt::kFdWait) {
+      // Its eventfd written here saves the hop through the agent.
+      const int copy = s.wake_fd >= 0 ? CopyOfFd(s.pid.load(), s.wake_fd, s.tid.load()) : -1;
+      if (copy >= 0 && eventfd_write(copy, 1) == 0) continue;
+      s.fired.store(1);
+      need_agent(s.pid.load());
+    } else if (kind == vt::kCondWait) {
       s.fired.store(1);
       need_agent(s.pid.load());
     } else {
@@ -154,8 +163,14 @@ int VirtualClock::WakeDue() {
     if (t.state.load() != vt::kTimerArmed || t.fired.load() != 0 || t.next_ns.load() > now) {
       continue;
     }
-    t.fired.store(1);
     ++ended;
+    const std::uint64_t tag = std::uint64_t{1} << 32 | t.generation.load();
+    const int copy = CopyOfFd(t.pid.load(), t.fd, tag);
+    if (copy >= 0) {
+      eventfd_write(copy, vt::ExpireTimer(t, now));
+      continue;
+    }
+    t.fired.store(1);
     need_agent(t.pid.load());
   }
   for (int a = 0; a < n_agents; ++a) {
@@ -173,6 +188,41 @@ int VirtualClock::WakeDue() {
     }
   }
   return ended;
+}
+
+int VirtualClock::CopyOfFd(pid_t pid, int fd, std::uint64_t tag) {
+  if (!fd_copies_work_ || pid <= 0 || fd < 0) return -1;
+  for (const FdCopy& c : fd_copies_) {
+    if (c.pid == pid && c.remote_fd == fd && c.tag == tag) return c.local_fd;
+  }
+  int pidfd = -1;
+  for (const auto& [p, f] : pidfds_) {
+    if (p == pid) pidfd = f;
+  }
+  if (pidfd < 0) {
+    pidfd = static_cast<int>(::syscall(SYS_pidfd_open, pid, 0));
+    if (pidfd < 0) {
+      fd_copies_work_ = false;  // no pidfds here: the agents write
+      return -1;
+    }
+    pidfds_.emplace_back(pid, pidfd);
+  }
+  const int local = static_cast<int>(::syscall(SYS_pidfd_getfd, pidfd, fd, 0));
+  if (local < 0) {
+    // EPERM (ptrace policy), ENOSYS: the agents write, for the whole run.
+    if (errno != EBADF && errno != ESRCH) fd_copies_work_ = false;
+    return -1;
+  }
+  // A copy for the same fd number with an older tag is another object now.
+  for (FdCopy& c : fd_copies_) {
+    if (c.pid == pid && c.remote_fd == fd) {
+      ::close(c.local_fd);
+      c = FdCopy{pid, fd, tag, local};
+      return local;
+    }
+  }
+  fd_copies_.push_back(FdCopy{pid, fd, tag, local});
+  return local;
 }
 
 bool VirtualClock::ProcessAlive(pid_t pid) const {

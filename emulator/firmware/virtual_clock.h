@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace wheelhil::bus::vtime {
@@ -77,6 +78,9 @@ class VirtualClock {
     std::uint64_t runs_seen = UINT64_MAX;  // schedstat timeslices when last seen asleep
   };
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
+  // This process's copy of fd `fd` of process `pid` (pidfd_getfd), cached while `tag` (the
+  // thread, or the timer's generation) is the same; -1 when copies cannot be had.
+  int CopyOfFd(pid_t pid, int fd, std::uint64_t tag);
   void FreeDeadThread(int slot);
   bool ProcessAlive(pid_t pid) const;
 
@@ -85,6 +89,15 @@ class VirtualClock {
   std::vector<ProcFiles> files_;
   std::uint32_t transitions_seen_ = 0;
   int first_process_slot_ = -1;
+  struct FdCopy {
+    pid_t pid = 0;
+    int remote_fd = -1;
+    std::uint64_t tag = 0;
+    int local_fd = -1;
+  };
+  std::vector<FdCopy> fd_copies_;
+  std::vector<std::pair<pid_t, int>> pidfds_;
+  bool fd_copies_work_ = true;
 };
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a

@@ -307,7 +307,8 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   } else if (clock != "cooperative") {
     r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual or cooperative", clock));
   }
-  const std::string producer = r.String(n, "sync_producer", "timing", std::string("emulator"));
+  const std::string producer = r.String(n, "sync_producer", "timing",
+                                        std::string(t.virtual_clock ? "firmware" : "emulator"));
   if (producer == "firmware") {
     t.firmware_produces_sync = true;
   } else if (producer != "emulator") {

@@ -115,6 +115,33 @@ TEST(ScenarioLoader, ColumnPointsAtTheValue) {
               ThrowsMessage<std::invalid_argument>(HasSubstr(":10:16: timing.mode: 'fast'")));
 }
 
+TEST(ScenarioLoader, ClockAndSyncProducer) {
+  // Cooperative handshake with the emulator's SYNC unless asked otherwise.
+  const Scenario plain = ParseScenario(Minimal(), kFile);
+  EXPECT_FALSE(plain.timing.virtual_clock);
+  EXPECT_FALSE(plain.timing.firmware_produces_sync);
+  // On the virtual clock the firmware produces SYNC unless the scenario says the emulator does.
+  const Scenario v = ParseScenario(Minimal("timing: {clock: virtual}\n"), kFile);
+  EXPECT_TRUE(v.timing.virtual_clock);
+  EXPECT_TRUE(v.timing.firmware_produces_sync);
+  const Scenario ve =
+      ParseScenario(Minimal("timing: {clock: virtual, sync_producer: emulator}\n"), kFile);
+  EXPECT_FALSE(ve.timing.firmware_produces_sync);
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {clock: fast}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr(":10:17: timing.clock: 'fast' is not virtual or cooperative")));
+  EXPECT_THAT(
+      [] { (void)ParseScenario(Minimal("timing: {sync_producer: master}\n"), kFile); },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
+  // The handshake needs the emulator's SYNC; real time does not.
+  EXPECT_THAT(
+      [] { (void)ParseScenario(Minimal("timing: {sync_producer: firmware}\n"), kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
+  EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
+                  .timing.firmware_produces_sync);
+}
+
 TEST(ScenarioLoader, UnknownWheelIsRejected) {
   std::string text = Minimal();
   text.replace(text.find("wheel: right"), 12, "wheel: front");
