@@ -18,6 +18,7 @@
 #include <linux/futex.h>
 #include <poll.h>
 #include <pthread.h>
+#include <semaphore.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,6 +33,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -89,6 +91,11 @@ REAL_FN_V(pthread_cond_timedwait, int, (pthread_cond_t*, pthread_mutex_t*, const
           "GLIBC_2.3.2")
 REAL_FN(pthread_cond_clockwait, int,
         (pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*))
+REAL_FN(sem_wait, int, (sem_t*))
+REAL_FN(sem_timedwait, int, (sem_t*, const timespec*))
+REAL_FN(sem_clockwait, int, (sem_t*, clockid_t, const timespec*))
+REAL_FN(pthread_mutex_timedlock, int, (pthread_mutex_t*, const timespec*))
+REAL_FN(pthread_mutex_clocklock, int, (pthread_mutex_t*, clockid_t, const timespec*))
 
 // ---- the page and this process's slots ----
 
@@ -391,6 +398,65 @@ int CondWaitUntil(pthread_cond_t* c, pthread_mutex_t* m, std::int64_t deadline) 
   EndWait(s);
   if (rc == 0 && deadline != vt::kNoDeadline && Now() >= deadline) return ETIMEDOUT;
   return rc;
+}
+
+/// The wake signal's handler: nothing; it only makes sem_wait return EINTR.
+void OnWakeSignal(int) {}
+
+void EnsureWakeSignal() {
+  static bool installed = false;  // under g_agent_lock
+  pthread_mutex_lock(&g_agent_lock);
+  if (!installed) {
+    struct sigaction old {};
+    sigaction(vt::kWakeSignal, nullptr, &old);
+    // A program with its own handler for it keeps it (that handler then sees the wake-ups).
+    if (old.sa_handler == SIG_DFL) {
+      struct sigaction sa {};
+      sa.sa_handler = OnWakeSignal;
+      sigemptyset(&sa.sa_mask);
+      sa.sa_flags = 0;  // no SA_RESTART: sem_wait returns EINTR
+      sigaction(vt::kWakeSignal, &sa, nullptr);
+    }
+    installed = true;
+  }
+  pthread_mutex_unlock(&g_agent_lock);
+}
+
+/// sem_wait until virtual `deadline`: 0, or -1 with errno ETIMEDOUT (or EINTR for a signal of
+/// the program's own). The host ends the wait at the deadline with kWakeSignal to this thread.
+int SemWaitUntil(sem_t* sem, std::int64_t deadline) {
+  if (sem_trywait(sem) == 0) return 0;
+  if (Now() >= deadline) {
+    NoteCall(vt::kCallPastDeadline);
+    errno = ETIMEDOUT;
+    return -1;
+  }
+  EnsureWakeSignal();
+  vt::ThreadSlot& s = Self();
+  sigset_t wake, old;
+  sigemptyset(&wake);
+  sigaddset(&wake, vt::kWakeSignal);
+  pthread_sigmask(SIG_UNBLOCK, &wake, &old);
+  BeginWait(s, vt::kSemWait, deadline);
+  int rc = real_sem_wait()(sem);
+  int err = errno;
+  EndWait(s);
+  pthread_sigmask(SIG_SETMASK, &old, nullptr);
+  if (rc != 0 && err == EINTR && Now() >= deadline) err = ETIMEDOUT;
+  errno = err;
+  return rc;
+}
+
+/// A mutex has no wait the host can end: tried every millisecond of virtual time until the
+/// deadline (deterministic; the lock is taken up to 1 ms after its release).
+int MutexLockUntil(pthread_mutex_t* m, std::int64_t deadline) {
+  for (;;) {
+    const int rc = pthread_mutex_trylock(m);
+    if (rc != EBUSY) return rc;
+    const std::int64_t now = Now();
+    if (now >= deadline) return ETIMEDOUT;
+    if (SleepUntil(std::min(deadline, now + 1000000)) != 0) continue;
+  }
 }
 
 // ---- virtual timerfds ----
@@ -838,4 +904,39 @@ VTIME_EXPORT pid_t fork() {
     g_page->processes[slot].state.store(vt::kProcFree);
   }
   return pid;
+}
+
+// ---- semaphores, timed mutexes ----
+
+VTIME_EXPORT int sem_timedwait(sem_t* sem, const timespec* abstime) {
+  if (g_page == nullptr) return real_sem_timedwait()(sem, abstime);
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) {
+    errno = EINVAL;
+    return -1;
+  }
+  return SemWaitUntil(sem, DeadlineFromAbs(CLOCK_REALTIME, *abstime));
+}
+
+VTIME_EXPORT int sem_clockwait(sem_t* sem, clockid_t clk, const timespec* abstime) {
+  if (g_page == nullptr || !IsVirtualClock(clk)) return real_sem_clockwait()(sem, clk, abstime);
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) {
+    errno = EINVAL;
+    return -1;
+  }
+  return SemWaitUntil(sem, DeadlineFromAbs(clk, *abstime));
+}
+
+VTIME_EXPORT int pthread_mutex_timedlock(pthread_mutex_t* m, const timespec* abstime) {
+  if (g_page == nullptr) return real_pthread_mutex_timedlock()(m, abstime);
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
+  return MutexLockUntil(m, DeadlineFromAbs(CLOCK_REALTIME, *abstime));
+}
+
+VTIME_EXPORT int pthread_mutex_clocklock(pthread_mutex_t* m, clockid_t clk,
+                                         const timespec* abstime) {
+  if (g_page == nullptr || !IsVirtualClock(clk)) {
+    return real_pthread_mutex_clocklock()(m, clk, abstime);
+  }
+  if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
+  return MutexLockUntil(m, DeadlineFromAbs(clk, *abstime));
 }

@@ -48,7 +48,11 @@ enum WaitKind : std::uint32_t {
   kFdWait = 2,    ///< poll/select/epoll on the thread's fds + its eventfd.
   kCondWait = 3,  ///< A condition variable (the agent broadcasts it at the deadline).
   kAgent = 4,     ///< The process's agent, idle: only the host ends it.
+  kSemWait = 5,   ///< sem_wait: the host ends it with kWakeSignal to the thread (EINTR).
 };
+
+/// The signal that ends a semaphore wait at its deadline (SIGRTMAX; its handler does nothing).
+inline constexpr int kWakeSignal = 64;
 
 /// What a thread last called that did not block (for the report of a thread that never does).
 enum LastCall : std::uint32_t {

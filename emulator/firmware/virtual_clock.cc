@@ -152,6 +152,8 @@ int VirtualClock::WakeDue() {
     } else if (kind == vt::kCondWait) {
       s.fired.store(1);
       need_agent(s.pid.load());
+    } else if (kind == vt::kSemWait) {
+      ::syscall(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
     } else {
       s.wake.fetch_add(1);
       FutexWake(&s.wake);

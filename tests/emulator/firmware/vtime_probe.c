@@ -7,6 +7,7 @@
 #include <errno.h>
 #include <poll.h>
 #include <pthread.h>
+#include <semaphore.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,6 +44,34 @@ static void* signaller(void* arg) {
   pthread_cond_signal(&g_c);
   pthread_mutex_unlock(&g_m);
   return NULL;
+}
+
+static sem_t g_sem;
+static pthread_mutex_t g_held = PTHREAD_MUTEX_INITIALIZER;
+
+static void* poster(void* arg) {
+  (void)arg;
+  usleep(5000);
+  sem_post(&g_sem);
+  return NULL;
+}
+
+static void* holder(void* arg) {
+  pthread_mutex_lock(&g_held);
+  usleep((useconds_t)(intptr_t)arg);
+  pthread_mutex_unlock(&g_held);
+  return NULL;
+}
+
+static struct timespec in_ms(clockid_t c, long ms) {
+  struct timespec t;
+  clock_gettime(c, &t);
+  t.tv_nsec += ms * 1000000L;
+  while (t.tv_nsec >= 1000000000L) {
+    t.tv_sec += 1;
+    t.tv_nsec -= 1000000000L;
+  }
+  return t;
 }
 
 int main(int argc, char** argv) {
@@ -129,6 +158,29 @@ int main(int argc, char** argv) {
     while (!g_flag) pthread_cond_wait(&g_c, &g_m);
     pthread_mutex_unlock(&g_m);
     report("signalled", 1);
+    pthread_join(t, NULL);
+  } else if (strcmp(what, "sem") == 0) {
+    sem_init(&g_sem, 0, 0);
+    struct timespec abs = in_ms(CLOCK_REALTIME, 30);
+    const int rc = sem_timedwait(&g_sem, &abs);
+    report("sem_timedwait", rc == -1 && errno == ETIMEDOUT);
+    pthread_t t;
+    pthread_create(&t, NULL, poster, NULL);
+    abs = in_ms(CLOCK_MONOTONIC, 100);
+    report("sem_clockwait_posted", sem_clockwait(&g_sem, CLOCK_MONOTONIC, &abs) == 0);
+    pthread_join(t, NULL);
+  } else if (strcmp(what, "mutex") == 0) {
+    pthread_t t;
+    pthread_create(&t, NULL, holder, (void*)(intptr_t)12500);
+    usleep(100);  // the holder has it
+    struct timespec abs = in_ms(CLOCK_REALTIME, 50);
+    report("timedlock", pthread_mutex_timedlock(&g_held, &abs) == 0);
+    pthread_mutex_unlock(&g_held);
+    pthread_join(t, NULL);
+    pthread_create(&t, NULL, holder, (void*)(intptr_t)20000);
+    usleep(100);
+    abs = in_ms(CLOCK_MONOTONIC, 5);
+    report("clocklock_timeout", pthread_mutex_clocklock(&g_held, CLOCK_MONOTONIC, &abs) == ETIMEDOUT);
     pthread_join(t, NULL);
   } else if (strcmp(what, "spin") == 0) {
     report("start", 0);
