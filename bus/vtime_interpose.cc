@@ -20,6 +20,7 @@
 #include <pthread.h>
 #include <semaphore.h>
 #include <signal.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <sys/epoll.h>
@@ -91,6 +92,15 @@ REAL_FN_V(pthread_cond_timedwait, int, (pthread_cond_t*, pthread_mutex_t*, const
           "GLIBC_2.3.2")
 REAL_FN(pthread_cond_clockwait, int,
         (pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*))
+REAL_FN(syscall, long, (long, ...))
+REAL_FN(alarm, unsigned, (unsigned))
+REAL_FN(setitimer, int, (int, const itimerval*, itimerval*))
+REAL_FN(getitimer, int, (int, itimerval*))
+REAL_FN(timer_create, int, (clockid_t, sigevent*, timer_t*))
+REAL_FN(timer_settime, int, (timer_t, int, const itimerspec*, itimerspec*))
+REAL_FN(timer_gettime, int, (timer_t, itimerspec*))
+REAL_FN(timer_getoverrun, int, (timer_t))
+REAL_FN(timer_delete, int, (timer_t))
 REAL_FN(sem_wait, int, (sem_t*))
 REAL_FN(sem_timedwait, int, (sem_t*, const timespec*))
 REAL_FN(sem_clockwait, int, (sem_t*, clockid_t, const timespec*))
@@ -109,10 +119,11 @@ thread_local int t_wake_fd = -1;
 // The clock of each virtual timerfd (index: timer slot), for absolute settings.
 clockid_t g_timer_clock[vt::kMaxTimers];
 
-pid_t Tid() { return static_cast<pid_t>(::syscall(SYS_gettid)); }
+pid_t Tid() { return static_cast<pid_t>(real_syscall()(SYS_gettid)); }
 
 long Futex(std::atomic<std::uint32_t>* word, int op, std::uint32_t val) {
-  return ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(word), op, val, nullptr, nullptr, 0);
+  return real_syscall()(SYS_futex, reinterpret_cast<std::uint32_t*>(word), op, val, nullptr,
+                        nullptr, 0);
 }
 
 std::int64_t Now() { return g_page->now_ns.load(std::memory_order_acquire); }
@@ -222,14 +233,43 @@ void DrainEventFd(int fd) {
   }
 }
 
+struct TimerThreadCall {
+  std::uint64_t function;
+  std::uint64_t sigval;
+};
+
+void* TimerThreadMain(void* raw) {
+  const TimerThreadCall call = *static_cast<TimerThreadCall*>(raw);
+  ::free(raw);
+  sigval v{};
+  v.sival_ptr = reinterpret_cast<void*>(call.sigval);
+  reinterpret_cast<void (*)(sigval)>(call.function)(v);
+  return nullptr;
+}
+
 void FireTimers() {
   const int used = g_page->timers_used.load();
   for (int i = 0; i < used; ++i) {
     vt::TimerSlot& t = g_page->timers[i];
     if (t.pid.load() != getpid() || t.fired.load() == 0) continue;
     const std::uint64_t expirations = vt::ExpireTimer(t, Now());
+    t.overrun.store(static_cast<std::uint32_t>(expirations - 1));
     t.fired.store(0);
-    eventfd_write(t.fd, expirations);
+    if (t.notify.load() == vt::kNotifyEventFd) {
+      eventfd_write(t.fd, expirations);
+    } else if (t.notify.load() == vt::kNotifyThread) {
+      // SIGEV_THREAD: like glibc, a new thread per expiration (through our pthread_create, so
+      // the host sees it).
+      auto* call = static_cast<TimerThreadCall*>(::malloc(sizeof(TimerThreadCall)));
+      if (call == nullptr) continue;
+      *call = TimerThreadCall{t.function, t.sigval};
+      pthread_t th;
+      pthread_attr_t attr;
+      pthread_attr_init(&attr);
+      pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+      if (pthread_create(&th, &attr, TimerThreadMain, call) != 0) ::free(call);
+      pthread_attr_destroy(&attr);
+    }
   }
 }
 
@@ -241,6 +281,10 @@ void FireWaits() {
     if (s.fired.exchange(0) == 0) continue;
     if (s.kind.load() == vt::kFdWait && s.wake_fd >= 0) {
       eventfd_write(s.wake_fd, 1);
+    } else if (s.kind.load() == vt::kFutexWait) {
+      real_syscall()(SYS_futex, reinterpret_cast<std::uint32_t*>(s.cond),
+                     static_cast<int>(FUTEX_WAKE_BITSET | s.mutex), INT32_MAX, nullptr, nullptr,
+                     FUTEX_BITSET_MATCH_ANY);
     } else if (s.kind.load() == vt::kCondWait) {
       // Under the waiter's mutex: the waiter is inside pthread_cond_wait (it registered with the
       // mutex held and the wait released it), so the broadcast cannot be missed.
@@ -457,6 +501,85 @@ int MutexLockUntil(pthread_mutex_t* m, std::int64_t deadline) {
     if (now >= deadline) return ETIMEDOUT;
     if (SleepUntil(std::min(deadline, now + 1000000)) != 0) continue;
   }
+}
+
+// ---- virtual timers ----
+
+/// A disarmed timer slot of this process telling its expiry by `notify`; -1 when all are taken.
+int ClaimTimer(clockid_t c, vt::TimerNotify notify, int fd) {
+  for (int i = 0; i < vt::kMaxTimers; ++i) {
+    vt::TimerSlot& t = g_page->timers[i];
+    std::uint32_t expect = vt::kTimerFree;
+    if (!t.state.compare_exchange_strong(expect, vt::kTimerDisarmed)) continue;
+    t.fired.store(0);
+    t.fd = fd;
+    t.notify.store(notify);
+    t.signo = 0;
+    t.target_tid = 0;
+    t.sigval = 0;
+    t.function = 0;
+    t.overrun.store(0);
+    t.generation.fetch_add(1);
+    t.next_ns.store(vt::kNoDeadline);
+    t.interval_ns.store(0);
+    t.pid.store(getpid());
+    g_timer_clock[i] = c;
+    std::int32_t used = g_page->timers_used.load();
+    while (used < i + 1 && !g_page->timers_used.compare_exchange_weak(used, i + 1)) {
+    }
+    return i;
+  }
+  return -1;
+}
+
+/// Arms (value > 0) or disarms a timer slot; `abs`: value is an absolute time on its clock.
+void ArmTimer(int i, const itimerspec& v, bool abs) {
+  vt::TimerSlot& t = g_page->timers[i];
+  t.state.store(vt::kTimerDisarmed);
+  t.next_ns.store(vt::kNoDeadline);
+  t.fired.store(0);
+  const std::int64_t value = vt::ToNs(v.it_value.tv_sec, v.it_value.tv_nsec);
+  if (value == 0) return;
+  const std::int64_t next = abs ? DeadlineFromAbs(g_timer_clock[i], v.it_value) : DeadlineIn(value);
+  t.interval_ns.store(vt::ToNs(v.it_interval.tv_sec, v.it_interval.tv_nsec));
+  t.next_ns.store(next);
+  t.state.store(vt::kTimerArmed);
+}
+
+bool ValidItimerspec(const itimerspec& v) {
+  return v.it_value.tv_nsec >= 0 && v.it_value.tv_nsec < 1000000000 &&
+         v.it_interval.tv_nsec >= 0 && v.it_interval.tv_nsec < 1000000000 &&
+         v.it_value.tv_sec >= 0 && v.it_interval.tv_sec >= 0;
+}
+
+// timer_t handles of virtual timers: above every user-space address and kernel timer id.
+constexpr std::uintptr_t kTimerHandleTag = 0x7674000000000000ull;
+
+timer_t TimerHandle(int slot) {
+  return reinterpret_cast<timer_t>(kTimerHandleTag | static_cast<std::uintptr_t>(slot));
+}
+int TimerSlotOf(timer_t h) {
+  const auto v = reinterpret_cast<std::uintptr_t>(h);
+  if ((v & ~std::uintptr_t{0xffff}) != kTimerHandleTag) return -1;
+  const int i = static_cast<int>(v & 0xffff);
+  if (i >= vt::kMaxTimers || g_page->timers[i].state.load() == vt::kTimerFree ||
+      g_page->timers[i].pid.load() != getpid()) {
+    return -1;
+  }
+  return i;
+}
+
+/// The process's alarm / ITIMER_REAL timer (created on first use), -1 when none is free.
+int AlarmTimer() {
+  const int used = g_page->timers_used.load();
+  for (int i = 0; i < used; ++i) {
+    const vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() != vt::kTimerFree && t.pid.load() == getpid() &&
+        t.notify.load() == vt::kNotifyAlarm) {
+      return i;
+    }
+  }
+  return ClaimTimer(CLOCK_MONOTONIC, vt::kNotifyAlarm, -1);
 }
 
 // ---- virtual timerfds ----
@@ -773,25 +896,12 @@ VTIME_EXPORT int timerfd_create(int c, int flags) {
   const int fd = eventfd(0, ((flags & TFD_NONBLOCK) ? EFD_NONBLOCK : 0) |
                                 ((flags & TFD_CLOEXEC) ? EFD_CLOEXEC : 0));
   if (fd < 0) return -1;
-  for (int i = 0; i < vt::kMaxTimers; ++i) {
-    vt::TimerSlot& t = g_page->timers[i];
-    std::uint32_t expect = vt::kTimerFree;
-    if (!t.state.compare_exchange_strong(expect, vt::kTimerDisarmed)) continue;
-    t.fired.store(0);
-    t.fd = fd;
-    t.generation.fetch_add(1);
-    t.next_ns.store(vt::kNoDeadline);
-    t.interval_ns.store(0);
-    t.pid.store(getpid());
-    g_timer_clock[i] = c;
-    std::int32_t used = g_page->timers_used.load();
-    while (used < i + 1 && !g_page->timers_used.compare_exchange_weak(used, i + 1)) {
-    }
-    return fd;
+  if (ClaimTimer(c, vt::kNotifyEventFd, fd) < 0) {
+    real_close()(fd);
+    errno = EMFILE;
+    return -1;
   }
-  real_close()(fd);
-  errno = EMFILE;
-  return -1;
+  return fd;
 }
 
 VTIME_EXPORT int timerfd_gettime(int fd, itimerspec* cur) {
@@ -819,17 +929,8 @@ VTIME_EXPORT int timerfd_settime(int fd, int flags, const itimerspec* nv, itimer
   // Disarm first (the host no longer fires it), then the new setting; expirations not yet
   // read are discarded, as timerfd_settime(2) does.
   t.state.store(vt::kTimerDisarmed);
-  t.next_ns.store(vt::kNoDeadline);
-  t.fired.store(0);
   DrainEventFd(fd);
-  const std::int64_t value = vt::ToNs(nv->it_value.tv_sec, nv->it_value.tv_nsec);
-  if (value == 0) return 0;
-  const std::int64_t next = (flags & TFD_TIMER_ABSTIME)
-                                ? DeadlineFromAbs(g_timer_clock[i], nv->it_value)
-                                : DeadlineIn(value);
-  t.interval_ns.store(vt::ToNs(nv->it_interval.tv_sec, nv->it_interval.tv_nsec));
-  t.next_ns.store(next);
-  t.state.store(vt::kTimerArmed);
+  ArmTimer(i, *nv, (flags & TFD_TIMER_ABSTIME) != 0);
   return 0;
 }
 
@@ -939,4 +1040,196 @@ VTIME_EXPORT int pthread_mutex_clocklock(pthread_mutex_t* m, clockid_t clk,
   }
   if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
   return MutexLockUntil(m, DeadlineFromAbs(clk, *abstime));
+}
+
+// ---- raw system calls through libc's syscall() (Rust's std parks threads this way) ----
+
+namespace {
+
+long FutexWaitUntil(std::uint32_t* addr, int op, std::uint32_t val, std::int64_t deadline,
+                    std::uint32_t bitset) {
+  if (__atomic_load_n(addr, __ATOMIC_SEQ_CST) != val) {
+    errno = EAGAIN;
+    return -1;
+  }
+  if (Now() >= deadline) {
+    NoteCall(vt::kCallPastDeadline);
+    errno = ETIMEDOUT;
+    return -1;
+  }
+  EnsureAgent();
+  vt::ThreadSlot& s = Self();
+  s.cond = reinterpret_cast<std::uintptr_t>(addr);
+  s.mutex = static_cast<std::uint64_t>(op & FUTEX_PRIVATE_FLAG);
+  BeginWait(s, vt::kFutexWait, deadline);
+  const long rc = real_syscall()(SYS_futex, addr, FUTEX_WAIT_BITSET | (op & FUTEX_PRIVATE_FLAG),
+                                 val, nullptr, nullptr, bitset);
+  const int err = errno;
+  EndWait(s);
+  if (rc == 0 && Now() >= deadline) {
+    errno = ETIMEDOUT;
+    return -1;
+  }
+  errno = err;
+  return rc;
+}
+
+}  // namespace
+
+VTIME_EXPORT long syscall(long number, ...) {
+  va_list ap;
+  va_start(ap, number);
+  const long a1 = va_arg(ap, long), a2 = va_arg(ap, long), a3 = va_arg(ap, long);
+  const long a4 = va_arg(ap, long), a5 = va_arg(ap, long), a6 = va_arg(ap, long);
+  va_end(ap);
+  if (g_page != nullptr) {
+    switch (number) {
+      case SYS_clock_gettime:
+        return clock_gettime(static_cast<clockid_t>(a1), reinterpret_cast<timespec*>(a2));
+      case SYS_gettimeofday:
+        return gettimeofday(reinterpret_cast<timeval*>(a1), reinterpret_cast<void*>(a2));
+      case SYS_time:
+        return time(reinterpret_cast<time_t*>(a1));
+      case SYS_nanosleep:
+        return nanosleep(reinterpret_cast<const timespec*>(a1), reinterpret_cast<timespec*>(a2));
+      case SYS_clock_nanosleep: {
+        const int rc = clock_nanosleep(static_cast<clockid_t>(a1), static_cast<int>(a2),
+                                       reinterpret_cast<const timespec*>(a3),
+                                       reinterpret_cast<timespec*>(a4));
+        if (rc == 0) return 0;
+        errno = rc;
+        return -1;
+      }
+      case SYS_futex: {
+        const int op = static_cast<int>(a2);
+        const int cmd = op & FUTEX_CMD_MASK;
+        const auto* ts = reinterpret_cast<const timespec*>(a4);
+        if ((cmd == FUTEX_WAIT || cmd == FUTEX_WAIT_BITSET) && ts != nullptr) {
+          // FUTEX_WAIT: relative; FUTEX_WAIT_BITSET: absolute on MONOTONIC or REALTIME.
+          const clockid_t clk = (op & FUTEX_CLOCK_REALTIME) ? CLOCK_REALTIME : CLOCK_MONOTONIC;
+          const std::int64_t deadline = cmd == FUTEX_WAIT
+                                            ? DeadlineIn(vt::ToNs(ts->tv_sec, ts->tv_nsec))
+                                            : DeadlineFromAbs(clk, *ts);
+          return FutexWaitUntil(reinterpret_cast<std::uint32_t*>(a1), op,
+                                static_cast<std::uint32_t>(a3), deadline,
+                                cmd == FUTEX_WAIT ? FUTEX_BITSET_MATCH_ANY
+                                                  : static_cast<std::uint32_t>(a6));
+        }
+        break;
+      }
+      default:
+        break;
+    }
+  }
+  return real_syscall()(number, a1, a2, a3, a4, a5, a6);
+}
+
+// ---- alarm, setitimer(ITIMER_REAL), POSIX timers ----
+
+VTIME_EXPORT int getitimer(int which, itimerval* cur) {
+  if (g_page == nullptr || which != ITIMER_REAL) return real_getitimer()(which, cur);
+  const int i = AlarmTimer();
+  if (i < 0) return real_getitimer()(which, cur);
+  const itimerspec v = TimerValue(g_page->timers[i]);
+  cur->it_value = timeval{v.it_value.tv_sec, v.it_value.tv_nsec / 1000};
+  cur->it_interval = timeval{v.it_interval.tv_sec, v.it_interval.tv_nsec / 1000};
+  return 0;
+}
+
+VTIME_EXPORT int setitimer(int which, const itimerval* nv, itimerval* old) {
+  if (g_page == nullptr || which != ITIMER_REAL) return real_setitimer()(which, nv, old);
+  const int i = AlarmTimer();
+  if (i < 0) {
+    errno = EAGAIN;
+    return -1;
+  }
+  if (nv->it_value.tv_usec < 0 || nv->it_value.tv_usec >= 1000000 || nv->it_interval.tv_usec < 0 ||
+      nv->it_interval.tv_usec >= 1000000) {
+    errno = EINVAL;
+    return -1;
+  }
+  if (old != nullptr) getitimer(which, old);
+  itimerspec v{};
+  v.it_value = timespec{nv->it_value.tv_sec, nv->it_value.tv_usec * 1000};
+  v.it_interval = timespec{nv->it_interval.tv_sec, nv->it_interval.tv_usec * 1000};
+  ArmTimer(i, v, false);
+  return 0;
+}
+
+VTIME_EXPORT unsigned alarm(unsigned seconds) {
+  if (g_page == nullptr) return real_alarm()(seconds);
+  itimerval nv{}, old{};
+  nv.it_value.tv_sec = static_cast<time_t>(seconds);
+  if (setitimer(ITIMER_REAL, &nv, &old) != 0) return 0;
+  // As glibc's alarm: the seconds left, rounded to the nearest, at least 1 when some are left.
+  unsigned left = static_cast<unsigned>(old.it_value.tv_sec);
+  if (old.it_value.tv_usec >= 500000 || (left == 0 && old.it_value.tv_usec > 0)) ++left;
+  return left;
+}
+
+VTIME_EXPORT int timer_create(clockid_t c, sigevent* sev, timer_t* id) {
+  if (g_page == nullptr || !IsVirtualClock(c)) return real_timer_create()(c, sev, id);
+  const int notify = sev == nullptr ? SIGEV_SIGNAL : sev->sigev_notify;
+  vt::TimerNotify kind = vt::kNotifySignal;
+  if (notify == SIGEV_NONE) {
+    kind = vt::kNotifyNone;
+  } else if (notify == SIGEV_THREAD) {
+    kind = vt::kNotifyThread;
+  } else if (notify != SIGEV_SIGNAL && notify != SIGEV_THREAD_ID) {
+    errno = EINVAL;
+    return -1;
+  }
+  const int i = ClaimTimer(c, kind, -1);
+  if (i < 0) {
+    errno = EAGAIN;
+    return -1;
+  }
+  vt::TimerSlot& t = g_page->timers[i];
+  if (sev == nullptr) {
+    t.signo = SIGALRM;
+    t.sigval = static_cast<std::uint64_t>(i);  // as the kernel: sival_int = the timer id
+  } else {
+    t.signo = sev->sigev_signo;
+    t.sigval = reinterpret_cast<std::uintptr_t>(sev->sigev_value.sival_ptr);
+    if (notify == SIGEV_THREAD) {
+      t.function = reinterpret_cast<std::uintptr_t>(sev->sigev_notify_function);
+    }
+    if (notify == SIGEV_THREAD_ID) t.target_tid = sev->_sigev_un._tid;
+  }
+  if (kind == vt::kNotifyThread) EnsureAgent();
+  *id = TimerHandle(i);
+  return 0;
+}
+
+VTIME_EXPORT int timer_settime(timer_t id, int flags, const itimerspec* nv, itimerspec* old) {
+  const int i = g_page == nullptr ? -1 : TimerSlotOf(id);
+  if (i < 0) return real_timer_settime()(id, flags, nv, old);
+  if (!ValidItimerspec(*nv)) {
+    errno = EINVAL;
+    return -1;
+  }
+  if (old != nullptr) *old = TimerValue(g_page->timers[i]);
+  ArmTimer(i, *nv, (flags & TIMER_ABSTIME) != 0);
+  return 0;
+}
+
+VTIME_EXPORT int timer_gettime(timer_t id, itimerspec* cur) {
+  const int i = g_page == nullptr ? -1 : TimerSlotOf(id);
+  if (i < 0) return real_timer_gettime()(id, cur);
+  *cur = TimerValue(g_page->timers[i]);
+  return 0;
+}
+
+VTIME_EXPORT int timer_getoverrun(timer_t id) {
+  const int i = g_page == nullptr ? -1 : TimerSlotOf(id);
+  if (i < 0) return real_timer_getoverrun()(id);
+  return static_cast<int>(g_page->timers[i].overrun.load());
+}
+
+VTIME_EXPORT int timer_delete(timer_t id) {
+  const int i = g_page == nullptr ? -1 : TimerSlotOf(id);
+  if (i < 0) return real_timer_delete()(id);
+  g_page->timers[i].state.store(vt::kTimerFree);
+  g_page->timers[i].pid.store(0);
+  return 0;
 }

@@ -49,6 +49,7 @@ enum WaitKind : std::uint32_t {
   kCondWait = 3,  ///< A condition variable (the agent broadcasts it at the deadline).
   kAgent = 4,     ///< The process's agent, idle: only the host ends it.
   kSemWait = 5,   ///< sem_wait: the host ends it with kWakeSignal to the thread (EINTR).
+  kFutexWait = 6, ///< A raw futex wait (syscall()): the agent wakes the futex word.
 };
 
 /// The signal that ends a semaphore wait at its deadline (SIGRTMAX; its handler does nothing).
@@ -94,6 +95,16 @@ struct alignas(64) ThreadSlot {
 
 enum TimerState : std::uint32_t { kTimerFree = 0, kTimerDisarmed = 1, kTimerArmed = 2 };
 
+/// How a timer tells its expiry.
+enum TimerNotify : std::uint32_t {
+  kNotifyEventFd = 0,  ///< A virtual timerfd: the expirations are written to `fd`.
+  kNotifySignal = 1,   ///< A signal (`signo`, SI_TIMER with `sigval`) to the process, or to
+                       ///< `target_tid` when it is not 0 (SIGEV_THREAD_ID).
+  kNotifyAlarm = 2,    ///< alarm / setitimer(ITIMER_REAL): SIGALRM to the process.
+  kNotifyThread = 3,   ///< SIGEV_THREAD: the agent runs `function(sigval)` in a new thread.
+  kNotifyNone = 4,     ///< SIGEV_NONE: only timer_gettime sees it.
+};
+
 struct alignas(64) TimerSlot {
   std::atomic<std::uint32_t> state{kTimerFree};
   std::atomic<std::uint32_t> fired{0};  ///< Host -> agent: next_ns passed.
@@ -102,6 +113,12 @@ struct alignas(64) TimerSlot {
   /// Bumped by every timerfd_create on this slot: a host that holds a copy of `fd` (pidfd_getfd)
   /// knows when it is another timer's.
   std::atomic<std::uint32_t> generation{0};
+  std::atomic<std::uint32_t> notify{kNotifyEventFd};
+  std::int32_t signo = 0;
+  std::int32_t target_tid = 0;
+  std::uint64_t sigval = 0;    ///< union sigval as its pointer member
+  std::uint64_t function = 0;  ///< kNotifyThread: void (*)(union sigval)
+  std::atomic<std::uint32_t> overrun{0};  ///< timer_getoverrun: expirations - 1 of the last
   std::atomic<std::int64_t> next_ns{kNoDeadline};
   std::atomic<std::int64_t> interval_ns{0};
 };

@@ -2,6 +2,7 @@
 
 #include <elf.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <linux/futex.h>
 #include <sys/eventfd.h>
 #include <sys/mman.h>
@@ -127,8 +128,30 @@ std::int64_t VirtualClock::NextDeadlineNs() const {
   return std::max(next, page_->now_ns.load()) - kMonotonicAtStartNs;
 }
 
+void VirtualClock::SendTimerSignal(const vt::TimerSlot& t, pid_t pid) {
+  // Any thread of the process may take it, also one the library has waiting on a futex.
+  if (std::find(signalled_.begin(), signalled_.end(), pid) == signalled_.end()) {
+    signalled_.push_back(pid);
+  }
+  if (t.notify.load() == vt::kNotifyAlarm) {
+    ::kill(pid, SIGALRM);
+    return;
+  }
+  siginfo_t info{};
+  info.si_signo = t.signo;
+  info.si_code = SI_TIMER;
+  info.si_value.sival_ptr = reinterpret_cast<void*>(t.sigval);
+  info.si_overrun = static_cast<int>(t.overrun.load());
+  if (t.target_tid != 0) {
+    ::syscall(SYS_rt_tgsigqueueinfo, pid, t.target_tid, t.signo, &info);
+  } else {
+    ::syscall(SYS_rt_sigqueueinfo, pid, t.signo, &info);
+  }
+}
+
 int VirtualClock::WakeDue() {
   const std::int64_t now = page_->now_ns.load();
+  signalled_.clear();
   int ended = 0;
   pid_t agents[vt::kMaxProcesses];
   int n_agents = 0;
@@ -149,7 +172,8 @@ int VirtualClock::WakeDue() {
       if (copy >= 0 && eventfd_write(copy, 1) == 0) continue;
       s.fired.store(1);
       need_agent(s.pid.load());
-    } else if (kind == vt::kCondWait) {
+    } else if (kind == vt::kCondWait || kind == vt::kFutexWait) {
+      // A condition variable or a futex word of the firmware's memory: its agent wakes it.
       s.fired.store(1);
       need_agent(s.pid.load());
     } else if (kind == vt::kSemWait) {
@@ -166,14 +190,32 @@ int VirtualClock::WakeDue() {
       continue;
     }
     ++ended;
-    const std::uint64_t tag = std::uint64_t{1} << 32 | t.generation.load();
-    const int copy = CopyOfFd(t.pid.load(), t.fd, tag);
-    if (copy >= 0) {
-      eventfd_write(copy, vt::ExpireTimer(t, now));
-      continue;
+    const pid_t pid = t.pid.load();
+    switch (t.notify.load()) {
+      case vt::kNotifyEventFd: {
+        const std::uint64_t tag = std::uint64_t{1} << 32 | t.generation.load();
+        const int copy = CopyOfFd(pid, t.fd, tag);
+        if (copy >= 0) {
+          eventfd_write(copy, vt::ExpireTimer(t, now));
+          continue;
+        }
+        break;  // the agent writes it
+      }
+      case vt::kNotifySignal:
+      case vt::kNotifyAlarm: {
+        const std::uint64_t expirations = vt::ExpireTimer(t, now);
+        t.overrun.store(static_cast<std::uint32_t>(expirations - 1));
+        SendTimerSignal(t, pid);
+        continue;
+      }
+      case vt::kNotifyNone:
+        vt::ExpireTimer(t, now);
+        continue;
+      default:
+        break;  // kNotifyThread: the agent starts the thread
     }
     t.fired.store(1);
-    need_agent(t.pid.load());
+    need_agent(pid);
   }
   for (int a = 0; a < n_agents; ++a) {
     for (int p = 0; p < vt::kMaxProcesses; ++p) {
@@ -314,7 +356,12 @@ bool VirtualClock::Blocked() {
     if (tid == 0) return false;  // created, not started
     if (st == vt::kWaiting) {
       const std::uint32_t kind = s.kind.load();
-      if (kind == vt::kSleep || kind == vt::kAgent) continue;  // only WakeDue ends these
+      // Only WakeDue ends these, unless it sent a signal to their process at this instant.
+      if ((kind == vt::kSleep || kind == vt::kAgent) &&
+          (signalled_.empty() ||
+           std::find(signalled_.begin(), signalled_.end(), pid) == signalled_.end())) {
+        continue;
+      }
       // An fd or a condition variable may have woken it before it could say so.
       const Kernel k = KernelState(i, pid, tid, nullptr);
       if (k == Kernel::kGone) {

@@ -19,6 +19,7 @@
 
 namespace wheelhil::bus::vtime {
 struct Page;
+struct TimerSlot;
 }
 
 namespace wheelhil::emulator::firmware {
@@ -81,6 +82,8 @@ class VirtualClock {
   // This process's copy of fd `fd` of process `pid` (pidfd_getfd), cached while `tag` (the
   // thread, or the timer's generation) is the same; -1 when copies cannot be had.
   int CopyOfFd(pid_t pid, int fd, std::uint64_t tag);
+  // An alarm / POSIX timer's signal, as the kernel sends it (SI_TIMER with its value).
+  void SendTimerSignal(const bus::vtime::TimerSlot& t, pid_t pid);
   void FreeDeadThread(int slot);
   bool ProcessAlive(pid_t pid) const;
 
@@ -98,6 +101,7 @@ class VirtualClock {
   std::vector<FdCopy> fd_copies_;
   std::vector<std::pair<pid_t, int>> pidfds_;
   bool fd_copies_work_ = true;
+  std::vector<pid_t> signalled_;  // processes a timer signal went to at the current instant
 };
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a

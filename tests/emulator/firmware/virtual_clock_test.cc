@@ -173,6 +173,28 @@ TEST(VirtualClock, TimedMutexLocksAreTriedEveryVirtualMillisecond) {
   EXPECT_EQ(r.waits.at("clocklock_timeout"), std::make_pair(18 * kMs + 200'000, 1L));
 }
 
+TEST(VirtualClock, RawSystemCallsThroughLibcAreVirtual) {
+  const ProbeRun r = RunProbe("syscall");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("raw_clock"), std::make_pair(0L, 0L));
+  EXPECT_EQ(r.waits.at("raw_nanosleep"), std::make_pair(3 * kMs, 0L));
+  // Rust's std parks threads this way: FUTEX_WAIT (relative), FUTEX_WAIT_BITSET (absolute).
+  EXPECT_EQ(r.waits.at("futex_timeout"), std::make_pair(7 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("futex_woken"), std::make_pair(9 * kMs, 1L));
+}
+
+TEST(VirtualClock, AlarmSetitimerAndPosixTimersSignalAtVirtualInstants) {
+  const ProbeRun r = RunProbe("timers");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("alarm_left"), std::make_pair(0L, 2L));
+  EXPECT_EQ(r.waits.at("alarm"), std::make_pair(1000 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("posix_timer"), std::make_pair(1015 * kMs, 1L));  // the third: 5, 10, 15
+  EXPECT_EQ(r.waits.at("thread_timer"), std::make_pair(1023 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("setitimer"), std::make_pair(1026 * kMs, 1L));
+}
+
 TEST(VirtualClock, AThreadThatNeverBlocksIsNamedWithItsLastCall) {
   const ProbeRun r = RunProbe("spin", 1.0);
   EXPECT_FALSE(r.finished);

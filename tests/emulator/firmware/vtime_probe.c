@@ -5,6 +5,9 @@
  * the test as the clock's host. argv[1] picks the case. */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <linux/futex.h>
+#include <signal.h>
+#include <sys/syscall.h>
 #include <poll.h>
 #include <pthread.h>
 #include <semaphore.h>
@@ -72,6 +75,27 @@ static struct timespec in_ms(clockid_t c, long ms) {
     t.tv_nsec -= 1000000000L;
   }
   return t;
+}
+
+static uint32_t g_word = 0;
+
+static void* futex_waker(void* arg) {
+  (void)arg;
+  usleep(2000);
+  __atomic_store_n(&g_word, 1, __ATOMIC_SEQ_CST);
+  syscall(SYS_futex, &g_word, FUTEX_WAKE_PRIVATE, 1, NULL, NULL, 0);
+  return NULL;
+}
+
+static volatile sig_atomic_t g_alarms = 0;
+static void on_alarm(int sig) {
+  (void)sig;
+  g_alarms++;
+}
+
+static sem_t g_fired;
+static void on_timer_thread(union sigval v) {
+  if (v.sival_int == 42) sem_post(&g_fired);
 }
 
 int main(int argc, char** argv) {
@@ -182,6 +206,71 @@ int main(int argc, char** argv) {
     abs = in_ms(CLOCK_MONOTONIC, 5);
     report("clocklock_timeout", pthread_mutex_clocklock(&g_held, CLOCK_MONOTONIC, &abs) == ETIMEDOUT);
     pthread_join(t, NULL);
+  } else if (strcmp(what, "syscall") == 0) {
+    struct timespec ts;
+    syscall(SYS_clock_gettime, CLOCK_MONOTONIC, &ts);
+    report("raw_clock", (long)((int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec - g_start));
+    struct timespec req = {0, 3000000};
+    report("raw_nanosleep", syscall(SYS_nanosleep, &req, NULL));
+    struct timespec rel = {0, 4000000};
+    const long rc = syscall(SYS_futex, &g_word, FUTEX_WAIT_PRIVATE, 0, &rel, NULL, 0);
+    report("futex_timeout", rc == -1 && errno == ETIMEDOUT);
+    pthread_t t;
+    pthread_create(&t, NULL, futex_waker, NULL);
+    struct timespec abs;
+    clock_gettime(CLOCK_MONOTONIC, &abs);
+    abs.tv_sec += 1;  // the waker comes first (2 ms)
+    long r2;
+    do r2 = syscall(SYS_futex, &g_word, FUTEX_WAIT_BITSET_PRIVATE, 0, &abs, NULL,
+                    FUTEX_BITSET_MATCH_ANY);
+    while (r2 == 0 && __atomic_load_n(&g_word, __ATOMIC_SEQ_CST) == 0);
+    report("futex_woken", __atomic_load_n(&g_word, __ATOMIC_SEQ_CST) == 1);
+    pthread_join(t, NULL);
+  } else if (strcmp(what, "timers") == 0) {
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_alarm;
+    sigaction(SIGALRM, &sa, NULL);
+    alarm(2);
+    report("alarm_left", alarm(1));  // replaces it: 2 s were left
+    while (g_alarms == 0) pause();
+    report("alarm", g_alarms);
+    // A POSIX timer every 5 ms from 5 ms, its signal taken with sigwaitinfo.
+    sigset_t usr;
+    sigemptyset(&usr);
+    sigaddset(&usr, SIGUSR1);
+    pthread_sigmask(SIG_BLOCK, &usr, NULL);
+    struct sigevent sev;
+    memset(&sev, 0, sizeof(sev));
+    sev.sigev_notify = SIGEV_SIGNAL;
+    sev.sigev_signo = SIGUSR1;
+    sev.sigev_value.sival_int = 7;
+    timer_t tid;
+    timer_create(CLOCK_MONOTONIC, &sev, &tid);
+    struct itimerspec its = {.it_interval = {0, 5000000}, .it_value = {0, 5000000}};
+    timer_settime(tid, 0, &its, NULL);
+    for (int i = 0; i < 3; ++i) {
+      siginfo_t info;
+      sigwaitinfo(&usr, &info);
+      report("posix_timer", info.si_code == SI_TIMER && info.si_value.sival_int == 7);
+    }
+    timer_delete(tid);
+    // SIGEV_THREAD: the function runs in a new thread 8 ms from now.
+    sem_init(&g_fired, 0, 0);
+    memset(&sev, 0, sizeof(sev));
+    sev.sigev_notify = SIGEV_THREAD;
+    sev.sigev_notify_function = on_timer_thread;
+    sev.sigev_value.sival_int = 42;
+    timer_create(CLOCK_MONOTONIC, &sev, &tid);
+    struct itimerspec once = {.it_interval = {0, 0}, .it_value = {0, 8000000}};
+    timer_settime(tid, 0, &once, NULL);
+    sem_wait(&g_fired);
+    report("thread_timer", 1);
+    struct itimerval it = {.it_interval = {0, 0}, .it_value = {0, 3000}};
+    g_alarms = 0;
+    setitimer(ITIMER_REAL, &it, NULL);
+    while (g_alarms == 0) pause();
+    report("setitimer", g_alarms);
   } else if (strcmp(what, "spin") == 0) {
     report("start", 0);
     for (;;) mono();
