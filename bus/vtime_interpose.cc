@@ -156,7 +156,10 @@ timespec ToTimespec(std::int64_t ns) {
 
 void Transition() {
   g_page->transitions.fetch_add(1);
-  if (g_page->host_waiting.load() != 0) Futex(&g_page->transitions, FUTEX_WAKE, 1);
+  // Only the first transition after the host went to sleep wakes it (one system call).
+  if (g_page->host_waiting.load() != 0 && g_page->host_waiting.exchange(0) != 0) {
+    Futex(&g_page->transitions, FUTEX_WAKE, 1);
+  }
 }
 
 /// Claims a free thread slot for `tid` (0: a thread not started yet) in this process.

@@ -132,7 +132,8 @@ struct Page {
   std::int64_t realtime_offset_ns = 0;
   /// Bumped on every wait entry and exit (futex word).
   alignas(64) std::atomic<std::uint32_t> transitions{0};
-  /// The host sleeps on `transitions`: waiters then wake it.
+  /// Set by the host before it sleeps on `transitions`; the first transition after takes it
+  /// (exchange to 0) and wakes the host.
   std::atomic<std::uint32_t> host_waiting{0};
   /// One past the highest thread / timer slot ever claimed (bounds the host's scans).
   std::atomic<std::int32_t> threads_used{0};

@@ -188,13 +188,18 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
     return broker_->client_progress() != before;
   };
-  pass();  // what the run sent since the last settle
+  // What the run sent since the last settle; if that reached the firmware, it runs now (and
+  // cannot be blocked yet).
+  bool woke = pass();
   for (;;) {
     if (run_.failed()) return false;
-    if (clock.Blocked()) {
+    if (!woke && clock.Blocked()) {
       // Every thread was blocked: frames written before that are in the broker's queues. If
       // routing them wakes nobody, the firmware stays blocked.
-      if (pass()) continue;
+      if (pass()) {
+        woke = true;
+        continue;
+      }
       if (run_.failed()) return false;
       if (process.running() && process.Exited()) {
         run_.Fail("the firmware exited during the run (see firmware.log)");
@@ -204,12 +209,19 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       return true;
     }
     const double wall = WallSeconds(t0);
-    if (wall > 1.0 && !checked_exit) {
+    if (wall > std::min(1.0, timeout_s / 2) && !checked_exit) {
       checked_exit = true;
       if (process.running() && process.Exited()) {
         run_.Fail("the firmware exited during the run (see firmware.log)");
         return false;
       }
+      // Long before the limit: say who keeps virtual time from moving.
+      std::string who;
+      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+      run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                                           {"event", "firmware_busy"},
+                                           {"wall_s", std::min(1.0, timeout_s / 2)},
+                                           {"threads", who}});
     }
     if (wall > timeout_s) {
       std::string who;
@@ -228,6 +240,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       return false;
     }
     clock.WaitForChange(200);
+    woke = false;
   }
 }
 

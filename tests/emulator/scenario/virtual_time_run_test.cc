@@ -129,9 +129,34 @@ TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   EXPECT_THAT(r.failure, HasSubstr("did not block within 1 s of wall time"));
   EXPECT_THAT(r.failure, HasSubstr("thread 'c_epoll_odometr'"));
   EXPECT_THAT(r.failure, HasSubstr("zero timeout"));
-  EXPECT_THAT(Slurp(dir_ / "spin" / "events.jsonl"), HasSubstr("\"firmware_not_blocking\""));
+  const std::string events = Slurp(dir_ / "spin" / "events.jsonl");
+  EXPECT_THAT(events, HasSubstr("\"firmware_busy\""));  // at half the limit
+  EXPECT_THAT(events, HasSubstr("\"firmware_not_blocking\""));
   // What was recorded before stays: the start-up and half a second of cycles.
   EXPECT_THAT(Slurp(dir_ / "spin" / "can.log"), HasSubstr(" 3A0#"));
+}
+
+// The same firmware and scenario in real time (`--realtime`): nothing preloaded but the bus, the
+// firmware on the host's clock, and still the only SYNC producer.
+TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.timing.duration_s = 1.5;
+  RunOptions o = testing::BuildTreeRunOptions(dir_ / "rt");
+  o.realtime = true;
+  const RunResult r = RunScenario(s, o);
+  ASSERT_EQ(r.failure, "");
+  const std::string log = Slurp(dir_ / "rt" / "can.log");
+  EXPECT_THAT(log, HasSubstr(" 000#0100"));
+  EXPECT_THAT(log, HasSubstr(" 3A0#"));
+  // Every SYNC is the firmware's (10 ms): about 1.5 s / 10 ms of motion after its start-up.
+  const int syncs = r.report["cycles"].get<int>();
+  EXPECT_GT(syncs, 100);
+  EXPECT_LT(syncs, 260);
+  std::size_t in_log = 0;
+  for (std::size_t at = log.find(" 080#"); at != std::string::npos; at = log.find(" 080#", at + 1)) {
+    ++in_log;
+  }
+  EXPECT_NEAR(static_cast<double>(in_log), syncs, 1.0);  // the last may still be on the wire
 }
 
 TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
