@@ -41,6 +41,7 @@
 #include <cstring>
 #include <new>
 
+#include "bus/internal/interpose_real.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
 
@@ -62,22 +63,9 @@ constexpr unsigned long kSiocgstampNsOld = 0x8907;
 constexpr unsigned long kSiocgstampNew = _IOR(0x89, 0x06, long long[2]);
 constexpr unsigned long kSiocgstampNsNew = _IOR(0x89, 0x07, long long[2]);
 
-// ---- the real functions ----
+// ---- the real functions (bus/internal/interpose_real.h) ----
 
-template <typename F>
-F Resolve(F& slot, const char* name) {
-  F f = __atomic_load_n(&slot, __ATOMIC_ACQUIRE);
-  if (f == nullptr) {
-    f = reinterpret_cast<F>(dlsym(RTLD_NEXT, name));
-    __atomic_store_n(&slot, f, __ATOMIC_RELEASE);
-  }
-  return f;
-}
-
-#define REAL_FN(name, ret, params)   \
-  using name##_fn = ret(*) params;   \
-  name##_fn g_real_##name = nullptr; \
-  inline name##_fn real_##name() { return Resolve(g_real_##name, #name); }
+using wheelhil::bus::interpose::Resolve;
 
 REAL_FN(socket, int, (int, int, int))
 REAL_FN(bind, int, (int, const sockaddr*, socklen_t))

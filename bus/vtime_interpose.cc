@@ -39,6 +39,7 @@
 #include <cstdint>
 #include <cstring>
 
+#include "bus/internal/interpose_real.h"
 #include "bus/vtime_protocol.h"
 
 #define VTIME_EXPORT extern "C" __attribute__((visibility("default")))
@@ -47,29 +48,7 @@ namespace {
 
 namespace vt = wheelhil::bus::vtime;
 
-// ---- the real functions ----
-
-template <typename F>
-F Resolve(F& slot, const char* name, const char* version = nullptr) {
-  F f = __atomic_load_n(&slot, __ATOMIC_ACQUIRE);
-  if (f == nullptr) {
-    void* p = version != nullptr ? dlvsym(RTLD_NEXT, name, version) : nullptr;
-    if (p == nullptr) p = dlsym(RTLD_NEXT, name);
-    f = reinterpret_cast<F>(p);
-    __atomic_store_n(&slot, f, __ATOMIC_RELEASE);
-  }
-  return f;
-}
-
-#define REAL_FN(name, ret, params)   \
-  using name##_fn = ret(*) params;   \
-  name##_fn g_real_##name = nullptr; \
-  inline name##_fn real_##name() { return Resolve(g_real_##name, #name); }
-// pthread_cond_* have an old (2.2.5) and the current (2.3.2) version; dlsym may give the old.
-#define REAL_FN_V(name, ret, params, version) \
-  using name##_fn = ret(*) params;            \
-  name##_fn g_real_##name = nullptr;          \
-  inline name##_fn real_##name() { return Resolve(g_real_##name, #name, version); }
+// ---- the real functions (bus/internal/interpose_real.h) ----
 
 REAL_FN(clock_gettime, int, (clockid_t, timespec*))
 REAL_FN(gettimeofday, int, (timeval*, void*))
