@@ -201,9 +201,17 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
         continue;
       }
       if (run_.failed()) return false;
-      if (process.running() && process.Exited()) {
-        run_.Fail("the firmware exited during the run (see firmware.log)");
-        return false;
+      // A process that exits leaves threads the check finds gone: only then is it asked, and
+      // given the time to finish exiting, so the exit is seen at this instant on every host.
+      if (clock.TakeThreadsGone() && process.running()) {
+        const auto gone_at = Clock::now();
+        do {
+          if (process.Exited()) {
+            run_.Fail("the firmware exited during the run (see firmware.log)");
+            return false;
+          }
+          std::this_thread::sleep_for(std::chrono::microseconds(200));
+        } while (WallSeconds(gone_at) < 2.0);
       }
       firmware_blocked_ = true;
       return true;

@@ -98,6 +98,7 @@ void VirtualClock::ExpectFirstProcess() {
 }
 
 void VirtualClock::SetFirstProcessPid(pid_t pid) {
+  first_pid_ = pid;
   if (first_process_slot_ < 0) return;
   std::int32_t expect = vt::kFirstProcessPid;
   page_->processes[first_process_slot_].pid.compare_exchange_strong(expect, pid);
@@ -314,6 +315,7 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
 
 void VirtualClock::FreeDeadThread(int slot) {
   vt::ThreadSlot& s = page_->threads[slot];
+  if (s.pid.load() == first_pid_) threads_gone_ = true;
   // A thread gone: perhaps its whole process (the slot of an exited process is freed here,
   // not looked at on every check).
   const pid_t pid = s.pid.load();

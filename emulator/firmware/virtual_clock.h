@@ -60,6 +60,9 @@ class VirtualClock {
   /// kernel outside the library's waits counts once it was seen asleep twice without running
   /// in between, so a first look at such a thread returns false.
   bool Blocked();
+  /// A thread of the first process was found gone (exited or killed without the library's
+  /// word) since the last call: then the firmware may be exiting.
+  bool TakeThreadsGone() { return std::exchange(threads_gone_, false); }
   /// Sleeps until a thread of the firmware enters or leaves a wait, at most timeout_us.
   void WaitForChange(int timeout_us);
 
@@ -101,7 +104,9 @@ class VirtualClock {
   std::vector<FdCopy> fd_copies_;
   std::vector<std::pair<pid_t, int>> pidfds_;
   bool fd_copies_work_ = true;
-  std::vector<pid_t> signalled_;  // processes a timer signal went to at the current instant
+  std::vector<pid_t> signalled_;
+  bool threads_gone_ = false;
+  pid_t first_pid_ = 0;  // processes a timer signal went to at the current instant
 };
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a

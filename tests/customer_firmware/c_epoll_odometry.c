@@ -7,9 +7,9 @@
  *   0x3A0 (8 bytes): x, y   int32 little endian, 0.1 mm
  *   0x3A1 (8 bytes): theta  int32 little endian, microradians; cycle uint32
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
- *                         [--track M] [--period-ms N] [--spin-after-s S]
- * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever (a test of
- * what the emulator reports for a firmware that never blocks). */
+ *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
+ * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever; --exit-after-s:
+ * after S seconds, exit with status 3 (tests of what the emulator reports for such firmware). */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <linux/can.h>
@@ -102,7 +102,7 @@ static void put_i32(uint8_t* p, int32_t v) {
 int main(int argc, char** argv) {
   const char* iface = NULL;
   int cpr = 2000;
-  double radius = 0.075, track = 0.32, spin_after_s = -1;
+  double radius = 0.075, track = 0.32, spin_after_s = -1, exit_after_s = -1;
   int period_ms = 10;
   g_nodes[0].id = 1;
   g_nodes[1].id = 2;
@@ -115,6 +115,7 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--track") == 0) track = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--period-ms") == 0) period_ms = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--spin-after-s") == 0) spin_after_s = atof(argv[i + 1]);
+    else if (strcmp(argv[i], "--exit-after-s") == 0) exit_after_s = atof(argv[i + 1]);
   }
   if (iface == NULL) {
     fprintf(stderr, "usage: %s --can IFACE ...\n", argv[0]);
@@ -170,6 +171,7 @@ int main(int argc, char** argv) {
       struct epoll_event out;
       for (;;) epoll_wait(ep, &out, 1, 0);  // a firmware bug: it never blocks again
     }
+    if (exit_after_s >= 0 && now_s() - t0 > exit_after_s) exit(3);
     struct epoll_event out;
     const int n = epoll_wait(ep, &out, 1, -1);
     if (n < 0) {

@@ -129,6 +129,19 @@ TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   EXPECT_THAT(Slurp(dir_ / "spin" / "can.log"), HasSubstr(" 3A0#"));
 }
 
+TEST_F(VirtualTimeRun, AFirmwareThatExitsEndsTheRunAtTheSameInstantEveryTime) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --exit-after-s 1.0";
+  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  EXPECT_EQ(a.exit_code, 1);
+  EXPECT_THAT(a.failure, HasSubstr("the firmware exited during the run"));
+  EXPECT_EQ(a.failure, b.failure);
+  // Seen at the first instant after its exit: the same record on every run.
+  EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
+  EXPECT_EQ(Slurp(dir_ / "a" / "events.jsonl"), Slurp(dir_ / "b" / "events.jsonl"));
+}
+
 // The same firmware and scenario in real time (`--realtime`): nothing preloaded but the bus, the
 // firmware on the host's clock, and still the only SYNC producer.
 TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
