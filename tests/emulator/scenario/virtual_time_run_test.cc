@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -181,6 +182,29 @@ TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
   EXPECT_THAT(cfg, HasSubstr("produce: true"));
   EXPECT_THAT(cfg, HasSubstr("deadline_s: 0.2"));
   EXPECT_EQ(a.report["cycles"].get<int>(), 38);  // 9.5 s at 4 Hz
+}
+
+// Every shipped paper and suspension scenario with the reference firmware as SYNC producer on the
+// virtual clock (its shipped config, the scenario's own overrides) meets its expectations. The
+// Release build only (as the golden artefacts): the sanitizer build checks memory, not results.
+TEST_F(VirtualTimeRun, ShippedScenariosMeetTheirExpectationsWithTheFirmwareProducingSync) {
+#ifdef WHEELHIL_SANITIZED
+  GTEST_SKIP() << "results are checked in the Release build";
+#endif
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios")) {
+    if (e.path().extension() == ".yaml") files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  ASSERT_GE(files.size(), 15u);
+  for (const auto& f : files) {
+    Scenario s = LoadScenarioFile(f.string());
+    s.timing.virtual_clock = true;
+    s.timing.firmware_produces_sync = true;
+    const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / f.stem()));
+    EXPECT_EQ(r.failure, "") << f.filename();
+    EXPECT_EQ(r.exit_code, 0) << f.filename() << ": " << r.report["expectations"].dump();
+  }
 }
 
 TEST_F(VirtualTimeRun, AStaticFirmwareIsRefusedBeforeTheRun) {
