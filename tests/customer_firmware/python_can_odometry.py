@@ -6,7 +6,10 @@ SDO 0x1800:02 = 1, NMT start, SYNC every period) and publishes its pose in its o
   0x3C0 (8 bytes): x, y   int32 little endian, 0.1 mm
   0x3C1 (8 bytes): theta  int32 little endian, microradians; cycle uint32
 Usage: python_can_odometry.py --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
-                              [--track M] [--period-ms N]
+                              [--track M] [--period-ms N] [--notifier]
+--notifier: frames come through a can.Notifier thread and a can.BufferedReader
+(reader.get_message(timeout): a queue with a timeout, i.e. a timed semaphore wait in CPython)
+instead of bus.recv(timeout).
 """
 import argparse
 import math
@@ -26,6 +29,7 @@ def main():
     p.add_argument("--radius", type=float, default=0.075)
     p.add_argument("--track", type=float, default=0.32)
     p.add_argument("--period-ms", type=int, default=10)
+    p.add_argument("--notifier", action="store_true")
     a = p.parse_args()
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
@@ -41,11 +45,23 @@ def main():
     next_tick = t0 + period
     state = "boot"
 
+    if a.notifier:
+        reader = can.BufferedReader()
+        notifier = can.Notifier(bus, [reader], timeout=0.5)
+
+        def receive(timeout):
+            return reader.get_message(timeout=timeout)
+    else:
+        notifier = None
+
+        def receive(timeout):
+            return bus.recv(timeout=timeout)
+
     def send(arb_id, data):
         bus.send(can.Message(arbitration_id=arb_id, data=bytes(data), is_extended_id=False))
 
     while not stop:
-        msg = bus.recv(timeout=max(0.0, next_tick - time.monotonic()))
+        msg = receive(max(0.0, next_tick - time.monotonic()))
         if msg is not None:
             for i, node in enumerate(ids):
                 d = msg.data
@@ -85,6 +101,8 @@ def main():
         send(0x3C0, struct.pack("<ii", round(x * 1e4), round(y * 1e4)))
         send(0x3C1, struct.pack("<iI", round(theta * 1e6), cycle & 0xFFFFFFFF))
         cycle += 1
+    if notifier is not None:
+        notifier.stop()
     bus.shutdown()
 
 

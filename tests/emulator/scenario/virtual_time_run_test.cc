@@ -114,6 +114,12 @@ TEST_F(VirtualTimeRun, CustomerPythonCanFirmwareIsByteIdentical) {
   ExpectCustomerRun(dir_, "python_can_odometry.yaml", "3C0");
 }
 
+// Two Python threads (a can.Notifier feeding a can.BufferedReader; the main loop's
+// get_message(timeout) is a timed semaphore wait, the GIL hand-over a timed condition wait).
+TEST_F(VirtualTimeRun, CustomerPythonNotifierThreadIsByteIdentical) {
+  ExpectCustomerRun(dir_, "python_can_notifier.yaml", "3C0");
+}
+
 TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   Scenario s = LoadScenarioFile(kCustomerC);
   s.firmware.command += " --spin-after-s 0.5";
