@@ -8,6 +8,8 @@
  *   0x3A1 (8 bytes): theta  int32 little endian, microradians; cycle uint32
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
  *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
+ *                         [--fork]
+ * --fork: the work is done by a forked child; the parent only waits for it (a supervisor).
  * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever; --exit-after-s:
  * after S seconds, exit with status 3 (tests of what the emulator reports for such firmware). */
 #define _GNU_SOURCE
@@ -26,6 +28,7 @@
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/timerfd.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -103,6 +106,7 @@ int main(int argc, char** argv) {
   const char* iface = NULL;
   int cpr = 2000;
   double radius = 0.075, track = 0.32, spin_after_s = -1, exit_after_s = -1;
+  int fork_child = 0;
   int period_ms = 10;
   g_nodes[0].id = 1;
   g_nodes[1].id = 2;
@@ -116,10 +120,24 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--period-ms") == 0) period_ms = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--spin-after-s") == 0) spin_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--exit-after-s") == 0) exit_after_s = atof(argv[i + 1]);
+    else if (strcmp(argv[i], "--fork") == 0) fork_child = atoi(argv[i + 1]);
   }
   if (iface == NULL) {
     fprintf(stderr, "usage: %s --can IFACE ...\n", argv[0]);
     return 2;
+  }
+  if (fork_child) {
+    const pid_t child = fork();
+    if (child < 0) {
+      perror("c_epoll_odometry: fork");
+      return 1;
+    }
+    if (child > 0) {
+      int status = 0;
+      while (waitpid(child, &status, 0) < 0 && errno == EINTR) {
+      }
+      return WIFEXITED(status) ? WEXITSTATUS(status) : 1;
+    }
   }
   struct sigaction sa;
   memset(&sa, 0, sizeof(sa));

@@ -114,6 +114,24 @@ TEST_F(VirtualTimeRun, CustomerPythonCanFirmwareIsByteIdentical) {
   ExpectCustomerRun(dir_, "python_can_odometry.yaml", "3C0");
 }
 
+// The work in a forked child, the parent only waiting for it: the child is on the clock from
+// its first instruction, the parent (asleep in waitpid) is blocked.
+TEST_F(VirtualTimeRun, AForkedChildRunsOnTheSameClock) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --fork 1";
+  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  const std::string log = Slurp(dir_ / "a" / "can.log");
+  EXPECT_EQ(log, Slurp(dir_ / "b" / "can.log"));
+  // The same bytes as the firmware without the fork.
+  const RunResult c = RunScenario(LoadScenarioFile(kCustomerC),
+                                  testing::BuildTreeRunOptions(dir_ / "c"));
+  ASSERT_EQ(c.failure, "");
+  EXPECT_EQ(log, Slurp(dir_ / "c" / "can.log"));
+}
+
 // Two Python threads (a can.Notifier feeding a can.BufferedReader; the main loop's
 // get_message(timeout) is a timed semaphore wait, the GIL hand-over a timed condition wait).
 TEST_F(VirtualTimeRun, CustomerPythonNotifierThreadIsByteIdentical) {
