@@ -99,6 +99,15 @@ RunCommand::RunCommand(CLI::App& app) {
                    "Lockstep: step the physics of the motion phase on a worker thread on another "
                    "CPU (auto: when the run may use more than one CPU; results are identical)")
       ->check(CLI::IsMember({"auto", "on", "off"}));
+  run_->add_option("--clock", clock_,
+                   "Lockstep: virtual (the firmware on the emulator's clock, any firmware: "
+                   "docs/virtual-time.md) or cooperative (the FW_Status handshake); overrides "
+                   "timing.clock. virtual makes the firmware the SYNC producer unless "
+                   "--sync-producer emulator")
+      ->check(CLI::IsMember({"virtual", "cooperative"}));
+  run_->add_option("--sync-producer", sync_producer_,
+                   "firmware or emulator; overrides timing.sync_producer")
+      ->check(CLI::IsMember({"firmware", "emulator"}));
 }
 
 std::optional<int> RunCommand::Run() {
@@ -108,6 +117,18 @@ std::optional<int> RunCommand::Run() {
     sc = scenario::LoadScenarioFile(scenario_);
   } catch (const std::invalid_argument& e) {
     fmt::print(stderr, "wheelhil run: {}\n", e.what());
+    return 2;
+  }
+  if (!clock_.empty()) {
+    sc.timing.virtual_clock = clock_ == "virtual";
+    sc.timing.firmware_produces_sync = sc.timing.virtual_clock;
+  }
+  if (!sync_producer_.empty()) sc.timing.firmware_produces_sync = sync_producer_ == "firmware";
+  if (sc.timing.firmware_produces_sync && sc.timing.lockstep && !realtime_ &&
+      !sc.timing.virtual_clock) {
+    fmt::print(stderr,
+               "wheelhil run: a firmware that produces SYNC runs in lockstep only on the "
+               "virtual clock (--clock virtual, or --realtime)\n");
     return 2;
   }
   scenario::RunOptions o;

@@ -27,6 +27,8 @@ class RunCommand {
   bool realtime_ = false;
   std::optional<int> cpu_;
   std::string physics_thread_ = "auto";
+  std::string clock_;          // empty: the scenario's timing.clock
+  std::string sync_producer_;  // empty: the scenario's timing.sync_producer
   bool quiet_ = false;
 };
 
