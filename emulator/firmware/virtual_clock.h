@@ -2,10 +2,11 @@
 /// The host side of the firmware's virtual clock (bus/vtime_protocol.h, docs/virtual-time.md).
 /// It creates the clock page in the run's private runtime directory, moves the firmware's time
 /// (SetNow), says when the firmware next needs the clock (NextDeadlineNs), ends the waits that
-/// reached their deadline (WakeDue), and tells whether every thread of every firmware process
-/// is blocked (Blocked): in a wait of the library that only the clock can end, or asleep in
-/// the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition of any thread while
-/// it looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
+/// reached their deadline (WakeDue: futex wakes, writes to copies of the firmware's eventfds
+/// taken with pidfd_getfd, signals, or the agent thread), and tells whether every thread of
+/// every firmware process is blocked (Blocked): in a wait of the library that only the clock
+/// can end, or asleep in the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition
+/// of any thread while it looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
 /// kMonotonicAtStartNs + run ns and its CLOCK_REALTIME kRealtimeAtStartNs + run ns, whatever
 /// the host's clocks say, so a run is the same on every machine.
 /// Thread-compatible: the run's thread only.
@@ -104,9 +105,9 @@ class VirtualClock {
   std::vector<FdCopy> fd_copies_;
   std::vector<std::pair<pid_t, int>> pidfds_;
   bool fd_copies_work_ = true;
-  std::vector<pid_t> signalled_;
+  std::vector<pid_t> signalled_;  // processes a timer signal went to at the current instant
   bool threads_gone_ = false;
-  pid_t first_pid_ = 0;  // processes a timer signal went to at the current instant
+  pid_t first_pid_ = 0;
 };
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a
