@@ -961,8 +961,9 @@ VTIME_EXPORT int pthread_cond_timedwait(pthread_cond_t* c, pthread_mutex_t* m,
                                         const timespec* abstime) {
   if (g_page == nullptr) return real_pthread_cond_timedwait()(c, m, abstime);
   if (abstime->tv_nsec < 0 || abstime->tv_nsec >= 1000000000) return EINVAL;
-  // glibc keeps the clock of pthread_condattr_setclock in bit 0 of __wrefs (1: monotonic).
-  const clockid_t clk = (c->__data.__wrefs & 1) ? CLOCK_MONOTONIC : CLOCK_REALTIME;
+  // glibc keeps the clock of pthread_condattr_setclock in __wrefs: bit 1 set is monotonic
+  // (__PTHREAD_COND_CLOCK_MONOTONIC_MASK; bit 0 is process-shared).
+  const clockid_t clk = (c->__data.__wrefs & 2) ? CLOCK_MONOTONIC : CLOCK_REALTIME;
   return CondWaitUntil(c, m, DeadlineFromAbs(clk, *abstime));
 }
 

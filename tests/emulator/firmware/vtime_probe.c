@@ -176,6 +176,21 @@ int main(int argc, char** argv) {
     do rc = pthread_cond_timedwait(&g_c, &g_m, &abs);
     while (rc == 0);
     report("timedwait", rc == ETIMEDOUT);
+    // A condition on CLOCK_MONOTONIC (as CPython's): pthread_cond_timedwait takes its clock.
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_cond_t mono;
+    pthread_cond_init(&mono, &ca);
+    clock_gettime(CLOCK_MONOTONIC, &abs);
+    abs.tv_nsec += 5000000;
+    if (abs.tv_nsec >= 1000000000) {
+      abs.tv_sec += 1;
+      abs.tv_nsec -= 1000000000;
+    }
+    do rc = pthread_cond_timedwait(&mono, &g_m, &abs);
+    while (rc == 0);
+    report("timedwait_monotonic", rc == ETIMEDOUT);
     // Another thread signals after 10 ms of its own sleep: the untimed wait ends then.
     pthread_t t;
     pthread_create(&t, NULL, signaller, NULL);
