@@ -156,23 +156,12 @@ int main(int argc, char** argv) {
     close(t);
   } else if (strcmp(what, "cond") == 0) {
     pthread_mutex_lock(&g_m);
-    struct timespec abs;
-    clock_gettime(CLOCK_MONOTONIC, &abs);
-    abs.tv_nsec += 50000000;
-    if (abs.tv_nsec >= 1000000000) {
-      abs.tv_sec += 1;
-      abs.tv_nsec -= 1000000000;
-    }
+    struct timespec abs = in_ms(CLOCK_MONOTONIC, 50);
     int rc;
     do rc = pthread_cond_clockwait(&g_c, &g_m, CLOCK_MONOTONIC, &abs);
     while (rc == 0);
     report("clockwait", rc == ETIMEDOUT);
-    clock_gettime(CLOCK_REALTIME, &abs);
-    abs.tv_nsec += 20000000;
-    if (abs.tv_nsec >= 1000000000) {
-      abs.tv_sec += 1;
-      abs.tv_nsec -= 1000000000;
-    }
+    abs = in_ms(CLOCK_REALTIME, 20);
     do rc = pthread_cond_timedwait(&g_c, &g_m, &abs);
     while (rc == 0);
     report("timedwait", rc == ETIMEDOUT);
@@ -182,12 +171,7 @@ int main(int argc, char** argv) {
     pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
     pthread_cond_t mono;
     pthread_cond_init(&mono, &ca);
-    clock_gettime(CLOCK_MONOTONIC, &abs);
-    abs.tv_nsec += 5000000;
-    if (abs.tv_nsec >= 1000000000) {
-      abs.tv_sec += 1;
-      abs.tv_nsec -= 1000000000;
-    }
+    abs = in_ms(CLOCK_MONOTONIC, 5);
     do rc = pthread_cond_timedwait(&mono, &g_m, &abs);
     while (rc == 0);
     report("timedwait_monotonic", rc == ETIMEDOUT);
