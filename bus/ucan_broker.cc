@@ -311,7 +311,6 @@ struct UcanBroker::Impl {
   Fd wake_fd;
   Fd spare_fd;  // released to refuse a connection when the process is out of fds
   std::uint64_t refused_connections = 0;
-  std::uint64_t activity = 0;  // events handled and frames routed (see UcanBroker::activity)
   std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
@@ -860,7 +859,6 @@ struct UcanBroker::Impl {
     const std::uint32_t can_id = f.can_id;
     const std::uint8_t* frame = f.frame.data();
     const std::size_t frame_len = f.frame_len;
-    ++activity;
     const std::int64_t ts =
         std::max(receive_clock ? receive_clock() : RealtimeNs(), bus->last_ts_ns);
     bus->last_ts_ns = ts;
@@ -1038,7 +1036,6 @@ struct UcanBroker::Impl {
     if (n < 0) n = 0;
     for (int i = 0; i < n; ++i) {
       const std::uint64_t tag = events[i].data.u64;
-      if (tag != kWakeTag) ++activity;
       if (tag == kListenTag) {
         AcceptAll();
         continue;
@@ -1211,11 +1208,6 @@ bool UcanBroker::Pump(int timeout_ms) {
   if (impl_->Pass(impl_->pump_events, timeout_ms)) return true;
   impl_->Finish();
   return false;
-}
-
-std::uint64_t UcanBroker::activity() const {
-  std::lock_guard lk(impl_->mu);
-  return impl_->activity;
 }
 
 std::uint64_t UcanBroker::client_progress() const {

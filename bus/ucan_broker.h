@@ -94,9 +94,6 @@ class UcanBroker {
   /// Takes the next frame routed to the port; false when none is there.
   bool ReceiveLocal(int port, CanFrame* frame);
 
-  /// Grows with every connection event handled and every frame routed: equal before and after
-  /// a Pump() means that pass moved nothing.
-  std::uint64_t activity() const;
   /// Grows with everything that can wake a program blocked on a broker socket: writes to a
   /// client (frames, doorbells, replies), a connection accepted (answered by a later pass), a
   /// client dropped. Equal before and after a Pump(): that pass woke no client.

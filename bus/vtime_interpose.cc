@@ -141,6 +141,13 @@ void Transition() {
   }
 }
 
+/// Slot `i` is in use: the host's scans (one past the highest slot ever claimed) include it.
+void RaiseUsed(std::atomic<std::int32_t>& used, int i) {
+  std::int32_t u = used.load();
+  while (u < i + 1 && !used.compare_exchange_weak(u, i + 1)) {
+  }
+}
+
 /// Claims a free thread slot for `tid` (0: a thread not started yet) in this process.
 int ClaimThreadSlot(pid_t tid) {
   for (int i = 0; i < vt::kMaxThreads; ++i) {
@@ -157,9 +164,7 @@ int ClaimThreadSlot(pid_t tid) {
     s.wake_fd = -1;
     s.pid.store(getpid());
     s.tid.store(tid);
-    std::int32_t used = g_page->threads_used.load();
-    while (used < i + 1 && !g_page->threads_used.compare_exchange_weak(used, i + 1)) {
-    }
+    RaiseUsed(g_page->threads_used, i);
     return i;
   }
   ::fprintf(stderr, "wheelhil vtime: more than %d threads in the firmware's processes\n",
@@ -186,6 +191,13 @@ void NoteCall(vt::LastCall what) {
   vt::ThreadSlot& s = Self();
   s.calls.fetch_add(1, std::memory_order_relaxed);
   s.last_call.store(what, std::memory_order_relaxed);
+}
+
+/// True (and counted as a call that did not block) when virtual time is at `deadline` already.
+bool DeadlinePassed(std::int64_t deadline) {
+  if (Now() < deadline) return false;
+  NoteCall(vt::kCallPastDeadline);
+  return true;
 }
 
 void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
@@ -235,7 +247,6 @@ void FireTimers() {
     vt::TimerSlot& t = g_page->timers[i];
     if (t.pid.load() != getpid() || t.fired.load() == 0) continue;
     const std::uint64_t expirations = vt::ExpireTimer(t, Now());
-    t.overrun.store(static_cast<std::uint32_t>(expirations - 1));
     t.fired.store(0);
     if (t.notify.load() == vt::kNotifyEventFd) {
       eventfd_write(t.fd, expirations);
@@ -339,10 +350,7 @@ int WakeFd() {
 /// Sleeps until virtual `deadline`; 0 or EINTR.
 int SleepUntil(std::int64_t deadline) {
   vt::ThreadSlot& s = Self();
-  if (Now() >= deadline) {
-    NoteCall(vt::kCallPastDeadline);
-    return 0;
-  }
+  if (DeadlinePassed(deadline)) return 0;
   BeginWait(s, vt::kSleep, deadline);
   int rc = 0;
   for (;;) {
@@ -411,10 +419,7 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
 int CondWaitUntil(pthread_cond_t* c, pthread_mutex_t* m, std::int64_t deadline) {
   vt::ThreadSlot& s = Self();
   if (deadline != vt::kNoDeadline) {
-    if (Now() >= deadline) {
-      NoteCall(vt::kCallPastDeadline);
-      return ETIMEDOUT;
-    }
+    if (DeadlinePassed(deadline)) return ETIMEDOUT;
     EnsureAgent();
   }
   s.cond = reinterpret_cast<std::uintptr_t>(c);
@@ -452,8 +457,7 @@ void EnsureWakeSignal() {
 /// the program's own). The host ends the wait at the deadline with kWakeSignal to this thread.
 int SemWaitUntil(sem_t* sem, std::int64_t deadline) {
   if (sem_trywait(sem) == 0) return 0;
-  if (Now() >= deadline) {
-    NoteCall(vt::kCallPastDeadline);
+  if (DeadlinePassed(deadline)) {
     errno = ETIMEDOUT;
     return -1;
   }
@@ -506,9 +510,7 @@ int ClaimTimer(clockid_t c, vt::TimerNotify notify, int fd) {
     t.interval_ns.store(0);
     t.pid.store(getpid());
     g_timer_clock[i] = c;
-    std::int32_t used = g_page->timers_used.load();
-    while (used < i + 1 && !g_page->timers_used.compare_exchange_weak(used, i + 1)) {
-    }
+    RaiseUsed(g_page->timers_used, i);
     return i;
   }
   return -1;
@@ -1035,8 +1037,7 @@ long FutexWaitUntil(std::uint32_t* addr, int op, std::uint32_t val, std::int64_t
     errno = EAGAIN;
     return -1;
   }
-  if (Now() >= deadline) {
-    NoteCall(vt::kCallPastDeadline);
+  if (DeadlinePassed(deadline)) {
     errno = ETIMEDOUT;
     return -1;
   }

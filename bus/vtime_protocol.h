@@ -61,7 +61,6 @@ enum LastCall : std::uint32_t {
   kCallClock = 1,     ///< clock_gettime / gettimeofday / time
   kCallPollZero = 2,  ///< poll/select/epoll with a zero timeout
   kCallPastDeadline = 3,
-  kCallCount = 4,
 };
 
 enum ProcessState : std::uint32_t {
@@ -146,8 +145,9 @@ struct Page {
 inline std::int64_t ToNs(std::int64_t sec, std::int64_t nsec) { return sec * 1000000000 + nsec; }
 
 /// A timer whose next_ns is at or before `now` expires: returns the expirations since then
-/// (what a read of the timerfd returns) and moves next_ns on, or disarms a one-shot timer.
-/// Whoever writes the timer's eventfd (host or agent) calls it, once per firing.
+/// (what a read of the timerfd returns), keeps all but one as its overrun (timer_getoverrun)
+/// and moves next_ns on, or disarms a one-shot timer. Whoever fires the timer (host or agent)
+/// calls it, once per firing.
 inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
   const std::int64_t next = t.next_ns.load();
   const std::int64_t interval = t.interval_ns.load();
@@ -159,6 +159,7 @@ inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
     t.next_ns.store(kNoDeadline);
     t.state.store(kTimerDisarmed);
   }
+  t.overrun.store(static_cast<std::uint32_t>(expirations - 1));
   return expirations;
 }
 

@@ -161,7 +161,7 @@ void FirmwareLink::KeepAlive(VirtualClock& clock) {
   bus::CanFrame f;
   while (broker_->ReceiveLocal(local_port_, &f)) {
   }
-  clock.Blocked();
+  clock.Blocked();  // the reference point of the wait below
   clock.WaitForChange(1000);
 }
 
@@ -180,6 +180,15 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   firmware_blocked_ = false;
   const auto t0 = Clock::now();
   bool checked_exit = false;
+  auto exited = [&] {
+    run_.Fail("the firmware exited during the run (see firmware.log)");
+    return false;
+  };
+  auto running_threads = [&] {
+    std::string who;
+    for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+    return who;
+  };
   // One broker pass; true when it wrote to a client (which may wake a firmware thread).
   auto pass = [&] {
     const std::uint64_t before = broker_->client_progress();
@@ -206,10 +215,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       if (clock.TakeThreadsGone() && process.running()) {
         const auto gone_at = Clock::now();
         do {
-          if (process.Exited()) {
-            run_.Fail("the firmware exited during the run (see firmware.log)");
-            return false;
-          }
+          if (process.Exited()) return exited();
           std::this_thread::sleep_for(std::chrono::microseconds(200));
         } while (WallSeconds(gone_at) < 2.0);
       }
@@ -219,21 +225,15 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     const double wall = WallSeconds(t0);
     if (wall > std::min(1.0, timeout_s / 2) && !checked_exit) {
       checked_exit = true;
-      if (process.running() && process.Exited()) {
-        run_.Fail("the firmware exited during the run (see firmware.log)");
-        return false;
-      }
+      if (process.running() && process.Exited()) return exited();
       // Long before the limit: say who keeps virtual time from moving.
-      std::string who;
-      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
       run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
                                            {"event", "firmware_busy"},
                                            {"wall_s", std::min(1.0, timeout_s / 2)},
-                                           {"threads", who}});
+                                           {"threads", running_threads()}});
     }
     if (wall > timeout_s) {
-      std::string who;
-      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+      std::string who = running_threads();
       if (const pid_t p = clock.UnregisteredProcess(); who.empty() && p != 0) {
         who = fmt::format("process {} never loaded libwheelhil_vtime.so (a static binary, or "
                           "LD_PRELOAD cleared: see docs/virtual-time.md)",

@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <new>
+#include <string_view>
 #include <system_error>
 
 #include <fmt/format.h>
@@ -38,6 +39,25 @@ std::string ReadAt0(int fd) {
   const ssize_t n = ::pread(fd, buf, sizeof(buf) - 1, 0);
   return n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
 }
+
+// A whole small /proc file by path; "" when it is gone.
+std::string ReadProcFile(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return {};
+  std::string s = ReadAt0(fd);
+  ::close(fd);
+  return s;
+}
+
+// The state letter of a /proc .../stat line (after the command in parentheses, which may hold
+// spaces); '\0' when the line is not one.
+char TaskState(const std::string& stat) {
+  const auto close_paren = stat.rfind(')');
+  if (close_paren == std::string::npos || close_paren + 2 >= stat.size()) return '\0';
+  return stat[close_paren + 2];
+}
+
+bool Gone(char state) { return state == '\0' || state == 'Z' || state == 'X'; }
 
 const char* LastCallName(std::uint32_t c) {
   switch (c) {
@@ -203,12 +223,10 @@ int VirtualClock::WakeDue() {
         break;  // the agent writes it
       }
       case vt::kNotifySignal:
-      case vt::kNotifyAlarm: {
-        const std::uint64_t expirations = vt::ExpireTimer(t, now);
-        t.overrun.store(static_cast<std::uint32_t>(expirations - 1));
+      case vt::kNotifyAlarm:
+        vt::ExpireTimer(t, now);
         SendTimerSignal(t, pid);
         continue;
-      }
       case vt::kNotifyNone:
         vt::ExpireTimer(t, now);
         continue;
@@ -271,18 +289,7 @@ int VirtualClock::CopyOfFd(pid_t pid, int fd, std::uint64_t tag) {
 }
 
 bool VirtualClock::ProcessAlive(pid_t pid) const {
-  if (pid <= 0) return false;
-  const std::string stat = [&] {
-    const int fd = ::open(fmt::format("/proc/{}/stat", pid).c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return std::string();
-    std::string s = ReadAt0(fd);
-    ::close(fd);
-    return s;
-  }();
-  const auto close_paren = stat.rfind(')');
-  if (close_paren == std::string::npos || close_paren + 2 >= stat.size()) return false;
-  const char state = stat[close_paren + 2];
-  return state != 'Z' && state != 'X';
+  return pid > 0 && !Gone(TaskState(ReadProcFile(fmt::format("/proc/{}/stat", pid))));
 }
 
 VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
@@ -298,11 +305,8 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
     f.schedstat_fd = ::open((dir + "schedstat").c_str(), O_RDONLY | O_CLOEXEC);
   }
   if (f.stat_fd < 0) return Kernel::kGone;
-  const std::string stat = ReadAt0(f.stat_fd);
-  const auto close_paren = stat.rfind(')');
-  if (close_paren == std::string::npos || close_paren + 2 >= stat.size()) return Kernel::kGone;
-  const char state = stat[close_paren + 2];
-  if (state == 'Z' || state == 'X') return Kernel::kGone;
+  const char state = TaskState(ReadAt0(f.stat_fd));
+  if (Gone(state)) return Kernel::kGone;
   if (runs != nullptr) {
     // "run ns, wait ns, timeslices": the last counts every time the thread got a CPU.
     const std::string sched = f.schedstat_fd >= 0 ? ReadAt0(f.schedstat_fd) : std::string();
@@ -410,17 +414,12 @@ std::vector<std::string> VirtualClock::RunningThreads() {
     const pid_t pid = s.pid.load();
     const pid_t tid = s.tid.load();
     if (KernelState(i, pid, tid, nullptr) != Kernel::kRunning) continue;
-    std::string name = "?";
-    const int fd = ::open(fmt::format("/proc/{}/task/{}/comm", pid, tid).c_str(),
-                          O_RDONLY | O_CLOEXEC);
-    if (fd >= 0) {
-      name = ReadAt0(fd);
-      ::close(fd);
-      while (!name.empty() && name.back() == '\n') name.pop_back();
-    }
+    std::string name = ReadProcFile(fmt::format("/proc/{}/task/{}/comm", pid, tid));
+    while (!name.empty() && name.back() == '\n') name.pop_back();
     out.push_back(fmt::format("thread '{}' (pid {}, tid {}) last called {} ({} such calls since "
                               "its last wait)",
-                              name, pid, tid, LastCallName(s.last_call.load()), s.calls.load()));
+                              name.empty() ? std::string_view("?") : std::string_view(name), pid,
+                              tid, LastCallName(s.last_call.load()), s.calls.load()));
   }
   return out;
 }

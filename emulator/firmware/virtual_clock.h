@@ -64,7 +64,8 @@ class VirtualClock {
   /// A thread of the first process was found gone (exited or killed without the library's
   /// word) since the last call: then the firmware may be exiting.
   bool TakeThreadsGone() { return std::exchange(threads_gone_, false); }
-  /// Sleeps until a thread of the firmware enters or leaves a wait, at most timeout_us.
+  /// Sleeps until a thread of the firmware entered or left a wait since the last Blocked()
+  /// began (so nothing between that check and this sleep is missed), at most timeout_us.
   void WaitForChange(int timeout_us);
 
   /// The threads that are not blocked: "name (tid N) last called X (K calls since its last
