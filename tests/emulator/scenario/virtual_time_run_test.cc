@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "emulator/scenario/runner.h"
@@ -73,6 +74,17 @@ double FinalTruthX(const fs::path& dir) {
   return std::stod(last.substr(last.find(',') + 1));
 }
 
+// `s` run twice, into dir/a and dir/b: their can.log must be the same bytes. Returns the first
+// run's result and its can.log.
+std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs::path& dir) {
+  RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir / "a"));
+  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir / "b"));
+  EXPECT_EQ(a.failure, b.failure);
+  std::string log = Slurp(dir / "a" / "can.log");
+  EXPECT_EQ(log, Slurp(dir / "b" / "can.log"));
+  return {std::move(a), std::move(log)};
+}
+
 // A customer firmware's scenario run twice: the same bytes, and the firmware's own pose frame
 // `id` (x, y: int32, 0.1 mm) ends where the robot did (1 m straight), within a few encoder counts
 // (0.24 mm each). Returns the first run's can.log.
@@ -80,12 +92,8 @@ std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
                               const std::string& id) {
   const Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
                                       "/tests/data/customer_firmware/" + scenario);
-  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir / "a"));
-  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir / "b"));
+  const auto [a, log] = RunTwiceSameBytes(s, dir);
   EXPECT_EQ(a.failure, "");
-  EXPECT_EQ(b.failure, "");
-  const std::string log = Slurp(dir / "a" / "can.log");
-  EXPECT_EQ(log, Slurp(dir / "b" / "can.log"));
   EXPECT_THAT(log, HasSubstr(" 000#0100"));
   const auto pose = LastPayload(log, id);
   EXPECT_EQ(pose.size(), 8u) << id;
@@ -119,12 +127,8 @@ TEST_F(VirtualTimeRun, CustomerPythonCanFirmwareIsByteIdentical) {
 TEST_F(VirtualTimeRun, AForkedChildRunsOnTheSameClock) {
   Scenario s = LoadScenarioFile(kCustomerC);
   s.firmware.command += " --fork 1";
-  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
-  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  const auto [a, log] = RunTwiceSameBytes(s, dir_);
   ASSERT_EQ(a.failure, "");
-  ASSERT_EQ(b.failure, "");
-  const std::string log = Slurp(dir_ / "a" / "can.log");
-  EXPECT_EQ(log, Slurp(dir_ / "b" / "can.log"));
   // The same bytes as the firmware without the fork.
   const RunResult c = RunScenario(LoadScenarioFile(kCustomerC),
                                   testing::BuildTreeRunOptions(dir_ / "c"));
@@ -157,13 +161,10 @@ TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
 TEST_F(VirtualTimeRun, AFirmwareThatExitsEndsTheRunAtTheSameInstantEveryTime) {
   Scenario s = LoadScenarioFile(kCustomerC);
   s.firmware.command += " --exit-after-s 1.0";
-  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
-  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  // Seen at the first instant after its exit: the same record (and failure) on every run.
+  const auto [a, log] = RunTwiceSameBytes(s, dir_);
   EXPECT_EQ(a.exit_code, 1);
   EXPECT_THAT(a.failure, HasSubstr("the firmware exited during the run"));
-  EXPECT_EQ(a.failure, b.failure);
-  // Seen at the first instant after its exit: the same record on every run.
-  EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
   EXPECT_EQ(Slurp(dir_ / "a" / "events.jsonl"), Slurp(dir_ / "b" / "events.jsonl"));
 }
 
@@ -195,11 +196,9 @@ TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
                                 "/scenarios/smoke/paper000_slip_short.yaml");
   s.timing.virtual_clock = true;
   s.timing.firmware_produces_sync = true;
-  const RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "a"));
-  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "b"));
+  const auto [a, log] = RunTwiceSameBytes(s, dir_);
   ASSERT_EQ(a.failure, "");
   EXPECT_EQ(a.exit_code, 0) << a.report["expectations"].dump();
-  EXPECT_EQ(Slurp(dir_ / "a" / "can.log"), Slurp(dir_ / "b" / "can.log"));
   EXPECT_EQ(testing::ReportWithoutWall(dir_ / "a"), testing::ReportWithoutWall(dir_ / "b"));
   // Its config went through unchanged: it produces SYNC and keeps its cycle deadline.
   const std::string cfg = Slurp(dir_ / "a" / "firmware_config.yaml");
