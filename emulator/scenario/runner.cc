@@ -140,7 +140,7 @@ int Run::SendSync(std::int64_t t_ns) {
   sync.len = 0;
   hub_->EnqueueSync(sync, t_ns);
   const int cycle = static_cast<int>(handshake_->syncs_sent() % 256);
-  estimates_->OnSync(cycle, run_.MotionSeconds(t_ns));
+  estimates_->OnSync(run_.MotionSeconds(t_ns));
   handshake_->OnSyncSent();
   return cycle;
 }
@@ -191,12 +191,11 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   hub_->EnqueueFromFirmware(f);
   if (s_.timing.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
     // The firmware is the SYNC producer: its SYNCs number the cycles.
-    estimates_->OnSync(static_cast<int>(handshake_->syncs_sent() % 256),
-                       run_.MotionSeconds(hub_->now_ns()));
+    estimates_->OnSync(run_.MotionSeconds(hub_->now_ns()));
     handshake_->OnSyncSent();
   }
   handshake_->OnFirmwareFrame(f);
-  estimates_->OnFrame(f);
+  estimates_->OnFrame(f, run_.MotionSeconds(hub_->now_ns()));
 }
 
 bool Run::WaitFirmware(const std::function<bool()>& done) {
@@ -259,7 +258,9 @@ void Run::Build() {
   hub_->SetFirmwareSend([this](const bus::CanFrame& f) { return link_->Send(f); });
   handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
   hub_->SetObserver(handshake_.get());
-  estimates_ = std::make_unique<scoring::EstimateDecoder>(fw_dbc);
+  estimates_ = std::make_unique<scoring::EstimateDecoder>(
+      s_.firmware.outputs ? scoring::OutputBinding::Resolve(*s_.firmware.outputs, o_.dbc_dir)
+                          : scoring::OutputBinding());
   scoring::TruthRecorderOptions to;
   to.drive_wheels = s_.platform.drive_wheels;
   to.slip_threshold_m_s = s_.slip_threshold_m_s;

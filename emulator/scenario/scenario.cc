@@ -258,7 +258,7 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
 FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
   FirmwareSpec fw;
   if (!n.IsDefined() || n.IsNull()) return fw;
-  r.CheckKeys(n, "firmware", {"command", "config", "overrides"});
+  r.CheckKeys(n, "firmware", {"command", "config", "overrides", "outputs"});
   fw.command = r.String(n, "command", "firmware", std::string());
   const std::string cfg = r.String(n, "config", "firmware", std::string());
   if (!cfg.empty()) {
@@ -271,6 +271,9 @@ FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
     YAML::Emitter e;
     e << o;
     fw.overrides_yaml = e.c_str();
+  }
+  if (const YAML::Node o = Reader::Get(n, "outputs"); Reader::Present(o)) {
+    fw.outputs = scoring::ReadOutputs(r, o, "firmware.outputs", r.Path("."));
   }
   if (fw.command.find("${CONFIG}") != std::string::npos && fw.config.empty()) {
     r.Fail(n["command"], "firmware.command", "uses ${CONFIG} but firmware.config is not set");

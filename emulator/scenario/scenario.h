@@ -23,6 +23,7 @@
 #include "emulator/physics/terrain.h"
 #include "emulator/platforms/platform.h"
 #include "emulator/scoring/expectations.h"
+#include "emulator/scoring/output_binding.h"
 
 namespace wheelhil::emulator::scenario {
 
@@ -171,6 +172,9 @@ struct FirmwareSpec {
   std::string command;
   std::string config;          ///< Firmware config file (absolute after loading); may be empty.
   std::string overrides_yaml;  ///< YAML map merged into the config (as text), may be empty.
+  /// Where its estimates are in its frames (emulator/scoring/output_binding.h); none: nothing
+  /// of the firmware is scored.
+  std::optional<scoring::OutputsSpec> outputs;
 };
 
 struct TimingSpec {

@@ -1,103 +1,161 @@
 #include "emulator/scoring/estimate_decoder.h"
 
-#include <initializer_list>
+#include <algorithm>
+#include <cmath>
 
 #include "bus/dbc_codec.h"
 
 namespace wheelhil::emulator::scoring {
 
-EstimateDecoder::EstimateDecoder(std::shared_ptr<const bus::DbcDatabase> firmware_dbc)
-    : dbc_(std::move(firmware_dbc)) {}
+namespace {
 
-void EstimateDecoder::OnFrame(const bus::CanFrame& f) {
-  if (f.extended) return;
-  const bus::DbcMessage* msg = dbc_->FindMessage(f.id, false);
-  if (msg == nullptr) return;
-  Plan& plan = PlanFor(*msg);
-  if (plan.kind == Plan::Kind::kIgnored) return;
-  auto get = [&](std::size_t field) {
-    double value = 0.0;
-    for (const bus::DbcSignal* sig : plan.fields[field]) {
-      if (bus::DecodeSignalIfPresent(*msg, *sig, f, &value)) return value;
+std::uint64_t Key(std::uint32_t id, bool extended) {
+  return (static_cast<std::uint64_t>(extended) << 32) | id;
+}
+
+// The signal's SI value in the frame, or nullopt when the frame does not carry it.
+std::optional<double> Value(const bus::DbcMessage& msg, const ResolvedSignal& s,
+                            const bus::CanFrame& f) {
+  double v = 0.0;
+  if (!bus::DecodeSignalIfPresent(msg, *s.signal, f, &v)) return std::nullopt;
+  return s.to_si.ToSi(v);
+}
+
+}  // namespace
+
+EstimateDecoder::EstimateDecoder(OutputBinding binding) : binding_(std::move(binding)) {
+  for (const ResolvedStream& s : binding_.streams()) {
+    StreamState st;
+    st.stream = &s;
+    st.checks = &checks_[s.spec->name];
+    by_id_[Key(s.message->id, s.message->extended)].push_back(st);
+    if (s.spec->kind == OutputKind::kPose && s.values[2].signal == nullptr) {
+      position_only_.insert(s.spec->name);
     }
-    return 0.0;
-  };
-  const int cycle = static_cast<int>(get(0));
-  const auto it = sync_time_by_cycle_.find(cycle);
-  if (it == sync_time_by_cycle_.end()) return;
-  const double t = it->second;
-  switch (plan.kind) {
-    case Plan::Kind::kPose: {
-      const PoseSample ps{t, get(1), get(2), get(3)};
-      if (plan.pose == nullptr) plan.pose = &pose_[plan.stream];
-      plan.pose->push_back(ps);
-      rows_.push_back({t, cycle, plan.stream, ps.x_m, ps.y_m, ps.theta_rad});
-      break;
-    }
-    case Plan::Kind::kVelocity: {
-      const VelocitySample vs{t, get(1), get(2), get(3)};
-      if (plan.vel == nullptr) plan.vel = &vel_[plan.stream];
-      plan.vel->push_back(vs);
-      rows_.push_back({t, cycle, plan.stream, vs.vx_m_s, vs.vy_m_s, vs.omega_rad_s});
-      break;
-    }
-    case Plan::Kind::kSlip:
-      detections_.push_back({t, get(1) != 0});
-      if (get(2) != 0) {
-        residual_.t_s.push_back(t);
-        residual_.residual_rad.push_back(get(3));
-        residual_.band_lower_rad.push_back(get(4));
-        residual_.band_upper_rad.push_back(get(5));
-      }
-      break;
-    default:
-      break;
   }
 }
 
-EstimateDecoder::Plan& EstimateDecoder::PlanFor(const bus::DbcMessage& msg) {
-  const auto found = plans_.find(&msg);
-  if (found != plans_.end()) return found->second;
-  Plan plan;
-  auto field = [&](const std::string& name) {
-    std::vector<const bus::DbcSignal*> sigs;
-    for (const auto& sg : msg.signals) {
-      if (sg.name == name) sigs.push_back(&sg);
+void EstimateDecoder::OnSync(double t_s) {
+  ++syncs_;
+  sync_times_.push_back(t_s);
+}
+
+void EstimateDecoder::OnFrame(const bus::CanFrame& f, double t_s) {
+  const auto it = by_id_.find(Key(f.id, f.extended));
+  if (it == by_id_.end() || f.rtr) return;
+  for (StreamState& st : it->second) {
+    Check(st, f, t_s);
+    int cycle = static_cast<int>(syncs_) - 1;
+    if (const auto t = SampleTime(st, f, t_s, cycle)) Record(st, f, *t, cycle);
+  }
+}
+
+void EstimateDecoder::Check(StreamState& st, const bus::CanFrame& f, double t_s) {
+  const ResolvedStream& s = *st.stream;
+  FrameChecks& c = *st.checks;
+  ++c.frames;
+  if (f.len != s.message->length) ++c.dlc_errors;
+  if (st.last_arrival_s) {
+    const double gap = t_s - *st.last_arrival_s;
+    c.min_interval_s = c.intervals == 0 ? gap : std::min(c.min_interval_s, gap);
+    c.max_interval_s = c.intervals == 0 ? gap : std::max(c.max_interval_s, gap);
+    c.sum_interval_s += gap;
+    ++c.intervals;
+    if (s.expected_cycle_s) {
+      const double tol = *s.expected_cycle_s * s.spec->cycle_tolerance;
+      if (gap < *s.expected_cycle_s - tol || gap > *s.expected_cycle_s + tol) {
+        ++c.cycle_violations;
+      }
     }
-    plan.fields.push_back(std::move(sigs));
-  };
-  auto estimate = [&](Plan::Kind kind, const char* stream, const std::string& prefix,
-                      std::initializer_list<const char*> names) {
-    plan.kind = kind;
-    plan.stream = stream;
-    for (const char* n : names) field(prefix + n);
-  };
-  // The cycle: the first signal named <prefix>_Cycle; a message without one is not an estimate.
-  std::string cycle;
-  for (const auto& sg : msg.signals) {
-    if (sg.name.size() > 6 && sg.name.ends_with("_Cycle")) {
-      cycle = sg.name;
+  }
+  st.last_arrival_s = t_s;
+  const std::span<const std::uint8_t> payload(f.data.data(), f.len);
+  if (s.counter.signal != nullptr) {
+    std::uint64_t raw = 0;
+    if (bus::ExtractRaw(*s.counter.signal, payload, raw)) {
+      const auto m = static_cast<std::int64_t>(s.counter_modulo);
+      if (st.last_counter) {
+        const std::int64_t expected =
+            ((static_cast<std::int64_t>(*st.last_counter) + s.spec->counter_step) % m + m) % m;
+        if (static_cast<std::int64_t>(raw) != expected) ++c.counter_errors;
+      }
+      st.last_counter = raw;
+    } else {
+      ++c.counter_errors;
+    }
+  }
+  if (s.checksum.signal != nullptr) {
+    std::uint64_t raw = 0;
+    if (!bus::ExtractRaw(*s.checksum.signal, payload, raw) ||
+        raw != ComputeChecksum(s.spec->checksum_kind, *s.checksum.signal, payload)) {
+      ++c.checksum_errors;
+    }
+  }
+}
+
+std::optional<double> EstimateDecoder::SampleTime(StreamState& st, const bus::CanFrame& f,
+                                                  double t_s, int& cycle) const {
+  const ResolvedStream& s = *st.stream;
+  if (s.cycle.signal != nullptr) {
+    const auto v = Value(*s.message, s.cycle, f);
+    if (!v) return std::nullopt;
+    // The latest SYNC whose number matches the counter (mod its range).
+    const auto m = static_cast<std::int64_t>(s.cycle_modulo);
+    const auto c = static_cast<std::int64_t>(*v);
+    const std::int64_t last = syncs_ - 1;
+    if (last < 0 || c < 0 || c >= m) return std::nullopt;
+    const std::int64_t n = last - ((last - c) % m + m) % m;
+    if (n < 0) return std::nullopt;
+    cycle = static_cast<int>(c);
+    return sync_times_[static_cast<std::size_t>(n)];
+  }
+  if (t_s < 0) return std::nullopt;
+  if (s.timestamp.signal != nullptr) {
+    const auto stamp = Value(*s.message, s.timestamp, f);
+    if (!stamp) return std::nullopt;
+    if (!st.first_stamp_s) st.first_stamp_s = *stamp, st.first_arrival_s = t_s;
+    return *st.first_arrival_s + (*stamp - *st.first_stamp_s);
+  }
+  return t_s;
+}
+
+void EstimateDecoder::Record(StreamState& st, const bus::CanFrame& f, double t, int cycle) {
+  const ResolvedStream& s = *st.stream;
+  const std::string& name = s.spec->name;
+  double v[6] = {0, 0, 0, 0, 0, 0};
+  for (std::size_t i = 0; i < s.values.size(); ++i) {
+    if (s.values[i].signal == nullptr) continue;
+    const auto value = Value(*s.message, s.values[i], f);
+    if (!value) return;
+    v[i] = *value;
+  }
+  switch (s.spec->kind) {
+    case OutputKind::kPose: {
+      pose_[name].push_back(PoseSample{t, v[0], v[1], v[2]});
+      rows_.push_back({t, cycle, name, v[0], v[1], v[2]});
+      break;
+    }
+    case OutputKind::kVelocity: {
+      vel_[name].push_back(VelocitySample{t, v[0], v[1], v[2]});
+      rows_.push_back({t, cycle, name, v[0], v[1], v[2]});
+      break;
+    }
+    case OutputKind::kSlip: {
+      // flags (a wheel bit mask) or detected: either way "some wheel slips" when non-zero.
+      detections_[name].push_back({t, (s.values[0].signal != nullptr ? v[0] : v[1]) != 0});
+      const bool calibrated = s.values[2].signal == nullptr || v[2] != 0;
+      if (s.values[3].signal != nullptr && calibrated) {
+        ResidualTrace& r = residuals_[name];
+        r.t_s.push_back(t);
+        r.residual_rad.push_back(v[3]);
+        if (s.values[4].signal != nullptr) {
+          r.band_lower_rad.push_back(v[4]);
+          r.band_upper_rad.push_back(v[5]);
+        }
+      }
       break;
     }
   }
-  if (!cycle.empty()) {
-    field(cycle);
-    if (msg.name == "FW_Pose") {
-      estimate(Plan::Kind::kPose, "pose", "Pose", {"_X", "_Y", "_Theta"});
-    } else if (msg.name == "FW_PoseRaw") {
-      estimate(Plan::Kind::kPose, "pose_raw", "PoseRaw", {"_X", "_Y", "_Theta"});
-    } else if (msg.name == "FW_Velocity") {
-      estimate(Plan::Kind::kVelocity, "fused", "Vel", {"_Vx", "_Vy", "_Omega"});
-    } else if (msg.name == "FW_VelocityOdom") {
-      estimate(Plan::Kind::kVelocity, "odometry", "VelOdom", {"_Vx", "_Vy", "_Omega"});
-    } else if (msg.name == "FW_VelocityAccel") {
-      estimate(Plan::Kind::kVelocity, "accel", "VelAccel", {"_Vx", "_Vy", "_Omega"});
-    } else if (msg.name == "FW_SlipStatus") {
-      estimate(Plan::Kind::kSlip, "", "Slip_",
-               {"OutOfBand", "Calibrated", "Residual", "BandLower", "BandUpper"});
-    }
-  }
-  return plans_.emplace(&msg, std::move(plan)).first->second;
 }
 
 }  // namespace wheelhil::emulator::scoring

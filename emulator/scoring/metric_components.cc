@@ -19,16 +19,19 @@ class PoseComponent final : public MetricComponent {
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
     for (const auto& [name, est] : run.estimates.pose_streams()) {
       const PoseMetrics m = ComputePoseMetrics(run.truth.poses(), est);
-      metrics[name] = json{{"final_position_error_m", m.final_position_error_m},
-                           {"final_heading_error_rad", m.final_heading_error_rad},
-                           {"ape_rmse_m", m.ape_rmse_m},
-                           {"distance_m", m.distance_m},
-                           {"rotation_rad", m.rotation_rad},
-                           {"samples", m.samples}};
+      json block{{"final_position_error_m", m.final_position_error_m},
+                 {"ape_rmse_m", m.ape_rmse_m},
+                 {"distance_m", m.distance_m},
+                 {"rotation_rad", m.rotation_rad},
+                 {"samples", m.samples}};
+      if (!run.estimates.position_only().contains(name)) {
+        block["final_heading_error_rad"] = m.final_heading_error_rad;
+      }
       if (m.distance_m > 0) {
-        metrics[name]["final_position_error_pct_of_distance"] =
+        block["final_position_error_pct_of_distance"] =
             100.0 * m.final_position_error_m / m.distance_m;
       }
+      metrics[name] = std::move(block);
     }
   }
 };
@@ -119,47 +122,54 @@ class ContactComponent final : public MetricComponent {
   }
 };
 
-// Paper 000: the firmware's per-cycle slip flags against the ground-truth intervals.
+// Paper 000: the firmware's per-cycle slip flags against the ground-truth intervals, one block
+// per slip stream (a stream named "slip" replaces the truth component's block of that name).
 class SlipDetectionComponent final : public MetricComponent {
  public:
   std::string_view name() const override { return "slip_detection"; }
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
-    const auto& detections = run.estimates.detections();
-    if (detections.empty()) return;
-    const SlipMetrics sm = ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
-    json j{{"precision", sm.precision},
-           {"recall", sm.recall},
-           {"true_positive", sm.true_positive},
-           {"false_positive", sm.false_positive},
-           {"false_negative", sm.false_negative},
-           {"true_negative", sm.true_negative},
-           {"truth_intervals", sm.intervals},
-           {"intervals_detected", sm.intervals_detected},
-           {"detections", std::count_if(detections.begin(), detections.end(),
-                                        [](const DetectionSample& d) { return d.detected; })}};
-    if (sm.mean_latency_s) j["mean_latency_s"] = *sm.mean_latency_s;
-    if (sm.max_latency_s) j["max_latency_s"] = *sm.max_latency_s;
-    metrics["slip"] = j;
+    for (const auto& [stream, detections] : run.estimates.detections()) {
+      if (detections.empty()) continue;
+      const SlipMetrics sm =
+          ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
+      json j{{"precision", sm.precision},
+             {"recall", sm.recall},
+             {"true_positive", sm.true_positive},
+             {"false_positive", sm.false_positive},
+             {"false_negative", sm.false_negative},
+             {"true_negative", sm.true_negative},
+             {"truth_intervals", sm.intervals},
+             {"intervals_detected", sm.intervals_detected},
+             {"detections", std::count_if(detections.begin(), detections.end(),
+                                          [](const DetectionSample& d) { return d.detected; })}};
+      if (sm.mean_latency_s) j["mean_latency_s"] = *sm.mean_latency_s;
+      if (sm.max_latency_s) j["max_latency_s"] = *sm.max_latency_s;
+      metrics[stream] = j;
+    }
   }
 };
 
-// Paper 000: is the firmware's calibrated residual normal (its band assumes it is)?
+// Paper 000: is the firmware's calibrated residual normal (its band assumes it is)? The block
+// of the stream named "slip" is "residual", of another one "<stream>_residual".
 class ResidualNormalityComponent final : public MetricComponent {
  public:
   std::string_view name() const override { return "residual_normality"; }
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
-    const auto& residual = run.estimates.residual().residual_rad;
-    if (run.estimates.detections().empty() || residual.empty()) return;
-    // Paper 000 states no minimum n; below 8 samples the skewness test is not defined.
-    const bus::NormalityResult n = bus::SkewnessKurtosisTest(residual, 1.96, 8);
-    metrics["residual"] = json{{"samples", n.n},
-                               {"mean_rad", n.mean},
-                               {"sigma_rad", n.sigma},
-                               {"skewness_g1", n.g1},
-                               {"excess_kurtosis_g2", n.g2},
-                               {"u1", n.u1},
-                               {"u2", n.u2},
-                               {"normality_accepted", n.accepted}};
+    for (const auto& [stream, trace] : run.estimates.residuals()) {
+      const auto& residual = trace.residual_rad;
+      if (residual.empty()) continue;
+      // Paper 000 states no minimum n; below 8 samples the skewness test is not defined.
+      const bus::NormalityResult n = bus::SkewnessKurtosisTest(residual, 1.96, 8);
+      metrics[stream == "slip" ? std::string("residual") : stream + "_residual"] =
+          json{{"samples", n.n},
+               {"mean_rad", n.mean},
+               {"sigma_rad", n.sigma},
+               {"skewness_g1", n.g1},
+               {"excess_kurtosis_g2", n.g2},
+               {"u1", n.u1},
+               {"u2", n.u2},
+               {"normality_accepted", n.accepted}};
+    }
   }
 };
 

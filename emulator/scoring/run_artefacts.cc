@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <fmt/format.h>
+
 #include "emulator/scoring/artefacts.h"
 #include "emulator/scoring/metrics.h"
 
@@ -14,15 +16,15 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
   const auto& truth_vel = truth.velocities();
   const auto& pose_streams = estimates.pose_streams();
   const auto& vel_streams = estimates.velocity_streams();
-  const ResidualTrace& residual = estimates.residual();
   WriteTruthCsv(out + "/truth.csv", truth.rows());
   WriteEstimateCsv(out + "/estimate.csv", estimates.rows());
   WriteTum(out + "/truth.tum", truth_pose);
-  if (const auto it = pose_streams.find("pose"); it != pose_streams.end()) {
-    WriteTum(out + "/estimate.tum", it->second);
-  }
-  if (const auto it = pose_streams.find("pose_raw"); it != pose_streams.end()) {
-    WriteTum(out + "/estimate_raw.tum", it->second);
+  for (const auto& [name, est] : pose_streams) {
+    // A stream named "pose" (the reference firmware's corrected one) also as estimate.tum,
+    // "pose_raw" as estimate_raw.tum: the names evo recipes in docs/ use.
+    WriteTum(out + "/estimate_" + name + ".tum", est);
+    if (name == "pose") WriteTum(out + "/estimate.tum", est);
+    if (name == "pose_raw") WriteTum(out + "/estimate_raw.tum", est);
   }
   WriteJsonLines(out + "/events.jsonl", events);
   WriteText(out + "/report.json", report.dump(2) + "\n");
@@ -42,12 +44,15 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
     }
     plots.push_back(SvgPlot("Trajectory: truth vs estimates", "x [m]", "y [m]", ss, false));
   }
-  if (!residual.residual_rad.empty()) {
-    std::vector<Series> ss{{"residual r", "#1f77b4", residual.t_s, residual.residual_rad},
-                           {"band lower", "#d62728", residual.t_s, residual.band_lower_rad, true},
-                           {"band upper", "#d62728", residual.t_s, residual.band_upper_rad, true}};
-    plots.push_back(
-        SvgPlot("Paper 000 residual against its band (cf. fig 8)", "t [s]", "r [rad]", ss));
+  for (const auto& [stream, residual] : estimates.residuals()) {
+    std::vector<Series> ss{{"residual r", "#1f77b4", residual.t_s, residual.residual_rad}};
+    if (!residual.band_lower_rad.empty()) {
+      ss.push_back({"band lower", "#d62728", residual.t_s, residual.band_lower_rad, true});
+      ss.push_back({"band upper", "#d62728", residual.t_s, residual.band_upper_rad, true});
+    }
+    plots.push_back(SvgPlot(fmt::format("{}: residual against its band (cf. paper 000 fig 8)",
+                                        stream),
+                            "t [s]", "r [rad]", ss));
   }
   if (!vel_streams.empty()) {
     std::vector<Series> ss;

@@ -24,6 +24,15 @@ std::shared_ptr<const bus::DbcDatabase> FwDbc() {
       bus::DbcDatabase::LoadFile(std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc/wheelhil_fw.dbc"));
 }
 
+// The reference firmware's binding, as the shipped scenarios name it.
+OutputBinding ReferenceBinding() {
+  const std::string dir = std::string(WHEELHIL_SOURCE_DIR) + "/scenarios";
+  const bus::yaml::FieldReader r(dir + "/scenario.yaml");
+  return OutputBinding::Resolve(
+      ReadOutputs(r, YAML::Node("outputs/wheelhil_fw.yaml"), "firmware.outputs", dir),
+      std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc");
+}
+
 bus::CanFrame Pose(const bus::DbcDatabase& db, const char* msg, const char* prefix, int cycle,
                    double x) {
   const bus::DbcMessage* m = db.FindMessage(msg);
@@ -54,11 +63,11 @@ TruthRecorder StraightTruth() {
 
 TEST(EstimateDecoder, StampsEstimatesWithTheirSyncAndIgnoresUnknownCycles) {
   const auto db = FwDbc();
-  EstimateDecoder d(db);
-  d.OnSync(0, 0.0);
-  d.OnSync(1, 0.25);
-  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 1, 0.5));
-  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 7, 9.0));  // no SYNC 7: ignored
+  EstimateDecoder d(ReferenceBinding());
+  d.OnSync(0.0);
+  d.OnSync(0.25);
+  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 1, 0.5), 1.0);
+  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 7, 9.0), 1.0);  // no SYNC 7: ignored
   ASSERT_EQ(d.pose_streams().count("pose"), 1u);
   const auto& pose = d.pose_streams().at("pose");
   ASSERT_EQ(pose.size(), 1u);
@@ -71,10 +80,10 @@ TEST(EstimateDecoder, StampsEstimatesWithTheirSyncAndIgnoresUnknownCycles) {
 TEST(MetricComponents, OnlySelectedComponentsAddBlocks) {
   const auto db = FwDbc();
   const TruthRecorder truth = StraightTruth();
-  EstimateDecoder d(db);
-  d.OnSync(0, 1.0);
-  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 0, 1.0 + 0.01));     // corrected: 10 mm off
-  d.OnFrame(Pose(*db, "FW_PoseRaw", "PoseRaw", 0, 1.0 + 0.1));  // uncorrected: 100 mm off
+  EstimateDecoder d(ReferenceBinding());
+  d.OnSync(1.0);
+  d.OnFrame(Pose(*db, "FW_Pose", "Pose", 0, 1.0 + 0.01), 1.0);     // corrected: 10 mm off
+  d.OnFrame(Pose(*db, "FW_PoseRaw", "PoseRaw", 0, 1.0 + 0.1), 1.0);  // uncorrected: 100 mm off
   const RecordedRun run{truth, d, 0.25, {"left"}, SlipIntervals(truth)};
 
   json generic = json::object();
