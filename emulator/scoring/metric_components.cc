@@ -31,6 +31,23 @@ class PoseComponent final : public MetricComponent {
         block["final_position_error_pct_of_distance"] =
             100.0 * m.final_position_error_m / m.distance_m;
       }
+      const bool heading = !run.estimates.position_only().contains(name);
+      // evo's conventions: nearest truth sample within 10 ms, no alignment.
+      const auto pairs = AssociateNearest(run.truth.poses(), est, 0.01);
+      const ErrorStats ape = AbsolutePositionError(pairs);
+      block["ape"] = json{{"pairs", ape.n},      {"rmse_m", ape.rmse}, {"mean_m", ape.mean},
+                          {"median_m", ape.median}, {"std_m", ape.std},  {"min_m", ape.min},
+                          {"max_m", ape.max}};
+      const RelativePoseError rpe = ComputeRelativePoseError(pairs, 1.0);
+      json rpe_block{{"segments", rpe.translation_m.n},
+                     {"translation_rmse_m", rpe.translation_m.rmse},
+                     {"translation_mean_m", rpe.translation_m.mean},
+                     {"translation_max_m", rpe.translation_m.max}};
+      if (heading) {
+        rpe_block["rotation_rmse_rad"] = rpe.rotation_rad.rmse;
+        rpe_block["rotation_max_rad"] = rpe.rotation_rad.max;
+      }
+      block["rpe_1m"] = std::move(rpe_block);
       metrics[name] = std::move(block);
     }
   }
@@ -173,14 +190,42 @@ class ResidualNormalityComponent final : public MetricComponent {
   }
 };
 
+// CANoe-style checks of the firmware's frames of each bound stream, added to the stream's block
+// (after the other components, which may have written it).
+class FramesComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "frames"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
+    const auto& checks = run.estimates.frame_checks();
+    for (const ResolvedStream& s : run.estimates.binding().streams()) {
+      const FrameChecks& c = checks.at(s.spec->name);
+      if (c.frames == 0) continue;  // not sent in this run: no block (an expectation on it fails)
+      json& block = metrics[s.spec->name];
+      block["frames"] = c.frames;
+      block["dlc_errors"] = c.dlc_errors;
+      if (c.intervals > 0) {
+        block["cycle_time_min_s"] = c.min_interval_s;
+        block["cycle_time_max_s"] = c.max_interval_s;
+        block["cycle_time_mean_s"] = c.sum_interval_s / static_cast<double>(c.intervals);
+      }
+      if (s.expected_cycle_s) {
+        block["cycle_time_expected_s"] = *s.expected_cycle_s;
+        block["cycle_time_violations"] = c.cycle_violations;
+      }
+      if (s.counter.signal != nullptr) block["counter_errors"] = c.counter_errors;
+      if (s.checksum.signal != nullptr) block["checksum_errors"] = c.checksum_errors;
+    }
+  }
+};
+
 }  // namespace
 
 const std::vector<std::string>& MetricComponentNames() {
   // The canonical order: the events of "truth" (slip) come before those of "contact" at one
   // instant.
-  static const std::vector<std::string> names{"pose",    "correction_ratio", "velocity",
-                                              "truth",   "contact",          "slip_detection",
-                                              "residual_normality"};
+  static const std::vector<std::string> names{
+      "pose",    "correction_ratio", "velocity",           "truth",
+      "contact", "slip_detection",   "residual_normality", "frames"};
   return names;
 }
 
@@ -192,12 +237,13 @@ std::unique_ptr<MetricComponent> MakeMetricComponent(std::string_view name) {
   if (name == "contact") return std::make_unique<ContactComponent>();
   if (name == "slip_detection") return std::make_unique<SlipDetectionComponent>();
   if (name == "residual_normality") return std::make_unique<ResidualNormalityComponent>();
+  if (name == "frames") return std::make_unique<FramesComponent>();
   throw std::invalid_argument(fmt::format("unknown metric component '{}' (known: {})", name,
                                           fmt::join(MetricComponentNames(), ", ")));
 }
 
 std::vector<std::string> DefaultMetricComponents() {
-  return {"pose", "velocity", "truth", "contact"};
+  return {"pose", "velocity", "truth", "contact", "frames"};
 }
 
 std::vector<Interval> SlipIntervals(const TruthRecorder& truth) {

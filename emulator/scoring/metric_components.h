@@ -2,10 +2,11 @@
 /// A run's metrics as named components. Each component reads what the run recorded (ground
 /// truth, the firmware's decoded estimates) and adds its block to report.json's `metrics` (and
 /// its events to events.jsonl) when it applies; a scenario selects the components by name
-/// (`scoring.metrics`), by default all of them. Generic components: "pose" (one block per pose
-/// stream: paper 000 eq 13 final error, APE RMSE, ...), "velocity" (RMSE per velocity stream),
-/// "truth" (slip intervals of the ground truth, distance, rotation), "contact" (ground-truth
-/// contact loss per wheel). Paper-specific ones: "correction_ratio" (paper 000 Table 2:
+/// (`scoring.metrics`), by default the generic ones. Generic components: "pose" (one block per
+/// pose stream: paper 000 eq 13 final error, APE RMSE after interpolation, evo-style APE and RPE
+/// per metre, ...), "velocity" (RMSE per velocity stream), "truth" (slip intervals of the ground
+/// truth, distance, rotation), "contact" (ground-truth contact loss per wheel), "frames" (bus
+/// checks of each stream's frames: count, DLC, cycle time, counter, checksum). Paper-specific ones: "correction_ratio" (paper 000 Table 2:
 /// uncorrected over corrected final error), "slip_detection" (paper 000: precision, recall and
 /// latency of the firmware's slip flags against the truth), "residual_normality" (paper 000:
 /// skewness/kurtosis test of the firmware's calibrated residual). Components always run in this

@@ -30,6 +30,85 @@ PoseSample InterpolatePose(const std::vector<PoseSample>& truth, double t_s) {
   return p;
 }
 
+ErrorStats ComputeErrorStats(std::vector<double> e) {
+  ErrorStats s;
+  s.n = e.size();
+  if (e.empty()) return s;
+  double sum = 0, sq = 0;
+  for (double v : e) sum += v, sq += v * v;
+  const double n = static_cast<double>(e.size());
+  s.mean = sum / n;
+  s.rmse = std::sqrt(sq / n);
+  double var = 0;
+  for (double v : e) var += (v - s.mean) * (v - s.mean);
+  s.std = std::sqrt(var / n);  // numpy's std, as evo uses it
+  std::sort(e.begin(), e.end());
+  s.min = e.front();
+  s.max = e.back();
+  const std::size_t mid = e.size() / 2;
+  s.median = e.size() % 2 == 1 ? e[mid] : 0.5 * (e[mid - 1] + e[mid]);
+  return s;
+}
+
+std::vector<std::pair<PoseSample, PoseSample>> AssociateNearest(
+    const std::vector<PoseSample>& truth, const std::vector<PoseSample>& estimate,
+    double max_diff_s) {
+  std::vector<std::pair<PoseSample, PoseSample>> out;
+  if (truth.empty()) return out;
+  for (const PoseSample& e : estimate) {
+    const auto it = std::lower_bound(truth.begin(), truth.end(), e.t_s,
+                                     [](const PoseSample& p, double t) { return p.t_s < t; });
+    const PoseSample* best = nullptr;
+    if (it != truth.end()) best = &*it;
+    if (it != truth.begin() && (best == nullptr || e.t_s - (it - 1)->t_s < best->t_s - e.t_s)) {
+      best = &*(it - 1);
+    }
+    if (best != nullptr && std::abs(best->t_s - e.t_s) <= max_diff_s) out.emplace_back(*best, e);
+  }
+  return out;
+}
+
+ErrorStats AbsolutePositionError(const std::vector<std::pair<PoseSample, PoseSample>>& pairs) {
+  std::vector<double> e;
+  e.reserve(pairs.size());
+  for (const auto& [t, est] : pairs) e.push_back(std::hypot(est.x_m - t.x_m, est.y_m - t.y_m));
+  return ComputeErrorStats(std::move(e));
+}
+
+namespace {
+// b expressed in a's frame (planar): a^-1 b.
+PoseSample Relative(const PoseSample& a, const PoseSample& b) {
+  const double c = std::cos(a.theta_rad), s = std::sin(a.theta_rad);
+  const double dx = b.x_m - a.x_m, dy = b.y_m - a.y_m;
+  return PoseSample{0, c * dx + s * dy, -s * dx + c * dy, WrapAngle(b.theta_rad - a.theta_rad)};
+}
+}  // namespace
+
+RelativePoseError ComputeRelativePoseError(
+    const std::vector<std::pair<PoseSample, PoseSample>>& pairs, double delta_m) {
+  std::vector<std::size_t> ids;
+  if (!pairs.empty()) ids.push_back(0);
+  double path = 0;
+  for (std::size_t i = 1; i < pairs.size(); ++i) {
+    path += std::hypot(pairs[i].first.x_m - pairs[i - 1].first.x_m,
+                       pairs[i].first.y_m - pairs[i - 1].first.y_m);
+    if (path >= delta_m) {
+      path = 0;
+      ids.push_back(i);
+    }
+  }
+  std::vector<double> trans, rot;
+  for (std::size_t k = 1; k < ids.size(); ++k) {
+    const auto& [ti, ei] = pairs[ids[k - 1]];
+    const auto& [tj, ej] = pairs[ids[k]];
+    const PoseSample dt = Relative(ti, tj), de = Relative(ei, ej);
+    const PoseSample err = Relative(dt, de);
+    trans.push_back(std::hypot(err.x_m, err.y_m));
+    rot.push_back(std::abs(err.theta_rad));
+  }
+  return RelativePoseError{ComputeErrorStats(std::move(trans)), ComputeErrorStats(std::move(rot))};
+}
+
 double PathLength(const std::vector<PoseSample>& truth) {
   double d = 0;
   for (std::size_t i = 1; i < truth.size(); ++i) {

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace wheelhil::emulator::scoring {
@@ -51,6 +52,32 @@ double FinalPositionError(const std::vector<PoseSample>& truth,
 /// final errors use the last estimate sample. Empty estimate: all-zero metrics with samples 0.
 PoseMetrics ComputePoseMetrics(const std::vector<PoseSample>& truth,
                                const std::vector<PoseSample>& estimate);
+
+/// Statistics of a set of errors, as evo prints them.
+struct ErrorStats {
+  std::size_t n = 0;
+  double rmse = 0, mean = 0, median = 0, std = 0, min = 0, max = 0;
+};
+ErrorStats ComputeErrorStats(std::vector<double> errors);
+
+/// evo's association (evo/core/sync.py associate_trajectories): each estimate sample paired
+/// with the truth sample nearest in time, kept when |dt| <= max_diff_s. Both sorted by time.
+std::vector<std::pair<PoseSample, PoseSample>> AssociateNearest(
+    const std::vector<PoseSample>& truth, const std::vector<PoseSample>& estimate,
+    double max_diff_s = 0.01);
+
+/// APE of the translation part (m) over associated (truth, estimate) pairs, no alignment.
+ErrorStats AbsolutePositionError(const std::vector<std::pair<PoseSample, PoseSample>>& pairs);
+
+/// RPE over consecutive segments of at least `delta_m` of the truth's path (evo's
+/// filter_pairs_by_path without all_pairs, measured on the truth): per segment (i, j) the
+/// error E = (T_i^-1 T_j)^-1 (E_i^-1 E_j) of the planar poses; its translation (m per segment)
+/// and its rotation angle (rad).
+struct RelativePoseError {
+  ErrorStats translation_m, rotation_rad;
+};
+RelativePoseError ComputeRelativePoseError(
+    const std::vector<std::pair<PoseSample, PoseSample>>& pairs, double delta_m = 1.0);
 
 /// Path length (sum of |dp|) and total turned angle (sum of |wrap(dtheta)|).
 double PathLength(const std::vector<PoseSample>& truth);

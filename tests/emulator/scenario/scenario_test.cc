@@ -46,7 +46,7 @@ TEST(ScenarioLoader, MinimalLoadsWithDefaults) {
 
 TEST(ScenarioLoader, ScoringSelectsMetricComponentsGenericByDefault) {
   EXPECT_EQ(ParseScenario(Minimal(), kFile).metric_components,
-            (std::vector<std::string>{"pose", "velocity", "truth", "contact"}));
+            (std::vector<std::string>{"pose", "velocity", "truth", "contact", "frames"}));
   const Scenario s =
       ParseScenario(Minimal("scoring: {metrics: [pose, correction_ratio]}\n"), kFile);
   EXPECT_EQ(s.metric_components, (std::vector<std::string>{"pose", "correction_ratio"}));
