@@ -110,12 +110,17 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void RunPhases();
   void Progress(bool final);
   json Report(double wall_s);
+  // The time of an estimate: since the motion start, negative before it (not scored).
+  double ScoredSeconds(std::int64_t t_ns) const {
+    return motion_started_ ? run_.MotionSeconds(t_ns) : -1.0;
+  }
 
   const Scenario& s_;
   const RunOptions& o_;
   std::uint64_t seed_ = 1;
   bool lockstep_ = true;
   bool virtual_time_ = false;
+  bool motion_started_ = false;
   std::string out_;
   sim::RunContext run_;
   sim::CpuPlacement cpus_;
@@ -191,11 +196,11 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   hub_->EnqueueFromFirmware(f);
   if (s_.timing.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
     // The firmware is the SYNC producer: its SYNCs number the cycles.
-    estimates_->OnSync(run_.MotionSeconds(hub_->now_ns()));
+    estimates_->OnSync(ScoredSeconds(hub_->now_ns()));
     handshake_->OnSyncSent();
   }
   handshake_->OnFirmwareFrame(f);
-  estimates_->OnFrame(f, run_.MotionSeconds(hub_->now_ns()));
+  if (motion_started_) estimates_->OnFrame(f, ScoredSeconds(hub_->now_ns()));
 }
 
 bool Run::WaitFirmware(const std::function<bool()>& done) {
@@ -382,6 +387,7 @@ void Run::RunPhases() {
   const std::int64_t cycles = std::llround(s_.timing.duration_s * 1e9) / period_ns;
   run_.motion0_ns = run_.now_ns;
   run_.motion0_s = static_cast<double>(run_.now_ns) * 1e-9;
+  motion_started_ = true;
   physics_->StartMotion(run_.now_ns);
   truth_->StartMotion(run_.now_ns, physics_->vehicle().body_truth());
   run_.events.push_back(json{{"t_s", 0.0}, {"event", "motion_start"}});

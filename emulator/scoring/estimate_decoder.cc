@@ -107,7 +107,9 @@ std::optional<double> EstimateDecoder::SampleTime(StreamState& st, const bus::Ca
     const std::int64_t n = last - ((last - c) % m + m) % m;
     if (n < 0) return std::nullopt;
     cycle = static_cast<int>(c);
-    return sync_times_[static_cast<std::size_t>(n)];
+    const double t = sync_times_[static_cast<std::size_t>(n)];
+    if (t < 0) return std::nullopt;  // a cycle of the boot (a firmware that produces SYNC)
+    return t;
   }
   if (t_s < 0) return std::nullopt;
   if (s.timestamp.signal != nullptr) {

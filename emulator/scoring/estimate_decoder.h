@@ -5,7 +5,7 @@
 /// arrival, the SYNC of its cycle signal, or its timestamp signal). Samples before the motion
 /// start, of a cycle whose SYNC is unknown, or of a frame that lacks a bound signal (too short,
 /// another multiplexer value) are left out; every frame of a bound message counts in its
-/// stream's bus checks. Thread-compatible.
+/// stream's bus checks. The run hands it the frames of the motion phase. Thread-compatible.
 
 #include <cstdint>
 #include <map>

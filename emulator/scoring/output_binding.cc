@@ -177,8 +177,9 @@ std::uint64_t Modulo(const bus::DbcSignal& s) {
   throw std::invalid_argument(fmt::format("{}: {}: {}", where, field, problem));
 }
 
+// `q` empty: a raw value (counter, checksum, cycle), whatever its unit string says.
 ResolvedSignal ResolveSignal(const SignalBindingSpec& b, const bus::DbcMessage& msg,
-                             PhysicalQuantity q, const std::string& dbc_name) {
+                             std::optional<PhysicalQuantity> q, const std::string& dbc_name) {
   ResolvedSignal out;
   if (!b.bound()) return out;
   out.signal = msg.FindSignal(b.signal);
@@ -189,13 +190,14 @@ ResolvedSignal ResolveSignal(const SignalBindingSpec& b, const bus::DbcMessage& 
          fmt::format("message {} of {} has no signal '{}' (it has: {})", msg.name, dbc_name,
                      b.signal, fmt::join(names, ", ")));
   }
+  if (!q) return out;
   const std::string& unit = b.unit.empty() ? out.signal->unit : b.unit;
-  const auto to_si = bus::ConvertUnit(unit, q);
+  const auto to_si = bus::ConvertUnit(unit, *q);
   if (!to_si) {
     Fail(b.where, b.field,
          fmt::format("{}'s unit '{}'{} is not a unit of {} ({}){}", b.signal, unit,
                      b.unit.empty() ? fmt::format(" (in {})", dbc_name) : std::string(),
-                     bus::PhysicalQuantityName(q), bus::AcceptedUnits(q),
+                     bus::PhysicalQuantityName(*q), bus::AcceptedUnits(*q),
                      b.unit.empty() ? "; give the binding's own: {signal, unit}" : ""));
   }
   out.to_si = bus::UnitToSi{to_si->scale * b.gain, to_si->offset * b.gain};
@@ -275,13 +277,13 @@ OutputBinding OutputBinding::Resolve(OutputsSpec spec, const std::string& dbc_di
     for (std::size_t i = 0; i < s.values.size(); ++i) {
       rs.values.push_back(ResolveSignal(s.values[i], *rs.message, RoleQuantity(s.kind, i), dbc_name));
     }
-    rs.cycle = ResolveSignal(s.cycle, *rs.message, PhysicalQuantity::kDimensionless, dbc_name);
+    rs.cycle = ResolveSignal(s.cycle, *rs.message, std::nullopt, dbc_name);
     if (rs.cycle.signal != nullptr) {
       RequireInteger(s.cycle, rs.cycle, "the cycle");
       rs.cycle_modulo = Modulo(*rs.cycle.signal);
     }
     rs.timestamp = ResolveSignal(s.timestamp, *rs.message, PhysicalQuantity::kTime, dbc_name);
-    rs.counter = ResolveSignal(s.counter, *rs.message, PhysicalQuantity::kDimensionless, dbc_name);
+    rs.counter = ResolveSignal(s.counter, *rs.message, std::nullopt, dbc_name);
     if (rs.counter.signal != nullptr) {
       RequireInteger(s.counter, rs.counter, "the counter");
       rs.counter_modulo = s.counter_modulo.value_or(Modulo(*rs.counter.signal));
@@ -291,8 +293,7 @@ OutputBinding OutputBinding::Resolve(OutputsSpec spec, const std::string& dbc_di
                          rs.counter.signal->length, s.counter.signal));
       }
     }
-    rs.checksum =
-        ResolveSignal(s.checksum, *rs.message, PhysicalQuantity::kDimensionless, dbc_name);
+    rs.checksum = ResolveSignal(s.checksum, *rs.message, std::nullopt, dbc_name);
     if (rs.checksum.signal != nullptr && !ChecksumFits(s.checksum_kind, *rs.checksum.signal)) {
       Fail(s.checksum.where, s.checksum.field,
            fmt::format("{} ({} bits) cannot carry a {} checksum", s.checksum.signal,

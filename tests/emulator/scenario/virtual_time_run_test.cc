@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -74,6 +75,19 @@ double FinalTruthX(const fs::path& dir) {
   return std::stod(last.substr(last.find(',') + 1));
 }
 
+// The x of the last `stream` row of estimate.csv (t_s,cycle,stream,x,...).
+double LastEstimateX(const fs::path& dir, const std::string& stream) {
+  std::istringstream lines(Slurp(dir / "estimate.csv"));
+  std::string line;
+  double x = std::nan("");
+  const std::string key = "," + stream + ",";
+  while (std::getline(lines, line)) {
+    const auto at = line.find(key);
+    if (at != std::string::npos) x = std::stod(line.substr(at + key.size()));
+  }
+  return x;
+}
+
 // `s` run twice, into dir/a and dir/b: their can.log must be the same bytes. Returns the first
 // run's result and its can.log.
 std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs::path& dir) {
@@ -85,19 +99,24 @@ std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs:
   return {std::move(a), std::move(log)};
 }
 
-// A customer firmware's scenario run twice: the same bytes, and the firmware's own pose frame
-// `id` (x, y: int32, 0.1 mm) ends where the robot did (1 m straight), within a few encoder counts
-// (0.24 mm each). Returns the first run's can.log.
+// A customer firmware's scenario run twice: the same bytes; the firmware's pose, scored through
+// its own DBC (firmware.outputs), meets the scenario's expectations; and its last pose frame
+// `id` (x, y: int32, 0.1 mm), decoded here by hand, is what the binding read (the DBC's unit is
+// mm, m or cm) and where the robot ended (1 m straight), within a few encoder counts (0.24 mm
+// each). Returns the first run's can.log.
 std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
                               const std::string& id) {
   const Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
                                       "/tests/data/customer_firmware/" + scenario);
   const auto [a, log] = RunTwiceSameBytes(s, dir);
   EXPECT_EQ(a.failure, "");
+  EXPECT_EQ(a.report["verdict"], "pass") << a.report["expectations"].dump(1);
+  EXPECT_GE(a.report["metrics"]["pose"]["frames"].get<int>(), 100);
   EXPECT_THAT(log, HasSubstr(" 000#0100"));
   const auto pose = LastPayload(log, id);
   EXPECT_EQ(pose.size(), 8u) << id;
   if (pose.size() == 8u) {
+    EXPECT_NEAR(I32(pose, 0) * 1e-4, LastEstimateX(dir / "a", "pose"), 1.5e-6);  // estimate.csv: 1 um
     EXPECT_NEAR(I32(pose, 0) * 1e-4, FinalTruthX(dir / "a"), 0.005);
     EXPECT_NEAR(I32(pose, 4) * 1e-4, 0.0, 0.005);
   }
