@@ -11,7 +11,38 @@ std::optional<ChecksumKind> ParseChecksumKind(std::string_view name) noexcept {
   if (name == "xor") return ChecksumKind::kXor;
   if (name == "sum") return ChecksumKind::kSum;
   if (name == "crc8_sae_j1850" || name == "crc8") return ChecksumKind::kCrc8SaeJ1850;
+  if (name == "crc8_h2f") return ChecksumKind::kCrc8H2F;
+  if (name == "crc16_ccitt") return ChecksumKind::kCrc16Ccitt;
   return std::nullopt;
+}
+
+std::string_view ChecksumKindNames() noexcept {
+  return "xor, sum, crc8_sae_j1850, crc8_h2f, crc16_ccitt";
+}
+
+namespace {
+std::uint32_t Reflect(std::uint32_t v, int bits) noexcept {
+  std::uint32_t r = 0;
+  for (int i = 0; i < bits; ++i) r |= ((v >> i) & 1U) << (bits - 1 - i);
+  return r;
+}
+}  // namespace
+
+std::uint32_t Crc(const CrcParams& p, std::span<const std::uint8_t> bytes) noexcept {
+  const std::uint32_t top = 1U << (p.width - 1);
+  const std::uint32_t mask = p.width == 32 ? ~0U : ((1U << p.width) - 1);
+  std::uint32_t reg = p.init & mask;
+  for (std::uint8_t b : bytes) {
+    const std::uint32_t in = p.reflect_in ? Reflect(b, 8) : b;
+    for (int i = 7; i >= 0; --i) {
+      const bool bit = ((in >> i) & 1U) != 0;
+      const bool msb = (reg & top) != 0;
+      reg = (reg << 1) & mask;
+      if (bit != msb) reg ^= p.poly;
+    }
+  }
+  if (p.reflect_out) reg = Reflect(reg, p.width);
+  return (reg ^ p.xor_out) & mask;
 }
 
 std::string_view ChecksumKindName(ChecksumKind kind) noexcept {
@@ -22,6 +53,10 @@ std::string_view ChecksumKindName(ChecksumKind kind) noexcept {
       return "sum";
     case ChecksumKind::kCrc8SaeJ1850:
       return "crc8_sae_j1850";
+    case ChecksumKind::kCrc8H2F:
+      return "crc8_h2f";
+    case ChecksumKind::kCrc16Ccitt:
+      return "crc16_ccitt";
   }
   return "?";
 }
@@ -34,7 +69,10 @@ bool ChecksumFits(ChecksumKind kind, const bus::DbcSignal& sig) noexcept {
     case ChecksumKind::kSum:
       return sig.length >= 1 && sig.length <= 8;
     case ChecksumKind::kCrc8SaeJ1850:
+    case ChecksumKind::kCrc8H2F:
       return sig.length == 8;
+    case ChecksumKind::kCrc16Ccitt:
+      return sig.length == 16;
   }
   return false;
 }
@@ -73,6 +111,10 @@ std::uint64_t ComputeChecksum(ChecksumKind kind, const bus::DbcSignal& checksum_
     }
     case ChecksumKind::kCrc8SaeJ1850:
       return Crc8SaeJ1850(work) & mask;
+    case ChecksumKind::kCrc8H2F:
+      return Crc(kCrc8H2FParams, work) & mask;
+    case ChecksumKind::kCrc16Ccitt:
+      return Crc(kCrc16CcittFalseParams, work) & mask;
   }
   return 0;
 }

@@ -163,7 +163,7 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
         const std::string c = r.String(e, "checksum", f, std::nullopt);
         const auto ck = ParseChecksumKind(c);
         if (!ck)
-          r.Fail(e["checksum"], f + ".checksum", fmt::format("'{}' is not a checksum kind", c));
+          r.Fail(e["checksum"], f + ".checksum", fmt::format("'{}' is not one of {}", c, ChecksumKindNames()));
         ff.checksum = *ck;
       }
       if (ff.kind == FrameFaultKind::kWrongCounter && ff.counter_signal.empty()) {

@@ -60,7 +60,7 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
       const auto k = ParseChecksumKind(kind);
       if (!k) {
         r.FailKey(ms[i], "checksum_kind", mf + ".checksum_kind",
-                  fmt::format("'{}' is not one of xor, sum, crc8_sae_j1850", kind));
+                  fmt::format("'{}' is not one of {}", kind, ChecksumKindNames()));
       }
       o.checksum = *k;
       d.node.message_options.push_back(o);

@@ -138,7 +138,7 @@ OutputStreamSpec ReadStream(const FieldReader& r, const YAML::Node& key, const Y
     const auto ck = ParseChecksumKind(type);
     if (!ck) {
       r.FailKey(checksum, "type", s.checksum.field + ".type",
-                fmt::format("'{}' is not one of xor, sum, crc8_sae_j1850", type));
+                fmt::format("'{}' is not one of {}", type, ChecksumKindNames()));
     }
     s.checksum_kind = *ck;
   }

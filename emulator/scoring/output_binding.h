@@ -22,7 +22,7 @@
 /// stream's first frame. Bus checks of the stream's message: cycle time against
 /// GenMsgCycleTime (or `cycle_time_ms`), with `cycle_tolerance` (a fraction, 0.1 by default);
 /// the DLC against the DBC's; a rolling `counter` (`{signal, step, modulo}`) and a `checksum`
-/// (`{signal, type}`, frame_checksum.h).
+/// (`{signal, type}`: xor, sum, crc8_sae_j1850, crc8_h2f, crc16_ccitt; frame_checksum.h).
 ///
 /// Reading checks the binding's shape (kinds, keys, names) and throws std::invalid_argument
 /// "file:line:col: field: problem"; Resolve checks it against the DBC (a missing message or

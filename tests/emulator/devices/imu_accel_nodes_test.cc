@@ -43,6 +43,40 @@ TEST(FrameChecksum, Crc8SaeJ1850CheckValue) {
   EXPECT_EQ(ParseChecksumKind("md5"), std::nullopt);
 }
 
+// The CRC engine against the reveng catalogue's check values of "123456789" (reflected and
+// 32-bit models included) and the examples of AUTOSAR's CRC library specification
+// (SWS_CrcLibrary, CRC-8 SAE J1850 and CRC-8H2F tables).
+TEST(FrameChecksum, CrcPresetsMatchPublishedCheckValues) {
+  const std::string s = "123456789";
+  const std::vector<std::uint8_t> check(s.begin(), s.end());
+  EXPECT_EQ(Crc(kCrc8SaeJ1850Params, check), 0x4Bu);
+  EXPECT_EQ(Crc(kCrc8H2FParams, check), 0xDFu);
+  EXPECT_EQ(Crc(kCrc16CcittFalseParams, check), 0x29B1u);
+  EXPECT_EQ(Crc(CrcParams{16, 0x1021, 0x0000, true, true, 0x0000}, check), 0x2189u);  // KERMIT
+  EXPECT_EQ(Crc(CrcParams{32, 0x04C11DB7, 0xFFFFFFFF, true, true, 0xFFFFFFFF}, check),
+            0xCBF43926u);  // CRC-32/ISO-HDLC
+  struct Example {
+    std::vector<std::uint8_t> data;
+    std::uint32_t j1850, h2f;
+  };
+  const Example autosar[] = {
+      {{0x00, 0x00, 0x00, 0x00}, 0x59, 0x12},
+      {{0xF2, 0x01, 0x83}, 0x37, 0xC2},
+      {{0x0F, 0xAA, 0x00, 0x55}, 0x79, 0xC6},
+      {{0x00, 0xFF, 0x55, 0x11}, 0xB8, 0x77},
+      {{0x33, 0x22, 0x55, 0xAA, 0xBB, 0xCC, 0xDD, 0xEE, 0xFF}, 0xCB, 0x11},
+      {{0x92, 0x6B, 0x55}, 0x8C, 0x33},
+      {{0xFF, 0xFF, 0xFF, 0xFF}, 0x74, 0x6C},
+  };
+  for (const Example& e : autosar) {
+    EXPECT_EQ(Crc(kCrc8SaeJ1850Params, e.data), e.j1850);
+    EXPECT_EQ(Crc8SaeJ1850(e.data), e.j1850);
+    EXPECT_EQ(Crc(kCrc8H2FParams, e.data), e.h2f);
+  }
+  EXPECT_EQ(ParseChecksumKind("crc8_h2f"), ChecksumKind::kCrc8H2F);
+  EXPECT_EQ(ParseChecksumKind("crc16_ccitt"), ChecksumKind::kCrc16Ccitt);
+}
+
 // A spinning, accelerating, slightly tilted body: every frame decodes (through the DBC) to the
 // analytic specific force along each sensor axis within half a quantisation step.
 TEST(Accel4Node, FramesDecodeToSpecificForceWithinQuantisation) {
