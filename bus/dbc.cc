@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <bitset>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -550,9 +551,9 @@ class DbcParser {
     if (kind == "SG_") {
       const std::uint32_t raw = RawMessageId();
       const std::string sig(Ident());
-      (void)AttributeValueText();
+      std::string value = AttributeValueText();
       Expect(';');
-      if (raw != kIndependentSignalsId) (void)RequireSignal(raw, sig);
+      if (raw != kIndependentSignalsId) RequireSignal(raw, sig).attributes[name] = std::move(value);
       return;
     }
     if (kind == "BU_" || kind == "EV_") {
@@ -605,6 +606,9 @@ class DbcParser {
     for (std::size_t i = 0; i < db_.messages_.size(); ++i) {
       DbcMessage& m = db_.messages_[i];
       if (!m.cycle_time_ms && default_cycle > 0) m.cycle_time_ms = default_cycle;
+      ResolveAttributes("BO_", m.attributes);
+      for (auto& sig : m.signals) ResolveAttributes("SG_", sig.attributes);
+      CheckOverlaps(m, message_lines_[i]);
       const bool has_mux = m.multiplexer() != nullptr;
       for (const auto& sig : m.signals) {
         if (sig.multiplex_value && !has_mux) {
@@ -619,6 +623,65 @@ class DbcParser {
       }
     }
     db_.BuildIndex();
+  }
+
+  // Defaults for the attributes not given, enum values as their strings (tools write an ENUM
+  // attribute's index; its meaning is the string: GenMsgSendType's order differs between tools).
+  void ResolveAttributes(std::string_view object,
+                         std::map<std::string, std::string, std::less<>>& values) const {
+    for (const auto& [name, def] : attribute_defs_) {
+      if (def.object != object) continue;
+      auto it = values.find(name);
+      if (it == values.end()) {
+        if (def.default_value.empty()) continue;
+        it = values.emplace(name, def.default_value).first;
+      }
+      if (def.type != "ENUM") continue;
+      std::size_t index = 0;
+      const std::string& v = it->second;
+      const auto r = std::from_chars(v.data(), v.data() + v.size(), index);
+      if (r.ec == std::errc() && r.ptr == v.data() + v.size() && index < def.enum_values.size()) {
+        it->second = def.enum_values[index];
+      }
+    }
+  }
+
+  // The payload bits a signal occupies (Intel: LSB upwards; Motorola: from its MSB in sawtooth
+  // numbering, down a byte then on to the next byte's bit 7).
+  static std::bitset<512> SignalBits(const DbcSignal& sig) {
+    std::bitset<512> bits;
+    int b = sig.start_bit;
+    for (int i = 0; i < sig.length && b >= 0 && b < 512; ++i) {
+      bits.set(static_cast<std::size_t>(b));
+      if (sig.little_endian) {
+        ++b;
+      } else {
+        b = (b % 8 == 0) ? b + 15 : b - 1;
+      }
+    }
+    return bits;
+  }
+
+  // Two signals that can be in one frame (not multiplexed apart) must not share a bit.
+  void CheckOverlaps(const DbcMessage& m, int line) const {
+    std::vector<std::bitset<512>> bits;
+    for (const auto& sig : m.signals) bits.push_back(SignalBits(sig));
+    for (std::size_t a = 0; a < m.signals.size(); ++a) {
+      for (std::size_t b = a + 1; b < m.signals.size(); ++b) {
+        const DbcSignal& sa = m.signals[a];
+        const DbcSignal& sb = m.signals[b];
+        if (sa.multiplex_value && sb.multiplex_value && *sa.multiplex_value != *sb.multiplex_value) {
+          continue;
+        }
+        const std::bitset<512> common = bits[a] & bits[b];
+        if (common.none()) continue;
+        std::size_t first = 0;
+        while (!common.test(first)) ++first;
+        FailAt(line, fmt::format("message {}: signals {} and {} overlap (both use bit {}, "
+                                 "{} bits in common)",
+                                 m.name, sa.name, sb.name, first, common.count()));
+      }
+    }
   }
 
   std::string_view s_;

@@ -11,7 +11,8 @@
 ///
 /// Loading validates what the codec relies on: every signal lies inside its message's length,
 /// lengths are 1..64 bits (32/64 for float signals), factors are finite and non-zero, names are
-/// unique, `m<n>` signals have a multiplexer. Errors throw std::invalid_argument reading
+/// unique, `m<n>` signals have a multiplexer, no two signals that can be in one frame share a
+/// bit. Errors throw std::invalid_argument reading
 /// "<file>:<line>: <problem>". A loaded database is immutable and safe to share between threads.
 /// Encoding and decoding live in bus/dbc_codec.h.
 
@@ -51,6 +52,9 @@ struct DbcSignal {
   std::optional<int> multiplex_value;               ///< Set for `m<n>` signals.
   std::map<std::int64_t, std::string> value_names;  ///< VAL_: raw value -> name.
   std::string comment;
+  /// BA_ values of the signal (GenSigStartValue, ...) or their BA_DEF_DEF_ defaults, as
+  /// written; an ENUM attribute's value is its string, not its index.
+  std::map<std::string, std::string, std::less<>> attributes;
 };
 
 /// One message (frame). `id` has no flag bits; `length` is the DLC in bytes (0..64).
@@ -63,7 +67,9 @@ struct DbcMessage {
   std::vector<DbcSignal> signals;
   std::optional<int> cycle_time_ms;  ///< BA_ "GenMsgCycleTime" (or its non-zero default).
   std::string comment;
-  /// BA_ values given for this message, by attribute name, as written (strings unquoted).
+  /// BA_ values of this message by attribute name, as written (strings unquoted), or their
+  /// BA_DEF_DEF_ defaults; an ENUM attribute's value is its string (GenMsgSendType "Cyclic"),
+  /// whatever index the file wrote.
   std::map<std::string, std::string, std::less<>> attributes;
 
   const DbcSignal* FindSignal(std::string_view name) const;

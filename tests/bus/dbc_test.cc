@@ -307,13 +307,45 @@ VAL_ 100 Flag 1 "Set" 0 "Clear" ;
   EXPECT_EQ(db.value_tables().at("OnOff").at(1), "On");
   EXPECT_EQ(db.FindMessage(100, false)->cycle_time_ms, 10);
   EXPECT_EQ(db.FindMessage(101, false)->cycle_time_ms, 100);  // BA_DEF_DEF_ default
-  EXPECT_EQ(db.FindMessage(101, false)->attributes.at("GenMsgSendType"), "1");
+  // An ENUM attribute is its string, not the index the file wrote; defaults fill the rest.
+  EXPECT_EQ(db.FindMessage(101, false)->attributes.at("GenMsgSendType"), "Event");
+  EXPECT_EQ(db.FindMessage(100, false)->attributes.at("GenMsgSendType"), "Cyclic");
+  EXPECT_EQ(db.FindMessage(100, false)->FindSignal("Flag")->attributes.at("GenSigStartValue"), "1");
+  EXPECT_EQ(db.FindMessage(102, false)->FindSignal("X")->attributes.at("GenSigStartValue"), "0");
   EXPECT_EQ(db.FindMessage(100, false)->comment, "fast one");
   EXPECT_EQ(db.FindMessage(100, false)->FindSignal("Flag")->comment, "a flag with \"escapes\"");
   EXPECT_EQ(db.FindMessage(100, false)->FindSignal("Flag")->value_names.at(1), "Set");
   EXPECT_EQ(db.FindMessage(101, false)->FindSignal("Level")->unit, "%");
   EXPECT_EQ(db.FindMessage(100, true), nullptr);
   EXPECT_EQ(db.FindMessage("Nope"), nullptr);
+}
+
+// Signals that can be in one frame must not share a bit (Intel and Motorola alike); signals of
+// different multiplexer values may.
+TEST(DbcParseTest, OverlappingSignalsAreRefusedWithTheMessageLine) {
+  const std::string head = "VERSION \"\"\nBU_: A\n";
+  EXPECT_THAT([&] {
+    (void)DbcDatabase::Parse(head + "BO_ 1 M: 2 A\n SG_ P : 0|8@1+ (1,0) [0|0] \"\" A\n"
+                                    " SG_ Q : 4|8@1+ (1,0) [0|0] \"\" A\n", "o.dbc");
+  }, ThrowsMessage<std::invalid_argument>(
+         HasSubstr("o.dbc:3: message M: signals P and Q overlap (both use bit 4, 4 bits")));
+  // Motorola: P is bits 7..0 of byte 0; Q from bit 1 runs 1, 0, then 15..: overlaps P at 1, 0.
+  EXPECT_THAT([&] {
+    (void)DbcDatabase::Parse(head + "BO_ 1 M: 2 A\n SG_ P : 7|8@0+ (1,0) [0|0] \"\" A\n"
+                                    " SG_ Q : 1|4@0+ (1,0) [0|0] \"\" A\n", "o.dbc");
+  }, ThrowsMessage<std::invalid_argument>(HasSubstr("signals P and Q overlap")));
+  // Motorola neighbours that do not touch, and multiplexed signals sharing their bits.
+  EXPECT_NO_THROW((void)DbcDatabase::Parse(
+      head + "BO_ 1 M: 2 A\n SG_ P : 7|8@0+ (1,0) [0|0] \"\" A\n"
+             " SG_ Q : 15|8@0+ (1,0) [0|0] \"\" A\n", "o.dbc"));
+  EXPECT_NO_THROW((void)DbcDatabase::Parse(
+      head + "BO_ 1 M: 3 A\n SG_ S M : 0|8@1+ (1,0) [0|0] \"\" A\n"
+             " SG_ P m0 : 8|16@1+ (1,0) [0|0] \"\" A\n SG_ Q m1 : 8|8@1+ (1,0) [0|0] \"\" A\n",
+      "o.dbc"));
+  EXPECT_THAT([&] {
+    (void)DbcDatabase::Parse(head + "BO_ 1 M: 3 A\n SG_ S M : 0|8@1+ (1,0) [0|0] \"\" A\n"
+                                    " SG_ P m0 : 4|8@1+ (1,0) [0|0] \"\" A\n", "o.dbc");
+  }, ThrowsMessage<std::invalid_argument>(HasSubstr("signals S and P overlap")));
 }
 
 TEST(DbcParseTest, NamespaceBlockWithoutIndentation) {
