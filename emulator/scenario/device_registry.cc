@@ -9,6 +9,7 @@
 #include "emulator/devices/accel4_device.h"
 #include "emulator/devices/cia406_encoder_device.h"
 #include "emulator/devices/dbc_cia406_codec.h"
+#include "emulator/devices/dbc_device.h"
 #include "emulator/devices/dbc_imu_device.h"
 #include "emulator/devices/mm5_gyro_device.h"
 
@@ -19,22 +20,23 @@ namespace {
 using Devices = std::vector<std::unique_ptr<Device>>;
 using Builder = std::function<void(const DeviceBuildContext&, Devices&)>;
 
-void BuildEncoders(const DeviceBuildContext& c, Devices& out) {
+// One CiA 406 node; `k` numbers the encoders of the run (their seeds).
+std::unique_ptr<Device> MakeEncoder(const DeviceBuildContext& c,
+                                    const std::shared_ptr<const DbcCia406Codec>& codec,
+                                    const EncoderDeviceSpec& e, int lines_per_rev,
+                                    bool quadrature_x4, std::uint64_t k) {
   const SensorsSpec& sensors = c.scenario.sensors;
-  if (sensors.encoders.empty()) return;
-  const auto codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
-  std::uint64_t k = 0;
-  for (const auto& e : sensors.encoders) {
+  {
     Cia406EncoderDeviceConfig dc;
     dc.wheel_name = e.wheel;
     dc.wheel_index = c.scenario.platform.wheel_index(e.wheel);
     dc.direction = e.direction;
     EncoderParams& ep = dc.encoder;
-    ep.lines_per_rev = sensors.encoder_lines_per_rev;
-    ep.quadrature_x4 = sensors.encoder_quadrature_x4;
+    ep.lines_per_rev = lines_per_rev;
+    ep.quadrature_x4 = quadrature_x4;
     ep.missed_count_prob = sensors.encoder_missed_count_prob;
     ep.glitch_prob = sensors.encoder_glitch_prob;
-    ep.seed = c.seed * 1000003ull + (++k);
+    ep.seed = c.seed * 1000003ull + k;
     // A disc is mounted at no particular angle: an edge right at the start angle would make a
     // wheel that only settles there flip a count back and forth. Drawn apart from ep.seed's
     // stream so that the encoder's own imperfections keep their draws.
@@ -47,7 +49,41 @@ void BuildEncoders(const DeviceBuildContext& c, Devices& out) {
         codec->database().FindMessage(
             bus::canopen::CobId(bus::canopen::Function::kTpdo1, dc.node.node_id), false);
     dc.tpdo1_len = tpdo1 != nullptr ? static_cast<std::uint8_t>(tpdo1->length) : 0;
-    out.push_back(std::make_unique<Cia406EncoderDevice>(dc, codec));
+    return std::make_unique<Cia406EncoderDevice>(dc, codec);
+  }
+}
+
+void BuildEncoders(const DeviceBuildContext& c, Devices& out) {
+  const SensorsSpec& sensors = c.scenario.sensors;
+  if (sensors.encoders.empty()) return;
+  const auto codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
+  std::uint64_t k = 0;
+  for (const auto& e : sensors.encoders) {
+    out.push_back(MakeEncoder(c, codec, e, sensors.encoder_lines_per_rev,
+                              sensors.encoder_quadrature_x4, ++k));
+  }
+}
+
+// The `devices:` list, in its order, after the `sensors:` devices.
+void BuildDeviceList(const DeviceBuildContext& c, Devices& out) {
+  std::shared_ptr<const DbcCia406Codec> codec;
+  std::uint64_t k = c.scenario.sensors.encoders.size();
+  std::uint64_t index = 0;
+  for (const DeviceSpec& d : c.scenario.devices) {
+    ++index;
+    switch (d.kind) {
+      case DeviceSpec::Kind::kCanopenCia406:
+        if (!codec) codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
+        out.push_back(MakeEncoder(c, codec, d.encoder, d.lines_per_rev, d.quadrature_x4, ++k));
+        break;
+      case DeviceSpec::Kind::kDbc: {
+        auto dbc = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
+        DbcDeviceConfig dc = d.dbc_device;
+        dc.seed = c.seed * 2654435761ull + index;
+        out.push_back(std::make_unique<DbcDevice>(dbc, dc));
+        break;
+      }
+    }
   }
 }
 
@@ -105,7 +141,8 @@ const std::vector<std::pair<std::string, Builder>>& Builders() {
       {"cia406_encoder", BuildEncoders},
       {"mm5_10", BuildMm5Gyro},
       {"accel4", BuildAccel4},
-      {"dbc_imu", BuildDbcImu}};
+      {"dbc_imu", BuildDbcImu},
+      {"devices", BuildDeviceList}};
   return builders;
 }
 

@@ -390,7 +390,9 @@ void Run::RunPhases() {
   motion_started_ = true;
   physics_->StartMotion(run_.now_ns);
   truth_->StartMotion(run_.now_ns, physics_->vehicle().body_truth());
-  run_.events.push_back(json{{"t_s", 0.0}, {"event", "motion_start"}});
+  // Its bus time (can.log's clock) aligns can.log with truth.csv.
+  run_.events.push_back(
+      json{{"t_s", 0.0}, {"event", "motion_start"}, {"bus_time_s", run_.motion0_s}});
   faults_->Arm(run_.now_ns, devices_, *hub_);
   std::vector<firmware::SyncAnswer> answers;
   for (std::size_t d = 0; d < devices_.size(); ++d) {

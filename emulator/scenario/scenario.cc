@@ -428,8 +428,8 @@ std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
 
 Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   r.CheckKeys(root, "",
-              {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "faults",
-               "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s"});
+              {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "devices",
+               "faults", "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s"});
   Scenario s;
   s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);
@@ -462,6 +462,7 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   s.terrain = ReadTerrain(r, Reader::Get(root, "terrain"));
   s.motion = ReadMotion(r, root, s.platform);
   s.sensors = ReadSensors(r, root, s.platform);
+  s.devices = ReadDevices(r, Reader::Get(root, "devices"), s.platform, s.sensors);
   s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.platform);
   s.firmware = ReadFirmware(r, Reader::Get(root, "firmware"));
   s.timing = ReadTiming(r, Reader::Get(root, "timing"), MotionDuration(s.motion));

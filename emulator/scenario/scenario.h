@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 
+#include "emulator/devices/dbc_device.h"
 #include "emulator/devices/dbc_imu_node.h"
 #include "emulator/faults/bus_faults.h"
 #include "emulator/faults/device_faults.h"
@@ -118,6 +119,22 @@ struct SensorsSpec {
   std::optional<DbcImuSpec> dbc_imu;
 };
 
+/// One entry of `devices:` (docs/scenarios.md, docs/own-hardware.md): a device on the bus, after
+/// the `sensors:` ones in bus order.
+struct DeviceSpec {
+  enum class Kind {
+    kDbc,            ///< Every cyclic message of a node of the user's DBC (DbcDevice).
+    kCanopenCia406,  ///< A CiA 406 encoder node on a wheel (as sensors.encoders' nodes).
+  };
+  Kind kind = Kind::kDbc;
+  std::string where;  ///< file:line:column of the entry.
+  std::string dbc;    ///< kDbc: the DBC file (absolute).
+  DbcDeviceConfig dbc_device;  ///< kDbc; the seed and the start are the run's.
+  EncoderDeviceSpec encoder;   ///< kCanopenCia406.
+  int lines_per_rev = 500;
+  bool quadrature_x4 = true;
+};
+
 /// A fault injected over a window [start_s, end_s) of motion time (end_s infinite: to the end).
 /// The library kinds (frame/bus/sensor/device, emulator/faults/) carry the library's own spec;
 /// its window is set by the runner at the motion start. Physical kinds act on the vehicle or
@@ -201,6 +218,7 @@ struct Scenario {
   TerrainSpec terrain;
   std::vector<MotionSegment> motion;
   SensorsSpec sensors;
+  std::vector<DeviceSpec> devices;
   std::vector<FaultSpec> faults;
   FirmwareSpec firmware;
   TimingSpec timing;

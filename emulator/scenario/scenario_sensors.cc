@@ -107,19 +107,25 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& root,
                         const platforms::Platform& platform) {
   SensorsSpec s;
   const YAML::Node n = Reader::Get(root, "sensors");
-  if (!n.IsDefined()) r.Fail(root, "sensors", "is required (encoders at least)");
+  const bool devices = Reader::Present(Reader::Get(root, "devices"));
+  if (!n.IsDefined()) {
+    if (devices) return s;
+    r.Fail(root, "sensors", "is required (encoders at least), or a devices list");
+  }
   r.CheckKeys(n, "sensors", {"encoders", "gyro", "bus", "accel4", "dbc_imu"});
   const YAML::Node e = Reader::Get(n, "encoders");
-  if (!e.IsDefined()) r.Fail(n, "sensors.encoders", "is required");
-  r.CheckKeys(e, "sensors.encoders",
-              {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
+  if (!e.IsDefined() && !devices) r.Fail(n, "sensors.encoders", "is required");
+  if (e.IsDefined()) {
+    r.CheckKeys(e, "sensors.encoders",
+                {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
+  }
   s.encoder_lines_per_rev =
       static_cast<int>(r.Number(e, "lines_per_rev", "sensors.encoders", 1, 1e7, 500.0));
   s.encoder_quadrature_x4 = r.Bool(e, "quadrature_x4", "sensors.encoders", true);
   s.encoder_missed_count_prob = r.Number(e, "missed_count_prob", "sensors.encoders", 0, 1, 0.0);
   s.encoder_glitch_prob = r.Number(e, "glitch_prob", "sensors.encoders", 0, 1, 0.0);
   const YAML::Node nodes = Reader::Get(e, "nodes");
-  if (!nodes.IsSequence() || nodes.size() == 0) {
+  if (e.IsDefined() && (!nodes.IsSequence() || nodes.size() == 0)) {
     r.FailKey(e, "nodes", "sensors.encoders.nodes",
               "must list the encoder nodes ({wheel, node_id})");
   }

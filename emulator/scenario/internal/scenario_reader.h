@@ -43,6 +43,10 @@ inline Friction ReadFriction(const Reader& r, const YAML::Node& n, const std::st
 
 /// sensors: (scenario_sensors.cc).
 SensorsSpec ReadSensors(const Reader& r, const YAML::Node& root, const platforms::Platform& platform);
+/// devices: (scenario_devices.cc).
+std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
+                                    const platforms::Platform& platform,
+                                    const SensorsSpec& sensors);
 /// faults: (scenario_faults.cc).
 std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const SensorsSpec& s,
                                   const platforms::Platform& platform);

@@ -97,6 +97,47 @@ TEST(ScenarioLoader, DbcImuIsReadAndCheckedAgainstItsDbc) {
                                 "'IMU_Rates' has no signal 'IMU_Yaw'")));
 }
 
+// `devices:` (docs/own-hardware.md): the shipped MM7.10 example loads; a binding the DBC cannot
+// carry is an error at the binding's own line.
+TEST(ScenarioLoader, DevicesAreReadAndTheirBindingsCheckedAgainstTheDbc) {
+  const Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                      "/scenarios/own_hardware/robot_mm7_imu.yaml");
+  ASSERT_EQ(s.devices.size(), 3u);
+  EXPECT_TRUE(s.sensors.encoders.empty());
+  EXPECT_EQ(s.devices[1].encoder.node_id, 2);
+  EXPECT_EQ(s.devices[2].dbc_device.name, "imu");
+  EXPECT_EQ(s.devices[2].dbc_device.signals.size(), 13u);
+  const std::string head =
+      "name: t\nplatform: platforms/diff2.yaml\nmotion:\n"
+      "  - {type: twist, duration_s: 1, vx_m_s: 0.2}\n"
+      "devices:\n"
+      "  - kind: dbc\n"
+      "    dbc: own_hardware/bosch_mm7_10.dbc\n"
+      "    node: MM7_10\n"
+      "    signals:\n";
+  EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n      AY: rate_y\n", kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "inline.yaml:11:7: devices[0].signals.AY: AY's unit 'g' is not a unit of "
+                  "angular rate")));
+  EXPECT_THAT([&] { (void)ParseScenario(head + "      Yaw: rate_z\n", kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "inline.yaml:10:7: devices[0].signals.Yaw: no message node MM7_10 sends")));
+  EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: spin\n", kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "devices[0].signals.YawRate: 'spin' is not one of rate_x")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(head + "      YawRate: rate_z\n"
+                                   "  - {kind: canopen_cia406, wheel: left, node_id: 1}\n"
+                                   "  - {kind: canopen_cia406, wheel: right, node_id: 1}\n",
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("devices[2].node_id: node id 1 is taken")));
+  EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n  - {kind: lidar}\n", kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("devices[1].kind: 'lidar' is not one of dbc, canopen_cia406")));
+}
+
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
   EXPECT_THAT(
       [] { (void)ParseScenario(Minimal("speed: 3\n"), kFile); },

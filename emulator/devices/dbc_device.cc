@@ -1,0 +1,339 @@
+#include "emulator/devices/dbc_device.h"
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "bus/dbc_codec.h"
+#include "emulator/devices/accel4_device.h"
+#include "emulator/faults/sensor_faults.h"
+
+namespace wheelhil::emulator {
+
+namespace {
+
+using bus::PhysicalQuantity;
+
+constexpr std::array<std::string_view, 12> kQuantityNames = {
+    "rate_x",     "rate_y",      "rate_z",      "accel_x",  "accel_y", "accel_z",
+    "wheel_angle", "wheel_speed", "temperature", "constant", "counter", "checksum"};
+constexpr std::array<const char*, 6> kChannelSuffix = {".rate_x",  ".rate_y",  ".rate_z",
+                                                       ".accel_x", ".accel_y", ".accel_z"};
+
+[[noreturn]] void Fail(const std::string& field, const std::string& problem) {
+  throw std::invalid_argument(fmt::format("{}: {}", field, problem));
+}
+
+std::optional<double> AttributeNumber(const std::map<std::string, std::string, std::less<>>& a,
+                                      std::string_view name) {
+  const auto it = a.find(name);
+  if (it == a.end()) return std::nullopt;
+  double v = 0;
+  const auto r = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
+  if (r.ec != std::errc() || r.ptr != it->second.data() + it->second.size() || !std::isfinite(v)) {
+    return std::nullopt;
+  }
+  return v;
+}
+
+// GenMsgSendType by its string: the tools' enums differ, their cyclic types all say so.
+bool SendsCyclically(const bus::DbcMessage& m) {
+  const auto it = m.attributes.find("GenMsgSendType");
+  if (it == m.attributes.end()) return true;
+  std::string s = it->second;
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s.find("cyclic") != std::string::npos;
+}
+
+std::optional<PhysicalQuantity> UnitQuantity(DbcQuantity q) {
+  switch (q) {
+    case DbcQuantity::kRateX:
+    case DbcQuantity::kRateY:
+    case DbcQuantity::kRateZ:
+    case DbcQuantity::kWheelSpeed:
+      return PhysicalQuantity::kAngularRate;
+    case DbcQuantity::kAccelX:
+    case DbcQuantity::kAccelY:
+    case DbcQuantity::kAccelZ:
+      return PhysicalQuantity::kAcceleration;
+    case DbcQuantity::kWheelAngle:
+      return PhysicalQuantity::kAngle;
+    case DbcQuantity::kTemperature:
+      return PhysicalQuantity::kTemperature;
+    default:
+      return std::nullopt;
+  }
+}
+
+bool IsRawInteger(const bus::DbcSignal& s) {
+  return s.value_type == bus::DbcValueType::kInteger && s.factor == 1.0 && s.offset == 0.0;
+}
+
+}  // namespace
+
+std::optional<DbcQuantity> ParseDbcQuantity(std::string_view name) noexcept {
+  for (std::size_t i = 0; i < kQuantityNames.size(); ++i) {
+    if (kQuantityNames[i] == name) return static_cast<DbcQuantity>(i);
+  }
+  return std::nullopt;
+}
+
+std::string_view DbcQuantityNames() noexcept {
+  return "rate_x, rate_y, rate_z, accel_x, accel_y, accel_z, wheel_angle, wheel_speed, "
+         "temperature, constant, counter, checksum";
+}
+
+Eigen::Matrix3d MountRotation(const Eigen::Vector3d& rpy_deg) {
+  const Eigen::Vector3d r = rpy_deg * (std::numbers::pi / 180.0);
+  return (Eigen::AngleAxisd(r.z(), Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(r.y(), Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(r.x(), Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDeviceConfig& config)
+    : name_(config.name), dbc_(std::move(dbc)), config_(config) {
+  if (!dbc_) throw std::invalid_argument(config_.field + ": a DBC database is required");
+  const std::string& node = config_.node;
+  const auto& nodes = dbc_->nodes();
+  if (std::find(nodes.begin(), nodes.end(), node) == nodes.end()) {
+    Fail(config_.field + ".node",
+         fmt::format("'{}' is not a node of the DBC (BU_: {})", node, fmt::join(nodes, ", ")));
+  }
+  auto timing_of = [&](const std::string& msg) -> const DbcMessageTiming* {
+    for (const auto& t : config_.timing) {
+      if (t.message == msg) return &t;
+    }
+    return nullptr;
+  };
+  for (const auto& t : config_.timing) {
+    const bus::DbcMessage* m = dbc_->FindMessage(t.message);
+    if (m == nullptr || m->sender != node) {
+      Fail(t.field, fmt::format("'{}' is not a message node {} sends", t.message, node));
+    }
+  }
+  for (const bus::DbcMessage& m : dbc_->messages()) {
+    if (m.sender != node) continue;
+    const DbcMessageTiming* t = timing_of(m.name);
+    const bool cyclic = (t != nullptr && t->cycle_time_ms) || SendsCyclically(m);
+    if (!cyclic) continue;
+    const double period_ms =
+        t != nullptr && t->cycle_time_ms ? *t->cycle_time_ms : m.cycle_time_ms.value_or(0);
+    if (!(period_ms > 0)) {
+      Fail(config_.field + ".messages",
+           fmt::format("{} is cyclic but has no GenMsgCycleTime > 0: give its cycle_time_ms",
+                       m.name));
+    }
+    if (m.length > 8) {
+      Fail(config_.field + ".messages",
+           fmt::format("{} is {} bytes: only classic CAN frames (<= 8) are modelled", m.name,
+                       m.length));
+    }
+    Message msg;
+    msg.msg = &m;
+    msg.period_ns = std::llround(period_ms * 1e6);
+    const double delay_ms = t != nullptr && t->start_delay_ms
+                                ? *t->start_delay_ms
+                                : AttributeNumber(m.attributes, "GenMsgStartDelayTime").value_or(0);
+    msg.next_ns = config_.start_ns + std::llround((delay_ms + (t ? t->phase_ms : 0.0)) * 1e6);
+    messages_.push_back(std::move(msg));
+  }
+  if (messages_.empty()) {
+    Fail(config_.field + ".node", fmt::format("node {} sends no cyclic message", node));
+  }
+  for (const DbcSignalBinding& b : config_.signals) {
+    bool found = false;
+    for (Message& m : messages_) {
+      if (!b.message.empty() && m.msg->name != b.message) continue;
+      const bus::DbcSignal* sig = m.msg->FindSignal(b.signal);
+      if (sig == nullptr) continue;
+      found = true;
+      auto bound_already = [&](const std::vector<Bound>& v) {
+        return std::any_of(v.begin(), v.end(), [&](const Bound& x) { return x.signal == sig; });
+      };
+      if (bound_already(m.values) || bound_already(m.counters) || bound_already(m.checksums)) {
+        Fail(b.field, fmt::format("{}.{} is bound twice", m.msg->name, b.signal));
+      }
+      Bound bound{&b, sig, {}, 0, 0};
+      if (b.quantity == DbcQuantity::kCounter) {
+        if (!IsRawInteger(*sig)) {
+          Fail(b.field, fmt::format("counter {} must be an integer signal with factor 1, offset 0",
+                                    b.signal));
+        }
+        const std::uint64_t range = sig->length >= 63 ? (1ULL << 63) : (1ULL << sig->length);
+        bound.modulo = b.counter_modulo.value_or(range);
+        if (bound.modulo < 2 || bound.modulo > range) {
+          Fail(b.field, fmt::format("modulo {} does not fit the {} bits of {}", bound.modulo,
+                                    sig->length, b.signal));
+        }
+        m.counters.push_back(bound);
+        continue;
+      }
+      if (b.quantity == DbcQuantity::kChecksum) {
+        if (!ChecksumFits(b.checksum, *sig)) {
+          Fail(b.field, fmt::format("{} ({} bits) cannot carry a {} checksum", b.signal,
+                                    sig->length, ChecksumKindName(b.checksum)));
+        }
+        m.checksums.push_back(bound);
+        continue;
+      }
+      if (const auto q = UnitQuantity(b.quantity)) {
+        const bool counts = b.quantity == DbcQuantity::kWheelAngle && b.counts_per_rev > 0;
+        const auto unit = bus::ConvertUnit(sig->unit, counts ? PhysicalQuantity::kDimensionless : *q);
+        if (!unit) {
+          Fail(b.field,
+               fmt::format("{}'s unit '{}' is not a unit of {} ({}){}", b.signal, sig->unit,
+                           bus::PhysicalQuantityName(*q), bus::AcceptedUnits(*q),
+                           b.quantity == DbcQuantity::kWheelAngle
+                               ? "; for encoder counts give counts_per_rev"
+                               : ""));
+        }
+        bound.unit = *unit;
+      }
+      m.values.push_back(bound);
+    }
+    if (!found) {
+      Fail(b.field, b.message.empty()
+                        ? fmt::format("no message node {} sends cyclically has a signal '{}'",
+                                      node, b.signal)
+                        : fmt::format("'{}' is not a cyclic message of node {} with a signal '{}'",
+                                      b.message, node, b.signal));
+    }
+  }
+  std::int64_t fastest = messages_.front().period_ns;
+  for (const Message& m : messages_) fastest = std::min(fastest, m.period_ns);
+  const double rate_hz = 1e9 / static_cast<double>(fastest);
+  for (int axis = 0; axis < 3; ++axis) {
+    GyroParams gp = config_.gyro;
+    gp.axis_B = config_.R_BS.col(axis);
+    gp.rate_hz = rate_hz;
+    gp.seed = config_.seed * 31 + static_cast<std::uint64_t>(axis);
+    gyros_.emplace_back(gp);
+  }
+  AccelerometerParams ap = config_.accel;
+  ap.rate_hz = rate_hz;
+  ap.r_BP_B = config_.r_BS_B;
+  ap.axes_B = {config_.R_BS.col(0), config_.R_BS.col(1), config_.R_BS.col(2)};
+  ap.seed = config_.seed * 31 + 3;
+  accel_ = std::make_unique<AccelerometerModel>(ap);
+}
+
+DbcDevice::~DbcDevice() = default;
+
+std::int64_t DbcDevice::NextEventNs() const {
+  std::int64_t next = std::numeric_limits<std::int64_t>::max();
+  for (const Message& m : messages_) next = std::min(next, m.next_ns);
+  return next;
+}
+
+std::vector<std::string> DbcDevice::sensor_channels() const {
+  std::vector<std::string> out;
+  for (const char* s : kChannelSuffix) out.push_back(name_ + s);
+  return out;
+}
+
+double DbcDevice::channel_noise_std(const std::string& channel) const {
+  for (std::size_t c = 0; c < 3; ++c) {
+    if (channel == name_ + kChannelSuffix[c]) return gyros_[c].noise_std_rad_s();
+  }
+  return accel_->noise_std_m_s2();
+}
+
+void DbcDevice::ArmFaults(DeviceFaults faults) {
+  TakeDeviceFaults(faults);
+  for (auto& [channel, injector] : faults.sensors) {
+    for (std::size_t c = 0; c < kChannelSuffix.size(); ++c) {
+      if (channel == name_ + kChannelSuffix[c]) faults_[c] = std::move(injector);
+    }
+  }
+}
+
+void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out) {
+  out = bus::CanFrame{};
+  out.id = m.msg->id;
+  out.extended = m.msg->extended;
+  out.len = static_cast<std::uint8_t>(m.msg->length);
+  const std::span<std::uint8_t> payload(out.data.data(), out.len);
+  for (const bus::DbcSignal& sig : m.msg->signals) {
+    if (const auto start = AttributeNumber(sig.attributes, "GenSigStartValue")) {
+      bus::InsertRaw(sig, static_cast<std::uint64_t>(std::llround(*start)), payload);
+    }
+  }
+  for (const Bound& b : m.values) {
+    const DbcSignalBinding& cfg = *b.binding;
+    double si = 0;
+    switch (cfg.quantity) {
+      case DbcQuantity::kRateX:
+      case DbcQuantity::kRateY:
+      case DbcQuantity::kRateZ:
+      case DbcQuantity::kAccelX:
+      case DbcQuantity::kAccelY:
+      case DbcQuantity::kAccelZ:
+        si = s.imu[static_cast<std::size_t>(cfg.quantity)];
+        break;
+      case DbcQuantity::kWheelAngle:
+        si = (*world.wheels)[cfg.wheel_index].angle_rad;
+        break;
+      case DbcQuantity::kWheelSpeed:
+        si = (*world.wheels)[cfg.wheel_index].omega_rad_s;
+        break;
+      case DbcQuantity::kTemperature:
+        si = config_.temperature_k;
+        break;
+      default:
+        break;
+    }
+    double v = cfg.quantity == DbcQuantity::kConstant ? cfg.value : b.unit.FromSi(cfg.gain * si);
+    if (cfg.quantity == DbcQuantity::kWheelAngle && cfg.counts_per_rev > 0) {
+      v = cfg.gain * si / (2.0 * std::numbers::pi) * cfg.counts_per_rev;
+    }
+    const bus::DbcSignal& sig = *b.signal;
+    if (sig.minimum < sig.maximum && (v < sig.minimum || v > sig.maximum)) {
+      v = std::clamp(v, sig.minimum, sig.maximum);
+      ++clamped_;
+    }
+    if (!bus::EncodeSignal(sig, v, payload)) ++clamped_;
+  }
+  for (Bound& b : m.counters) {
+    const DbcSignalBinding& cfg = *b.binding;
+    const std::uint64_t value = (cfg.counter_shared ? shared_counter_ : b.counter) % b.modulo;
+    bus::InsertRaw(*b.signal, value, payload);
+    const auto mod = static_cast<std::int64_t>(b.modulo);
+    b.counter = static_cast<std::uint64_t>(
+        ((static_cast<std::int64_t>(b.counter % b.modulo) + cfg.counter_step) % mod + mod) % mod);
+  }
+  for (const Bound& b : m.checksums) WriteChecksum(b.binding->checksum, *b.signal, payload);
+}
+
+void DbcDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
+  while (NextEventNs() <= t_ns) {
+    const std::int64_t ts = NextEventNs();
+    const BodyKinematics k = AccelKinematics(*world.body);
+    Sample s;
+    for (std::size_t c = 0; c < 3; ++c) s.imu[c] = gyros_[c].Sample(k.omega_WB_B);
+    const std::vector<double>& a = accel_->Sample(k);
+    for (std::size_t c = 0; c < 3; ++c) s.imu[3 + c] = a[c];
+    const bool dropped = !ApplyToChannels(faults_, s.imu, ts);
+    std::vector<NodeFrame> frames;
+    for (Message& m : messages_) {
+      if (m.next_ns != ts) continue;
+      m.next_ns += m.period_ns;
+      if (dropped) continue;
+      NodeFrame f;
+      f.due_ns = ts;
+      Encode(m, s, world, f.frame);
+      frames.push_back(f);
+    }
+    ++shared_counter_;
+    frames_sent_ += frames.size();
+    if (!frames.empty()) SendThroughDeviceFaults(std::move(frames), true, port);
+  }
+}
+
+}  // namespace wheelhil::emulator

@@ -1,0 +1,153 @@
+#pragma once
+/// A device whose frames are every cyclic message one node of the user's DBC file sends
+/// (scenario `devices: [{kind: dbc, ...}]`, docs/own-hardware.md). Each signal is bound to a
+/// quantity: the body rate about a sensor axis (rate_x/y/z), the specific force along it at the
+/// mounting point (accel_x/y/z), a wheel's angle or speed, a temperature, a constant, a rolling
+/// counter or a checksum; unbound signals carry their GenSigStartValue (raw), else raw 0.
+///
+/// Units come from each signal's DBC unit string (bus/dbc_units.h: deg/s, rad/s, rpm, g, m/s^2,
+/// rad, deg, degC, K; a wheel angle in "counts" with the binding's counts_per_rev) times the
+/// binding's gain. A value outside the signal's DBC [min|max] range (when given) is sent
+/// clamped to it, beyond its raw range saturated; both are counted.
+///
+/// Timing: a message goes out every GenMsgCycleTime ms (or the override), the first one at the
+/// device's start plus GenMsgStartDelayTime plus its phase; GenMsgSendType is read as its string
+/// (a message whose type names no cycle, "Event", "OnChange", ..., is not sent unless an
+/// override gives it a cycle time). Messages due at one instant share one sample of the
+/// sensors; a counter counts frames of its message, or, `shared`, instants at which the device
+/// sends. Checksums (frame_checksum.h) are computed last, over the payload with their bits zero.
+///
+/// Sensors: three gyro axes and a three-axis accelerometer along the sensor axes, which are the
+/// body axes rotated by the mounting's roll, pitch and yaw (R_BS = Rz(yaw) Ry(pitch) Rx(roll)),
+/// at the mounting point r_BS_B. Sensor faults address "<name>.rate_x" .. "<name>.accel_z";
+/// device faults the device's name. Virtual time only; never blocks; thread-compatible.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "bus/dbc.h"
+#include "bus/dbc_units.h"
+#include "emulator/devices/device.h"
+#include "emulator/devices/frame_checksum.h"
+#include "emulator/sensors/accelerometer_model.h"
+#include "emulator/sensors/gyro_model.h"
+
+namespace wheelhil::emulator {
+
+enum class DbcQuantity : std::uint8_t {
+  kRateX, kRateY, kRateZ, kAccelX, kAccelY, kAccelZ,  // sensor axes
+  kWheelAngle, kWheelSpeed, kTemperature, kConstant, kCounter, kChecksum,
+};
+/// "rate_x" ... "accel_z", "wheel_angle", "wheel_speed", "temperature", "constant", "counter",
+/// "checksum"; nullopt otherwise.
+std::optional<DbcQuantity> ParseDbcQuantity(std::string_view name) noexcept;
+/// The names above, for messages.
+std::string_view DbcQuantityNames() noexcept;
+
+/// One signal's binding. `message` empty: the signal of that name in every message of the node
+/// (a counter or a CRC that all frames carry).
+struct DbcSignalBinding {
+  std::string message;
+  std::string signal;
+  DbcQuantity quantity = DbcQuantity::kConstant;
+  double gain = 1.0;
+  std::size_t wheel_index = 0;  ///< kWheelAngle, kWheelSpeed (vehicle wheel order).
+  double counts_per_rev = 0;    ///< kWheelAngle in a dimensionless unit ("counts").
+  double value = 0;             ///< kConstant: the physical value, in the signal's unit.
+  std::int64_t counter_step = 1;
+  std::optional<std::uint64_t> counter_modulo;  ///< Default 2^bits.
+  bool counter_shared = false;  ///< Counts the device's send instants, not the message's frames.
+  ChecksumKind checksum = ChecksumKind::kXor;
+  std::string field;  ///< Where it was configured, for messages ("devices[0].signals.CRC").
+};
+
+/// Timing overrides of one message.
+struct DbcMessageTiming {
+  std::string message;
+  std::optional<double> cycle_time_ms;
+  double phase_ms = 0;
+  std::optional<double> start_delay_ms;  ///< Replaces GenMsgStartDelayTime.
+  std::string field;
+};
+
+struct DbcDeviceConfig {
+  std::string name = "dbc";  ///< Its node name on the run's record and in faults.
+  std::string field = "dbc";  ///< Its configuration's field, for messages ("devices[0]").
+  std::string node;          ///< The DBC node (BU_) whose messages it sends.
+  std::vector<DbcSignalBinding> signals;
+  std::vector<DbcMessageTiming> timing;
+  Eigen::Vector3d r_BS_B = Eigen::Vector3d::Zero();  ///< Mounting point [m].
+  Eigen::Matrix3d R_BS = Eigen::Matrix3d::Identity();  ///< Sensor axes in the body frame.
+  GyroParams gyro;             ///< Per axis (axis, rate and seed are set by the device).
+  AccelerometerParams accel;   ///< Three axes (axes, point, rate and seed set by the device).
+  double temperature_k = 298.15;
+  std::uint64_t seed = 0;
+  std::int64_t start_ns = 0;  ///< When the device starts sending (its power-on).
+};
+
+/// R_BS from roll, pitch, yaw in degrees (z-y'-x'' intrinsic, as ROS and URDF write them).
+Eigen::Matrix3d MountRotation(const Eigen::Vector3d& rpy_deg);
+
+class DbcDevice final : public Device {
+ public:
+  /// Throws std::invalid_argument ("<field>: problem") for a node that sends nothing cyclic, a
+  /// binding to a missing message or signal, a unit that does not fit its quantity, a counter
+  /// or checksum its signal cannot carry, a message larger than a classic CAN frame.
+  DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDeviceConfig& config);
+  ~DbcDevice() override;
+
+  const std::string& name() const override { return name_; }
+  std::int64_t NextEventNs() const override;
+  void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
+  std::vector<std::string> sensor_channels() const override;
+  double channel_noise_std(const std::string& channel) const override;
+  void ArmFaults(DeviceFaults faults) override;
+
+  /// The messages it sends, in DBC order, and their periods.
+  std::size_t message_count() const { return messages_.size(); }
+  const bus::DbcMessage& message(std::size_t i) const { return *messages_[i].msg; }
+  std::int64_t period_ns(std::size_t i) const { return messages_[i].period_ns; }
+  std::uint64_t frames_sent() const { return frames_sent_; }
+  /// Values clamped to their DBC range, or saturated at their raw range.
+  std::uint64_t clamped() const { return clamped_; }
+
+ private:
+  struct Bound {
+    const DbcSignalBinding* binding;
+    const bus::DbcSignal* signal;
+    bus::UnitToSi unit;  // signal unit -> SI (gain applied when encoding)
+    std::uint64_t counter = 0;
+    std::uint64_t modulo = 0;
+  };
+  struct Message {
+    const bus::DbcMessage* msg = nullptr;
+    std::vector<Bound> values;
+    std::vector<Bound> counters;
+    std::vector<Bound> checksums;
+    std::int64_t period_ns = 0;
+    std::int64_t next_ns = 0;
+  };
+  struct Sample {
+    std::array<double, 6> imu{};  // rate x y z, accel x y z, sensor axes
+  };
+  void Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out);
+
+  std::string name_;
+  std::shared_ptr<const bus::DbcDatabase> dbc_;
+  DbcDeviceConfig config_;
+  std::vector<Message> messages_;
+  std::uint64_t shared_counter_ = 0;
+  std::vector<GyroModel> gyros_;
+  std::unique_ptr<AccelerometerModel> accel_;
+  std::array<std::unique_ptr<SensorFaultInjector>, 6> faults_;
+  std::uint64_t frames_sent_ = 0;
+  std::uint64_t clamped_ = 0;
+};
+
+}  // namespace wheelhil::emulator

@@ -1,0 +1,257 @@
+// The scenario loader's `devices:` list (emulator/scenario/scenario.h, docs/own-hardware.md).
+#include <map>
+#include <memory>
+#include <set>
+
+#include <fmt/format.h>
+
+#include "bus/dbc.h"
+#include "emulator/scenario/internal/scenario_reader.h"
+
+namespace wheelhil::emulator::scenario::internal {
+
+namespace {
+
+Eigen::Vector3d ReadVector3(const Reader& r, const YAML::Node& parent, const std::string& key,
+                            const std::string& prefix, double limit) {
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  const YAML::Node n = Reader::Get(parent, key);
+  if (!Reader::Present(n)) return v;
+  const std::string f = Reader::Join(prefix, key);
+  if (!n.IsSequence() || n.size() != 3) r.Fail(n, f, "must be [x, y, z]");
+  for (std::size_t i = 0; i < 3; ++i) {
+    v[static_cast<int>(i)] = r.ToNumber(n[i], fmt::format("{}[{}]", f, i), -limit, limit);
+  }
+  return v;
+}
+
+// `mount: {xyz_m: [x, y, z], rpy_deg: [roll, pitch, yaw]}` on the body frame B.
+void ReadMount(const Reader& r, const YAML::Node& n, const std::string& f, DbcDeviceConfig& c) {
+  const YAML::Node m = Reader::Get(n, "mount");
+  if (!Reader::Present(m)) return;
+  const std::string mf = f + ".mount";
+  r.CheckKeys(m, mf, {"xyz_m", "rpy_deg"});
+  c.r_BS_B = ReadVector3(r, m, "xyz_m", mf, 10);
+  c.R_BS = MountRotation(ReadVector3(r, m, "rpy_deg", mf, 360));
+}
+
+// One `signals:` entry: `NAME: quantity` or `NAME: {quantity, ...}`; NAME is a signal of any
+// message of the node, or MESSAGE.SIGNAL.
+DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::Node& v,
+                            const std::string& prefix, const platforms::Platform& platform) {
+  DbcSignalBinding b;
+  const std::string name = r.ToString(key, prefix);
+  b.field = Reader::Join(prefix, name);
+  if (const auto dot = name.find('.'); dot != std::string::npos) {
+    b.message = name.substr(0, dot);
+    b.signal = name.substr(dot + 1);
+  } else {
+    b.signal = name;
+  }
+  const YAML::Node q = v.IsMap() ? Reader::Get(v, "quantity") : v;
+  if (!Reader::Present(q)) r.Fail(v, b.field + ".quantity", "is required");
+  const std::string qs = r.ToString(q, b.field);
+  const auto quantity = ParseDbcQuantity(qs);
+  if (!quantity) {
+    r.Fail(q, b.field, fmt::format("'{}' is not one of {}", qs, DbcQuantityNames()));
+  }
+  b.quantity = *quantity;
+  if (!v.IsMap()) {
+    if (b.quantity == DbcQuantity::kWheelAngle || b.quantity == DbcQuantity::kWheelSpeed ||
+        b.quantity == DbcQuantity::kConstant || b.quantity == DbcQuantity::kChecksum) {
+      r.Fail(v, b.field,
+             fmt::format("{} needs a mapping ({{quantity: {}, {}}})", qs, qs,
+                         b.quantity == DbcQuantity::kConstant   ? "value: V"
+                         : b.quantity == DbcQuantity::kChecksum ? "type: T"
+                                                                : "wheel: W"));
+    }
+    return b;
+  }
+  std::set<std::string> keys{"quantity", "gain"};
+  switch (b.quantity) {
+    case DbcQuantity::kWheelAngle:
+      keys.insert({"wheel", "counts_per_rev"});
+      break;
+    case DbcQuantity::kWheelSpeed:
+      keys.insert("wheel");
+      break;
+    case DbcQuantity::kConstant:
+      keys = {"quantity", "value"};
+      break;
+    case DbcQuantity::kCounter:
+      keys = {"quantity", "step", "modulo", "shared"};
+      break;
+    case DbcQuantity::kChecksum:
+      keys = {"quantity", "type"};
+      break;
+    default:
+      break;
+  }
+  r.CheckKeys(v, b.field, keys);
+  b.gain = r.Number(v, "gain", b.field, -1e9, 1e9, 1.0);
+  if (b.quantity == DbcQuantity::kWheelAngle || b.quantity == DbcQuantity::kWheelSpeed) {
+    const std::string wheel = r.String(v, "wheel", b.field, std::nullopt);
+    try {
+      b.wheel_index = platform.wheel_index(wheel);
+    } catch (const std::exception&) {
+      r.Fail(v["wheel"], b.field + ".wheel",
+             fmt::format("platform {} has no wheel '{}'", platform.name, wheel));
+    }
+    b.counts_per_rev = r.Number(v, "counts_per_rev", b.field, 1, 1e9, 0.0);
+  }
+  if (b.quantity == DbcQuantity::kConstant) b.value = r.Number(v, "value", b.field, -1e15, 1e15);
+  if (b.quantity == DbcQuantity::kCounter) {
+    b.counter_step = r.Integer(v, "step", b.field, -65535, 65535, 1);
+    if (Reader::Present(Reader::Get(v, "modulo"))) {
+      b.counter_modulo = static_cast<std::uint64_t>(r.Integer(v, "modulo", b.field, 2, 1LL << 32));
+    }
+    b.counter_shared = r.Bool(v, "shared", b.field, false);
+  }
+  if (b.quantity == DbcQuantity::kChecksum) {
+    const std::string type = r.String(v, "type", b.field, std::nullopt);
+    const auto k = ParseChecksumKind(type);
+    if (!k) {
+      r.FailKey(v, "type", b.field + ".type",
+                fmt::format("'{}' is not one of {}", type, ChecksumKindNames()));
+    }
+    b.checksum = *k;
+  }
+  return b;
+}
+
+DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string& f,
+                         const platforms::Platform& platform) {
+  r.CheckKeys(n, f, {"kind", "name", "dbc", "node", "mount", "signals", "messages", "gyro", "accel",
+                     "temperature_c"});
+  DeviceSpec d;
+  d.kind = DeviceSpec::Kind::kDbc;
+  DbcDeviceConfig& c = d.dbc_device;
+  c.field = f;
+  c.node = r.String(n, "node", f, std::nullopt);
+  c.name = r.String(n, "name", f, c.node);
+  d.dbc = r.Path(r.String(n, "dbc", f, std::nullopt));
+  ReadMount(r, n, f, c);
+  std::map<std::string, YAML::Node> where;  // field -> node, for the device's own errors
+  const YAML::Node sigs = Reader::Get(n, "signals");
+  if (!sigs.IsMap() || sigs.size() == 0) {
+    r.FailKey(n, "signals", f + ".signals", "must map signal names to quantities");
+  }
+  for (auto it = sigs.begin(); it != sigs.end(); ++it) {
+    c.signals.push_back(ReadSignal(r, it->first, it->second, f + ".signals", platform));
+    where[c.signals.back().field] = it->first;
+  }
+  if (const YAML::Node ms = Reader::Get(n, "messages"); Reader::Present(ms)) {
+    if (!ms.IsMap()) r.Fail(ms, f + ".messages", "must map message names to timings");
+    for (auto it = ms.begin(); it != ms.end(); ++it) {
+      DbcMessageTiming t;
+      t.message = r.ToString(it->first, f + ".messages");
+      t.field = fmt::format("{}.messages.{}", f, t.message);
+      r.CheckKeys(it->second, t.field, {"cycle_time_ms", "phase_ms", "start_delay_ms"});
+      if (Reader::Present(Reader::Get(it->second, "cycle_time_ms"))) {
+        t.cycle_time_ms = r.Number(it->second, "cycle_time_ms", t.field, 0.01, 3.6e6);
+      }
+      t.phase_ms = r.Number(it->second, "phase_ms", t.field, 0, 3.6e6, 0.0);
+      if (Reader::Present(Reader::Get(it->second, "start_delay_ms"))) {
+        t.start_delay_ms = r.Number(it->second, "start_delay_ms", t.field, 0, 3.6e6);
+      }
+      c.timing.push_back(t);
+      where[t.field] = it->first;
+    }
+  }
+  if (const YAML::Node g = Reader::Get(n, "gyro"); Reader::Present(g)) {
+    const std::string gf = f + ".gyro";
+    r.CheckKeys(g, gf, {"noise_density_rad_s_sqrt_hz", "bias_rad_s",
+                        "bias_random_walk_rad_s_sqrt_s", "scale_factor_error"});
+    c.gyro.noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", gf, 0, 1, 0.0);
+    c.gyro.bias_rad_s = r.Number(g, "bias_rad_s", gf, -10, 10, 0.0);
+    c.gyro.bias_random_walk_rad_s_sqrt_s =
+        r.Number(g, "bias_random_walk_rad_s_sqrt_s", gf, 0, 1, 0.0);
+    c.gyro.scale_factor_error = r.Number(g, "scale_factor_error", gf, -0.5, 0.5, 0.0);
+  }
+  if (const YAML::Node a = Reader::Get(n, "accel"); Reader::Present(a)) {
+    const std::string af = f + ".accel";
+    r.CheckKeys(a, af, {"noise_density_m_s2_sqrt_hz", "bias_m_s2"});
+    c.accel.noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
+    const double bias = r.Number(a, "bias_m_s2", af, -10, 10, 0.0);
+    if (bias != 0) c.accel.bias_m_s2.assign(3, bias);
+  }
+  c.temperature_k = r.Number(n, "temperature_c", f, -100, 300, 25.0) + 273.15;
+  // The bindings against the DBC, now: an error names the entry's line.
+  std::shared_ptr<const bus::DbcDatabase> db;
+  try {
+    db = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
+  } catch (const std::exception& e) {
+    r.FailKey(n, "dbc", f + ".dbc", e.what());
+  }
+  try {
+    (void)DbcDevice(db, c);
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    const auto colon = what.find(": ");
+    const std::string field = colon == std::string::npos ? f : what.substr(0, colon);
+    const auto at = where.find(field);
+    r.Fail(at != where.end() ? at->second : n, field,
+           colon == std::string::npos ? what : what.substr(colon + 2));
+  }
+  return d;
+}
+
+DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::string& f,
+                            const platforms::Platform& platform) {
+  r.CheckKeys(n, f, {"kind", "wheel", "node_id", "direction", "lines_per_rev", "quadrature_x4"});
+  DeviceSpec d;
+  d.kind = DeviceSpec::Kind::kCanopenCia406;
+  d.encoder.wheel = r.String(n, "wheel", f, std::nullopt);
+  try {
+    (void)platform.wheel_index(d.encoder.wheel);
+  } catch (const std::exception&) {
+    r.Fail(n["wheel"], f + ".wheel",
+           fmt::format("platform {} has no wheel '{}'", platform.name, d.encoder.wheel));
+  }
+  d.encoder.node_id = static_cast<int>(r.Integer(n, "node_id", f, 1, 127));
+  d.encoder.direction = static_cast<int>(r.Integer(n, "direction", f, -1, 1, 1));
+  if (d.encoder.direction == 0) r.Fail(n["direction"], f + ".direction", "must be 1 or -1");
+  d.lines_per_rev = static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
+  d.quadrature_x4 = r.Bool(n, "quadrature_x4", f, true);
+  return d;
+}
+
+}  // namespace
+
+std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
+                                    const platforms::Platform& platform,
+                                    const SensorsSpec& sensors) {
+  std::vector<DeviceSpec> out;
+  if (!Reader::Present(n)) return out;
+  if (!n.IsSequence()) r.Fail(n, "devices", "must be a list of {kind, ...}");
+  std::set<std::string> names{"gyro", "accel4", "dbc_imu"};
+  std::set<int> node_ids;
+  for (const auto& e : sensors.encoders) node_ids.insert(e.node_id);
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const std::string f = fmt::format("devices[{}]", i);
+    if (!n[i].IsMap()) r.Fail(n[i], f, "must be a mapping {kind, ...}");
+    const std::string kind = r.String(n[i], "kind", f, std::nullopt);
+    DeviceSpec d;
+    if (kind == "dbc") {
+      d = ReadDbcDevice(r, n[i], f, platform);
+      if (!names.insert(d.dbc_device.name).second) {
+        r.Fail(n[i], f + ".name",
+               fmt::format("'{}' is taken: give each device its own name", d.dbc_device.name));
+      }
+    } else if (kind == "canopen_cia406") {
+      d = ReadCia406Device(r, n[i], f, platform);
+      if (!node_ids.insert(d.encoder.node_id).second) {
+        r.Fail(n[i]["node_id"], f + ".node_id",
+               fmt::format("node id {} is taken", d.encoder.node_id));
+      }
+    } else {
+      r.FailKey(n[i], "kind", f + ".kind",
+                fmt::format("'{}' is not one of dbc, canopen_cia406", kind));
+    }
+    d.where = r.Where(n[i]);
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+}  // namespace wheelhil::emulator::scenario::internal

@@ -1,0 +1,211 @@
+// The `dbc` device (emulator/devices/dbc_device.h): every cyclic message of a DBC node, its
+// signals bound to quantities in the DBC's units, timed by GenMsgCycleTime, GenMsgStartDelayTime
+// and a phase, GenMsgSendType read as its string; counters, checksums, the DBC range; errors
+// that name the field.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "bus/dbc.h"
+#include "bus/dbc_codec.h"
+#include "emulator/devices/dbc_device.h"
+
+namespace wheelhil::emulator {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+constexpr const char* kDbc = R"(VERSION ""
+BU_: Box Other
+BO_ 256 BOX_Rates: 8 Box
+ SG_ Yaw : 0|16@1- (0.01,0) [-300|300] "deg/s" Other
+ SG_ Ax : 16|16@1- (0.001,0) [-2|2] "g" Other
+ SG_ Temp : 32|8@1+ (1,-40) [-40|215] "degC" Other
+ SG_ Cnt : 40|4@1+ (1,0) [0|15] "" Other
+ SG_ Spare : 44|4@1+ (1,0) [0|15] "" Other
+ SG_ Crc : 56|8@1+ (1,0) [0|255] "" Other
+BO_ 257 BOX_Wheel: 8 Box
+ SG_ Angle : 0|32@1+ (1,0) [0|0] "counts" Other
+ SG_ Speed : 32|16@1- (0.1,0) [-3000|3000] "rpm" Other
+ SG_ Level : 48|8@1+ (1,0) [0|100] "%" Other
+ SG_ Cnt : 56|4@1+ (1,0) [0|15] "" Other
+BO_ 258 BOX_Event: 2 Box
+ SG_ Flag : 0|1@1+ (1,0) [0|1] "" Other
+BO_ 512 OTHER_Msg: 1 Other
+ SG_ X : 0|8@1+ (1,0) [0|255] "" Box
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_DEF_ BO_ "GenMsgSendType" ENUM "NoMsgSendType","Cyclic","Event";
+BA_DEF_ BO_ "GenMsgStartDelayTime" INT 0 65535;
+BA_DEF_ SG_ "GenSigStartValue" INT 0 65535;
+BA_DEF_DEF_ "GenMsgSendType" "Cyclic";
+BA_ "GenMsgCycleTime" BO_ 256 10;
+BA_ "GenMsgCycleTime" BO_ 257 20;
+BA_ "GenMsgStartDelayTime" BO_ 257 5;
+BA_ "GenMsgSendType" BO_ 258 2;
+BA_ "GenSigStartValue" SG_ 256 Spare 9;
+)";
+
+std::shared_ptr<const bus::DbcDatabase> Db() {
+  return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kDbc, "box.dbc"));
+}
+
+class RecordingPort final : public DevicePort {
+ public:
+  void Send(std::vector<NodeFrame> frames, bool) override {
+    for (auto& f : frames) sent.push_back(f);
+  }
+  void CountSilenced(std::size_t) override {}
+  void Event(nlohmann::json) override {}
+  double MotionSeconds(std::int64_t t_ns) const override { return 1e-9 * static_cast<double>(t_ns); }
+  void Fail(std::string) override {}
+  std::vector<NodeFrame> sent;
+};
+
+DbcSignalBinding Bind(const char* signal, DbcQuantity q, const char* message = "") {
+  DbcSignalBinding b;
+  b.message = message;
+  b.signal = signal;
+  b.quantity = q;
+  b.field = std::string("dbc.signals.") + signal;
+  return b;
+}
+
+DbcDeviceConfig Config() {
+  DbcDeviceConfig c;
+  c.name = "box";
+  c.node = "Box";
+  c.signals = {Bind("Yaw", DbcQuantity::kRateZ), Bind("Ax", DbcQuantity::kAccelX),
+               Bind("Temp", DbcQuantity::kTemperature), Bind("Cnt", DbcQuantity::kCounter),
+               Bind("Crc", DbcQuantity::kChecksum), Bind("Angle", DbcQuantity::kWheelAngle),
+               Bind("Speed", DbcQuantity::kWheelSpeed), Bind("Level", DbcQuantity::kConstant)};
+  c.signals[4].checksum = ChecksumKind::kCrc8H2F;
+  c.signals[5].counts_per_rev = 4096;
+  c.signals[5].wheel_index = 1;
+  c.signals[6].wheel_index = 1;
+  c.signals[7].value = 250;  // beyond the DBC's [0|100]: sent clamped
+  c.temperature_k = 273.15 + 35;
+  return c;
+}
+
+// A body turning at 0.5 rad/s, the sensor mounted upside down (roll 180 deg): its z axis is the
+// body's -z, so it reads -0.5 rad/s; wheel 1 at 3/4 turn spinning at 10 rad/s.
+TEST(DbcDevice, SendsEveryCyclicMessageOfItsNodeInTheDbcUnits) {
+  DbcDeviceConfig c = Config();
+  c.R_BS = MountRotation({180, 0, 0});
+  DbcDevice d(Db(), c);
+  ASSERT_EQ(d.message_count(), 2u);  // BOX_Event is "Event" (written as index 2): not sent
+  EXPECT_EQ(d.message(0).name, "BOX_Rates");
+  physics::BodyTruth body;
+  body.omega_WB_W = {0, 0, 0.5};  // level: the same in B
+  std::vector<physics::WheelTruth> wheels(2);
+  wheels[1].angle_rad = 1.5 * std::numbers::pi;
+  wheels[1].omega_rad_s = 10;
+  DeviceWorld world{&body, &wheels, {}};
+  RecordingPort port;
+  d.Poll(44'000'000, world, port);
+  // BOX_Rates at 0, 10, .., 40 ms; BOX_Wheel at 5 (GenMsgStartDelayTime), 25 ms.
+  std::vector<std::pair<std::uint32_t, std::int64_t>> order;
+  for (const auto& f : port.sent) order.emplace_back(f.frame.id, f.due_ns / 1'000'000);
+  EXPECT_THAT(order, ::testing::ElementsAre(std::pair{256u, 0}, std::pair{257u, 5},
+                                            std::pair{256u, 10}, std::pair{256u, 20},
+                                            std::pair{257u, 25}, std::pair{256u, 30},
+                                            std::pair{256u, 40}));
+  const auto db = Db();
+  const auto rates = bus::DecodeMessage(*db->FindMessage("BOX_Rates"), port.sent[3].frame);
+  EXPECT_NEAR(rates.at("Yaw"), -0.5 * 180 / std::numbers::pi, 0.005 + 1e-9);
+  // Upside down at rest the sensor's x is the body's x: no specific force along it.
+  EXPECT_NEAR(rates.at("Ax"), 0.0, 0.0005 + 1e-9);
+  EXPECT_DOUBLE_EQ(rates.at("Temp"), 35);
+  EXPECT_DOUBLE_EQ(rates.at("Cnt"), 2);    // its third frame
+  EXPECT_DOUBLE_EQ(rates.at("Spare"), 9);  // GenSigStartValue
+  const std::span<const std::uint8_t> p(port.sent[3].frame.data.data(), 8);
+  EXPECT_EQ(rates.at("Crc"),
+            ComputeChecksum(ChecksumKind::kCrc8H2F, *db->FindMessage("BOX_Rates")->FindSignal("Crc"), p));
+  const auto wheel = bus::DecodeMessage(*db->FindMessage("BOX_Wheel"), port.sent[4].frame);
+  EXPECT_DOUBLE_EQ(wheel.at("Angle"), 3072);  // 3/4 of 4096 counts
+  EXPECT_NEAR(wheel.at("Speed"), 10 * 60 / (2 * std::numbers::pi), 0.05 + 1e-9);
+  EXPECT_DOUBLE_EQ(wheel.at("Level"), 100);
+  EXPECT_DOUBLE_EQ(wheel.at("Cnt"), 1);
+  EXPECT_EQ(d.clamped(), 2u);  // Level, in both BOX_Wheel frames
+}
+
+TEST(DbcDevice, ASharedCounterCountsSendInstantsAndAPhaseShiftsAMessage) {
+  DbcDeviceConfig c = Config();
+  c.signals[3].counter_shared = true;  // "Cnt" in both messages
+  c.signals[3].counter_modulo = 15;
+  DbcMessageTiming t;
+  t.message = "BOX_Wheel";
+  t.phase_ms = 5;  // 5 + 5 = 10 ms: with BOX_Rates
+  t.field = "dbc.messages.BOX_Wheel";
+  c.timing = {t};
+  DbcDevice d(Db(), c);
+  physics::BodyTruth body;
+  std::vector<physics::WheelTruth> wheels(2);
+  DeviceWorld world{&body, &wheels, {}};
+  RecordingPort port;
+  d.Poll(300'000'000, world, port);
+  const auto db = Db();
+  std::vector<std::pair<std::int64_t, double>> cnt;
+  for (const auto& f : port.sent) {
+    const auto v = bus::DecodeMessage(*db->FindMessage(f.frame.id, false), f.frame);
+    cnt.emplace_back(f.due_ns / 1'000'000, v.at("Cnt"));
+  }
+  EXPECT_EQ(cnt[0], (std::pair<std::int64_t, double>{0, 0}));
+  EXPECT_EQ(cnt[1], (std::pair<std::int64_t, double>{10, 1}));  // BOX_Rates
+  EXPECT_EQ(cnt[2], (std::pair<std::int64_t, double>{10, 1}));  // BOX_Wheel: same instant
+  // Modulo 15 wraps after 14: the instant at 150 ms has counter 0.
+  for (const auto& [ms, v] : cnt) {
+    if (ms == 150) {
+      EXPECT_EQ(v, 0);
+    }
+    if (ms == 140) {
+      EXPECT_EQ(v, 14);
+    }
+  }
+}
+
+TEST(DbcDevice, ConfigurationsTheDbcCannotCarryAreRefusedNamingTheField) {
+  auto throws = [](DbcDeviceConfig c, const std::string& what) {
+    EXPECT_THAT([&] { (void)DbcDevice(Db(), c); },
+                ThrowsMessage<std::invalid_argument>(HasSubstr(what)));
+  };
+  DbcDeviceConfig c = Config();
+  c.node = "Nobody";
+  throws(c, "dbc.node: 'Nobody' is not a node of the DBC (BU_: Box, Other)");
+  c = Config();
+  c.signals.push_back(Bind("Nope", DbcQuantity::kRateX));
+  throws(c, "dbc.signals.Nope: no message node Box sends cyclically has a signal 'Nope'");
+  c = Config();
+  c.signals.push_back(Bind("Flag", DbcQuantity::kConstant, "BOX_Event"));
+  throws(c, "'BOX_Event' is not a cyclic message of node Box");
+  c = Config();
+  c.signals[0].quantity = DbcQuantity::kAccelZ;  // Yaw is in deg/s
+  throws(c, "dbc.signals.Yaw: Yaw's unit 'deg/s' is not a unit of acceleration");
+  c = Config();
+  c.signals[5].counts_per_rev = 0;  // "counts" is no angle
+  throws(c, "for encoder counts give counts_per_rev");
+  c = Config();
+  c.signals[4].checksum = ChecksumKind::kCrc16Ccitt;
+  throws(c, "Crc (8 bits) cannot carry a crc16_ccitt checksum");
+  c = Config();
+  c.signals[3].counter_modulo = 17;
+  throws(c, "modulo 17 does not fit the 4 bits of Cnt");
+  c = Config();
+  c.signals.push_back(Bind("Yaw", DbcQuantity::kRateX, "BOX_Rates"));
+  throws(c, "BOX_Rates.Yaw is bound twice");
+  c = Config();
+  DbcMessageTiming t;
+  t.message = "OTHER_Msg";
+  t.field = "dbc.messages.OTHER_Msg";
+  c.timing = {t};
+  throws(c, "dbc.messages.OTHER_Msg: 'OTHER_Msg' is not a message node Box sends");
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator
