@@ -61,9 +61,19 @@ CanopenEncoderNode::CanopenEncoderNode(const Cia406NodeConfig& config,
 void CanopenEncoderNode::ResetApplication() {
   operating_parameters_ = config_.operating_parameters;
   error_register_ = 0;
+  ResetExtraObjects(false);
+}
+
+void CanopenEncoderNode::ResetExtraObjects(bool communication) {
+  if (extra_.size() != config_.extra_objects.size()) extra_ = config_.extra_objects;
+  for (std::size_t i = 0; i < extra_.size(); ++i) {
+    const bool comm_area = extra_[i].index >= 0x1000 && extra_[i].index < 0x2000;
+    if (comm_area == communication) extra_[i].value = config_.extra_objects[i].value;
+  }
 }
 
 void CanopenEncoderNode::ResetCommunication() {
+  ResetExtraObjects(true);
   heartbeat_ms_ = config_.heartbeat_ms;
   tpdo1_cob_id_ = canopen::CobId(canopen::Function::kTpdo1, config_.node_id);
   tpdo1_type_ = config_.tpdo1_transmission_type;
@@ -290,8 +300,15 @@ CanopenEncoderNode::SdoResult CanopenEncoderNode::Read(std::uint16_t index,
       return no_sub;
     case 0x6200:
       return sub == 0 ? value(cyclic_timer_ms_, 2) : no_sub;
-    default:
-      return SdoResult{sdo::kAbortNoObject, 0, 0};
+    default: {
+      bool index_known = false;
+      for (const auto& x : extra_) {
+        if (x.index != index) continue;
+        index_known = true;
+        if (x.sub == sub) return value(x.value, x.size);
+      }
+      return SdoResult{index_known ? sdo::kAbortNoSubindex : sdo::kAbortNoObject, 0, 0};
+    }
   }
 }
 
@@ -305,7 +322,16 @@ std::uint32_t CanopenEncoderNode::Write(std::uint16_t index, std::uint8_t sub, s
       (index == od::kTpdo1Communication &&
        (sub == od::kPdoCobId || sub == od::kPdoTransmissionType || sub == od::kPdoEventTimer)) ||
       (index == 0x6000 && sub == 0) || (index == 0x6200 && sub == 0);
-  if (!writable) return sdo::kAbortReadOnly;
+  Cia406NodeConfig::ExtraObject* extra = nullptr;
+  for (auto& x : extra_) {
+    if (x.index == index && x.sub == sub) extra = &x;
+  }
+  if (!writable && (extra == nullptr || !extra->writable)) return sdo::kAbortReadOnly;
+  if (extra != nullptr) {
+    if (size != 0 && size != extra->size) return sdo::kAbortLength;
+    extra->value = value;
+    return 0;
+  }
   if (size != 0 && size != exists.size) return sdo::kAbortLength;
   auto restart_cyclic = [&] {
     const bool cyclic =

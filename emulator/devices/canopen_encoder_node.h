@@ -26,7 +26,7 @@
 /// u8), 5 (rw u16), 0x1A00 TPDO1 mapping sub 0..2 (ro: fixed mapping 0x60040020, 0x60300110),
 /// 0x6000 operating parameters (rw u16; bit 0 code sequence = count direction inverted),
 /// 0x6004 position value (ro u32), 0x6030 speed value sub 0 (ro, 1) and 1 (ro int16), 0x6200
-/// cyclic timer (rw u16 ms). Aborts: 0x06020000 no object, 0x06090011 no subindex,
+/// cyclic timer (rw u16 ms), and Cia406NodeConfig::extra_objects. Aborts: 0x06020000 no object, 0x06090011 no subindex,
 /// 0x06010002 read-only, 0x06070010 length mismatch, 0x06090030 bad value, 0x05040001 bad
 /// command. SDO requests are served in pre-operational and operational, not in stopped.
 /// EMCY on 0x080+id when a device fault is raised (error code, error register 0x1001) and an
@@ -61,6 +61,18 @@ struct Cia406NodeConfig {
   std::uint32_t serial = 0;                      ///< 0x1018:4.
   /// Speed value 0x6030:1 unit: counts per speed_time_base_s (1.0 = counts/s, 0.001 = /ms).
   double speed_time_base_s = 1.0;
+  /// Objects beyond the built-in dictionary (from the vendor's EDS: 0x1008.., 0x6001, 0x2000..),
+  /// expedited: up to 4 bytes. Uploads read their value; downloads to writable ones keep the
+  /// value (length checked) until the reset of their area (communication 0x1000..0x1FFF,
+  /// application the rest).
+  struct ExtraObject {
+    std::uint16_t index = 0;
+    std::uint8_t sub = 0;
+    std::uint32_t value = 0;
+    std::uint8_t size = 4;
+    bool writable = false;
+  };
+  std::vector<ExtraObject> extra_objects{};
 };
 
 /// A frame the node sends and the virtual instant it is due on the bus.
@@ -117,6 +129,7 @@ class CanopenEncoderNode {
 
   void ResetApplication();
   void ResetCommunication();
+  void ResetExtraObjects(bool communication);
   void ScheduleBoot(std::int64_t t_ns);
   void EnterOperational(std::int64_t t_ns);
   void HandleNmt(std::uint8_t command, std::int64_t t_ns);
@@ -153,6 +166,7 @@ class CanopenEncoderNode {
   bool have_last_tpdo_position_ = false;
   std::uint32_t last_tpdo_position_ = 0;
   std::uint64_t rejected_frames_ = 0;
+  std::vector<Cia406NodeConfig::ExtraObject> extra_;  ///< Current values.
 };
 
 }  // namespace wheelhil::emulator

@@ -21,10 +21,12 @@ using Devices = std::vector<std::unique_ptr<Device>>;
 using Builder = std::function<void(const DeviceBuildContext&, Devices&)>;
 
 // One CiA 406 node; `k` numbers the encoders of the run (their seeds).
+// `from_eds`: the node's dictionary as its EDS (and the scenario's objects) set it.
 std::unique_ptr<Device> MakeEncoder(const DeviceBuildContext& c,
                                     const std::shared_ptr<const DbcCia406Codec>& codec,
                                     const EncoderDeviceSpec& e, int lines_per_rev,
-                                    bool quadrature_x4, std::uint64_t k) {
+                                    bool quadrature_x4, std::uint64_t k,
+                                    const Cia406NodeConfig* from_eds = nullptr) {
   const SensorsSpec& sensors = c.scenario.sensors;
   {
     Cia406EncoderDeviceConfig dc;
@@ -43,8 +45,12 @@ std::unique_ptr<Device> MakeEncoder(const DeviceBuildContext& c,
     std::mt19937_64 phase_rng(ep.seed ^ 0xD15C0FFull);
     ep.disc_phase_counts = std::uniform_real_distribution<double>(0.0, 1.0)(phase_rng);
     dc.initial_angle_rad = c.wheels[dc.wheel_index].angle_rad;
+    if (from_eds != nullptr) {
+      dc.node = *from_eds;
+    } else {
+      dc.node.heartbeat_ms = static_cast<std::uint16_t>(sensors.heartbeat_ms);
+    }
     dc.node.node_id = static_cast<std::uint8_t>(e.node_id);
-    dc.node.heartbeat_ms = static_cast<std::uint16_t>(sensors.heartbeat_ms);
     const bus::DbcMessage* tpdo1 =
         codec->database().FindMessage(
             bus::canopen::CobId(bus::canopen::Function::kTpdo1, dc.node.node_id), false);
@@ -74,7 +80,8 @@ void BuildDeviceList(const DeviceBuildContext& c, Devices& out) {
     switch (d.kind) {
       case DeviceSpec::Kind::kCanopenCia406:
         if (!codec) codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
-        out.push_back(MakeEncoder(c, codec, d.encoder, d.lines_per_rev, d.quadrature_x4, ++k));
+        out.push_back(MakeEncoder(c, codec, d.encoder, d.lines_per_rev, d.quadrature_x4, ++k,
+                                  d.eds.empty() ? nullptr : &d.eds_node));
         break;
       case DeviceSpec::Kind::kDbc: {
         auto dbc = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));

@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 
+#include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_device.h"
 #include "emulator/devices/dbc_imu_node.h"
 #include "emulator/faults/bus_faults.h"
@@ -133,6 +134,8 @@ struct DeviceSpec {
   EncoderDeviceSpec encoder;   ///< kCanopenCia406.
   int lines_per_rev = 500;
   bool quadrature_x4 = true;
+  std::string eds;             ///< kCanopenCia406: the vendor's EDS/DCF (absolute), or empty.
+  Cia406NodeConfig eds_node;   ///< Its dictionary from the EDS and the entry's `objects`.
 };
 
 /// A fault injected over a window [start_s, end_s) of motion time (end_s infinite: to the end).

@@ -1,11 +1,16 @@
 // The scenario loader's `devices:` list (emulator/scenario/scenario.h, docs/own-hardware.md).
+#include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <map>
 #include <memory>
 #include <set>
 
 #include <fmt/format.h>
 
+#include "bus/canopen_eds.h"
 #include "bus/dbc.h"
+#include "emulator/devices/cia406_eds.h"
 #include "emulator/scenario/internal/scenario_reader.h"
 
 namespace wheelhil::emulator::scenario::internal {
@@ -196,9 +201,43 @@ DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string
   return d;
 }
 
+// `objects: {"0x6200": 10, "0x1018sub4": 1234}` after the EDS.
+void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f, Cia406NodeConfig& node) {
+  const YAML::Node objs = Reader::Get(n, "objects");
+  if (!Reader::Present(objs)) return;
+  if (!objs.IsMap()) r.Fail(objs, f + ".objects", "must map \"0xINDEX\" or \"0xINDEXsubN\" to values");
+  for (auto it = objs.begin(); it != objs.end(); ++it) {
+    const std::string key = r.ToString(it->first, f + ".objects");
+    const std::string kf = f + ".objects." + key;
+    std::string text = key;
+    std::transform(text.begin(), text.end(), text.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    if (text.starts_with("0x")) text = text.substr(2);
+    const auto sub_at = text.find("sub");
+    unsigned index = 0, sub = 0;
+    const std::string idx = text.substr(0, sub_at);
+    const auto r1 = std::from_chars(idx.data(), idx.data() + idx.size(), index, 16);
+    bool ok = idx.size() == 4 && r1.ec == std::errc() && r1.ptr == idx.data() + idx.size();
+    if (ok && sub_at != std::string::npos) {
+      const std::string sv = text.substr(sub_at + 3);
+      const auto r2 = std::from_chars(sv.data(), sv.data() + sv.size(), sub, 10);
+      ok = !sv.empty() && r2.ec == std::errc() && r2.ptr == sv.data() + sv.size() && sub <= 255;
+    }
+    if (!ok) r.Fail(it->first, kf, "is not an object: write \"0x6200\" or \"0x1018sub4\"");
+    const auto value = static_cast<std::uint32_t>(r.ToInteger(it->second, kf, 0, 0xFFFFFFFFLL));
+    try {
+      SetCia406Object(node, static_cast<std::uint16_t>(index), static_cast<std::uint8_t>(sub),
+                      value);
+    } catch (const std::invalid_argument& e) {
+      r.Fail(it->first, kf, e.what());
+    }
+  }
+}
+
 DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::string& f,
                             const platforms::Platform& platform) {
-  r.CheckKeys(n, f, {"kind", "wheel", "node_id", "direction", "lines_per_rev", "quadrature_x4"});
+  r.CheckKeys(n, f, {"kind", "wheel", "node_id", "direction", "lines_per_rev", "quadrature_x4",
+                     "eds", "objects"});
   DeviceSpec d;
   d.kind = DeviceSpec::Kind::kCanopenCia406;
   d.encoder.wheel = r.String(n, "wheel", f, std::nullopt);
@@ -208,11 +247,42 @@ DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::str
     r.Fail(n["wheel"], f + ".wheel",
            fmt::format("platform {} has no wheel '{}'", platform.name, d.encoder.wheel));
   }
-  d.encoder.node_id = static_cast<int>(r.Integer(n, "node_id", f, 1, 127));
+  d.eds = r.String(n, "eds", f, std::string());
+  const bool have_id = Reader::Present(Reader::Get(n, "node_id"));
+  if (!have_id && d.eds.empty()) r.FailKey(n, "node_id", f + ".node_id", "is required");
+  d.encoder.node_id = have_id ? static_cast<int>(r.Integer(n, "node_id", f, 1, 127)) : 0;
   d.encoder.direction = static_cast<int>(r.Integer(n, "direction", f, -1, 1, 1));
   if (d.encoder.direction == 0) r.Fail(n["direction"], f + ".direction", "must be 1 or -1");
-  d.lines_per_rev = static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
   d.quadrature_x4 = r.Bool(n, "quadrature_x4", f, true);
+  std::optional<std::uint32_t> eds_counts;
+  if (!d.eds.empty()) {
+    d.eds = r.Path(d.eds);
+    try {
+      const bus::EdsFile eds = bus::EdsFile::LoadFile(d.eds);
+      d.eds_node.node_id = static_cast<std::uint8_t>(d.encoder.node_id);
+      eds_counts = ApplyCia406Eds(eds, d.eds_node).counts_per_rev;
+      d.encoder.node_id = d.eds_node.node_id;
+    } catch (const std::invalid_argument& e) {
+      r.FailKey(n, "eds", f + ".eds", e.what());
+    }
+    ReadObjects(r, n, f, d.eds_node);
+  } else if (Reader::Present(Reader::Get(n, "objects"))) {
+    r.Fail(n["objects"], f + ".objects", "needs an eds (the objects it sets are the EDS's)");
+  }
+  const int per_line = d.quadrature_x4 ? 4 : 1;
+  if (eds_counts && Reader::Present(Reader::Get(n, "lines_per_rev")) &&
+      static_cast<std::uint64_t>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000)) * per_line !=
+          *eds_counts) {
+    r.Fail(n["lines_per_rev"], f + ".lines_per_rev",
+           fmt::format("disagrees with the EDS's 0x6001 ({} counts per revolution)", *eds_counts));
+  }
+  if (eds_counts && *eds_counts % per_line != 0) {
+    r.FailKey(n, "eds", f + ".eds",
+              fmt::format("0x6001 = {} counts per revolution is not a whole number of {}-count "
+                          "lines (quadrature_x4: {})", *eds_counts, per_line, d.quadrature_x4));
+  }
+  d.lines_per_rev = eds_counts ? static_cast<int>(*eds_counts / per_line)
+                               : static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
   return d;
 }
 

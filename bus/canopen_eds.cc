@@ -1,0 +1,282 @@
+#include "bus/canopen_eds.h"
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+namespace wheelhil::bus {
+
+namespace {
+
+std::string_view Trim(std::string_view s) {
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front())) != 0) s.remove_prefix(1);
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back())) != 0) s.remove_suffix(1);
+  return s;
+}
+
+std::string Lower(std::string_view s) {
+  std::string out(s);
+  std::transform(out.begin(), out.end(), out.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return out;
+}
+
+// An unsigned integer as CiA 306 writes it: decimal, 0x hexadecimal, 0-prefixed octal.
+std::optional<std::uint64_t> ParseUnsigned(std::string_view s) {
+  s = Trim(s);
+  int base = 10;
+  if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
+    base = 16;
+    s.remove_prefix(2);
+  } else if (s.size() > 1 && s[0] == '0') {
+    base = 8;
+    s.remove_prefix(1);
+  }
+  std::uint64_t v = 0;
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v, base);
+  if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size()) return std::nullopt;
+  return v;
+}
+
+// "$NODEID+0x180", "0x180+$NODEID", "-5", "12": terms joined by + or -.
+std::optional<std::int64_t> EvaluateValue(std::string_view text, int node_id) {
+  std::string s;
+  for (char c : text) {
+    if (std::isspace(static_cast<unsigned char>(c)) == 0) s.push_back(c);
+  }
+  if (s.empty()) return std::nullopt;
+  std::int64_t total = 0;
+  std::size_t i = 0;
+  int sign = 1;
+  if (s[0] == '-' || s[0] == '+') {
+    sign = s[0] == '-' ? -1 : 1;
+    i = 1;
+  }
+  while (i <= s.size()) {
+    std::size_t j = i;
+    while (j < s.size() && s[j] != '+' && s[j] != '-') ++j;
+    const std::string_view term(s.data() + i, j - i);
+    std::int64_t v = 0;
+    if (Lower(term) == "$nodeid") {
+      v = node_id;
+    } else if (const auto u = ParseUnsigned(term)) {
+      v = static_cast<std::int64_t>(*u);
+    } else {
+      return std::nullopt;
+    }
+    total += sign * v;
+    if (j == s.size()) break;
+    sign = s[j] == '-' ? -1 : 1;
+    i = j + 1;
+  }
+  return total;
+}
+
+struct Section {
+  std::string name;
+  int line = 0;
+  std::map<std::string, std::pair<std::string, int>, std::less<>> keys;  // lower-case key
+  std::vector<std::pair<std::string, std::string>> as_written;
+};
+
+}  // namespace
+
+int EdsFile::IntegerSize(std::uint16_t data_type) {
+  switch (data_type) {
+    case 0x0001:  // BOOLEAN
+    case 0x0002:  // INTEGER8
+    case 0x0005:  // UNSIGNED8
+      return 1;
+    case 0x0003:  // INTEGER16
+    case 0x0006:  // UNSIGNED16
+      return 2;
+    case 0x0010:  // INTEGER24
+    case 0x0016:  // UNSIGNED24
+      return 3;
+    case 0x0004:  // INTEGER32
+    case 0x0007:  // UNSIGNED32
+      return 4;
+    case 0x0015:  // INTEGER64
+    case 0x001B:  // UNSIGNED64
+      return 8;
+    default:
+      return 0;
+  }
+}
+
+EdsFile EdsFile::LoadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::invalid_argument(fmt::format("{}:0: cannot open EDS file", path));
+  std::ostringstream text;
+  text << in.rdbuf();
+  return Parse(text.str(), path);
+}
+
+EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
+  EdsFile eds;
+  eds.source_ = source_name;
+  std::vector<Section> sections;
+  int line_no = 0;
+  std::size_t pos = 0;
+  auto fail = [&](int line, const std::string& problem) {
+    throw std::invalid_argument(fmt::format("{}:{}: {}", source_name, line, problem));
+  };
+  while (pos <= text.size()) {
+    const std::size_t end = std::min(text.find('\n', pos), text.size());
+    std::string_view line = Trim(text.substr(pos, end - pos));
+    pos = end + 1;
+    ++line_no;
+    if (line.empty() || line[0] == ';' || line[0] == '#') {
+      if (end == text.size()) break;
+      continue;
+    }
+    if (line.front() == '[') {
+      if (line.back() != ']') fail(line_no, fmt::format("'{}': a section header ends with ']'", line));
+      Section s;
+      s.name = Lower(Trim(line.substr(1, line.size() - 2)));
+      s.line = line_no;
+      for (const Section& other : sections) {
+        if (other.name == s.name) {
+          fail(line_no, fmt::format("[{}] appears twice (first at line {})", s.name, other.line));
+        }
+      }
+      sections.push_back(std::move(s));
+    } else {
+      const auto eq = line.find('=');
+      if (eq == std::string_view::npos) fail(line_no, fmt::format("'{}' is not key=value", line));
+      if (sections.empty()) fail(line_no, "a key before the first [section]");
+      const std::string_view k = Trim(line.substr(0, eq));
+      const std::string v(Trim(line.substr(eq + 1)));
+      sections.back().keys[Lower(k)] = {v, line_no};
+      sections.back().as_written.emplace_back(std::string(k), v);
+    }
+    if (end == text.size()) break;
+  }
+  auto key = [](const Section& s, std::string_view k) -> const std::pair<std::string, int>* {
+    const auto it = s.keys.find(k);
+    return it == s.keys.end() ? nullptr : &it->second;
+  };
+  auto number = [&](const Section& s, std::string_view k, std::uint64_t max) -> std::optional<std::uint64_t> {
+    const auto* v = key(s, k);
+    if (v == nullptr || v->first.empty()) return std::nullopt;
+    const auto n = ParseUnsigned(v->first);
+    if (!n || *n > max) {
+      fail(v->second, fmt::format("[{}] {}: '{}' is not a number up to {}", s.name, k, v->first, max));
+    }
+    return n;
+  };
+  std::map<std::string, const Section*> by_name;
+  for (const Section& s : sections) by_name[s.name] = &s;
+  for (const Section& s : sections) {
+    if (s.name == "deviceinfo") {
+      for (const auto& [k, v] : s.as_written) eds.info_[k] = v;
+      continue;
+    }
+    if (s.name == "devicecomissioning" || s.name == "devicecommissioning") {
+      if (const auto id = number(s, "nodeid", 127)) eds.node_id_ = static_cast<int>(*id);
+      continue;
+    }
+    if (s.name == "dynamicchannels") fail(s.line, "[DynamicChannels] is not supported");
+    if (s.name == "mandatoryobjects" || s.name == "optionalobjects" ||
+        s.name == "manufacturerobjects") {
+      const auto count = number(s, "supportedobjects", 0xFFFF).value_or(0);
+      for (std::uint64_t i = 1; i <= count; ++i) {
+        const auto idx = number(s, std::to_string(i), 0xFFFF);
+        if (!idx) {
+          fail(s.line, fmt::format("[{}] lists {} objects but has no entry {}", s.name, count, i));
+        }
+        const std::string want = Lower(fmt::format("{:04X}", *idx));
+        if (!by_name.contains(want)) {
+          fail(key(s, std::to_string(i))->second,
+               fmt::format("[{}] {}: object 0x{:04X} has no section [{:04X}]", s.name, i, *idx,
+                           *idx));
+        }
+      }
+      continue;
+    }
+    // An object [XXXX] or a sub-object [XXXXsubN].
+    const std::string& n = s.name;
+    const auto sub_at = n.find("sub");
+    const std::string index_text = n.substr(0, sub_at);
+    const auto index = ParseUnsigned("0x" + index_text);
+    if (index_text.size() != 4 || !index) continue;  // [FileInfo], [Comments], tool sections
+    std::uint8_t sub = 0;
+    if (sub_at != std::string::npos) {
+      const auto sv = ParseUnsigned("0x" + n.substr(sub_at + 3));
+      if (!sv || *sv > 0xFF) fail(s.line, fmt::format("[{}]: bad sub-index", n));
+      sub = static_cast<std::uint8_t>(*sv);
+    }
+    if (key(s, "compactsubobj") != nullptr && number(s, "compactsubobj", 0xFF).value_or(0) != 0) {
+      fail(key(s, "compactsubobj")->second,
+           fmt::format("[{}] CompactSubObj is not supported: write the sub-objects out", n));
+    }
+    EdsEntry e;
+    e.index = static_cast<std::uint16_t>(*index);
+    e.sub = sub;
+    e.line = s.line;
+    if (const auto* v = key(s, "parametername")) e.name = v->first;
+    e.object_type = static_cast<std::uint8_t>(number(s, "objecttype", 0xFF).value_or(0x7));
+    if (sub_at == std::string::npos && (e.object_type == 0x8 || e.object_type == 0x9)) {
+      continue;  // the ARRAY/RECORD itself: its values are in its sub-objects
+    }
+    if (e.object_type != 0x7 && sub_at == std::string::npos) continue;  // DOMAIN, DEFTYPE, ...
+    const auto dt = number(s, "datatype", 0xFFFF);
+    if (!dt) fail(s.line, fmt::format("[{}] DataType: is required", n));
+    e.data_type = static_cast<std::uint16_t>(*dt);
+    const auto* access = key(s, "accesstype");
+    if (access == nullptr) fail(s.line, fmt::format("[{}] AccessType: is required", n));
+    e.access = Lower(access->first);
+    static const std::vector<std::string> kAccess{"ro", "wo", "rw", "rwr", "rww", "const"};
+    if (std::find(kAccess.begin(), kAccess.end(), e.access) == kAccess.end()) {
+      fail(access->second, fmt::format("[{}] AccessType: '{}' is not one of ro, wo, rw, rwr, "
+                                       "rww, const", n, access->first));
+    }
+    if (const auto* v = key(s, "defaultvalue")) e.default_value = v->first;
+    if (const auto* v = key(s, "parametervalue"); v != nullptr && !v->first.empty()) {
+      e.default_value = v->first;
+    }
+    if (const auto* v = key(s, "pdomapping")) e.pdo_mapping = Trim(v->first) == "1";
+    // An integer value must read as one now (with a node id of 1): a typo is a load error.
+    if (IntegerSize(e.data_type) > 0 && !e.default_value.empty() &&
+        !EvaluateValue(e.default_value, 1)) {
+      const auto* v = key(s, "parametervalue") != nullptr && !key(s, "parametervalue")->first.empty()
+                          ? key(s, "parametervalue")
+                          : key(s, "defaultvalue");
+      fail(v->second, fmt::format("[{}] {}: '{}' is not an integer (decimal, 0x.., or with "
+                                  "$NODEID)", n,
+                                  v == key(s, "defaultvalue") ? "DefaultValue" : "ParameterValue",
+                                  e.default_value));
+    }
+    eds.entries_[{e.index, e.sub}] = std::move(e);
+  }
+  return eds;
+}
+
+const EdsEntry* EdsFile::Find(std::uint16_t index, std::uint8_t sub) const {
+  const auto it = entries_.find({index, sub});
+  return it == entries_.end() ? nullptr : &it->second;
+}
+
+std::uint64_t EdsFile::Integer(std::uint16_t index, std::uint8_t sub, int node_id) const {
+  const EdsEntry* e = Find(index, sub);
+  if (e == nullptr) {
+    throw std::invalid_argument(
+        fmt::format("{}: object 0x{:04X} sub {} is not in the file", source_, index, sub));
+  }
+  const auto v = EvaluateValue(e->default_value, node_id);
+  if (!v) {
+    throw std::invalid_argument(fmt::format("{}:{}: [{:04X}{}] DefaultValue: '{}' is not an "
+                                            "integer",
+                                            source_, e->line, index,
+                                            sub != 0 ? fmt::format("sub{}", sub) : "",
+                                            e->default_value));
+  }
+  return static_cast<std::uint64_t>(*v);
+}
+
+}  // namespace wheelhil::bus
