@@ -463,7 +463,7 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   s.motion = ReadMotion(r, root, s.platform);
   s.sensors = ReadSensors(r, root, s.platform);
   s.devices = ReadDevices(r, Reader::Get(root, "devices"), s.platform, s.sensors);
-  s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.platform);
+  s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.devices, s.platform);
   s.firmware = ReadFirmware(r, Reader::Get(root, "firmware"));
   s.timing = ReadTiming(r, Reader::Get(root, "timing"), MotionDuration(s.motion));
   s.expectations = ReadExpectations(r, Reader::Get(root, "expectations"));

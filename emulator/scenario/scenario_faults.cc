@@ -58,12 +58,31 @@ const char* kFaultTypes =
 }  // namespace
 
 std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const SensorsSpec& s,
+                                  const std::vector<DeviceSpec>& devices,
                                   const platforms::Platform& platform) {
   std::vector<FaultSpec> out;
   if (!n.IsDefined()) return out;
+  // The encoders of both lists, and the named devices of `devices:` (their sensor channels are
+  // NAME.rate_x .. NAME.accel_z).
+  std::vector<EncoderDeviceSpec> encoders = s.encoders;
+  std::vector<std::string> device_names;
+  for (const DeviceSpec& d : devices) {
+    if (d.kind == DeviceSpec::Kind::kCanopenCia406) encoders.push_back(d.encoder);
+    if (d.kind == DeviceSpec::Kind::kDbc) device_names.push_back(d.dbc_device.name);
+  }
+  auto named_device = [&](const std::string& name) {
+    return std::find(device_names.begin(), device_names.end(), name) != device_names.end();
+  };
+  auto device_channel = [&](const std::string& channel) {
+    const auto dot = channel.rfind('.');
+    if (dot == std::string::npos || !named_device(channel.substr(0, dot))) return false;
+    const std::string axis = channel.substr(dot + 1);
+    return axis == "rate_x" || axis == "rate_y" || axis == "rate_z" || axis == "accel_x" ||
+           axis == "accel_y" || axis == "accel_z";
+  };
   if (!n.IsSequence()) r.Fail(n, "faults", "must be a list");
   auto encoder_known = [&](int id) {
-    return std::any_of(s.encoders.begin(), s.encoders.end(),
+    return std::any_of(encoders.begin(), encoders.end(),
                        [&](const auto& e) { return e.node_id == id; });
   };
   for (std::size_t i = 0; i < n.size(); ++i) {
@@ -108,9 +127,11 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
       x.node = r.String(e, "node", f, std::nullopt);
       if (x.node == "gyro" && s.gyro) return;
       if (x.node == "accel4" && s.accel4) return;
+      if (named_device(x.node)) return;
       if (x.node != "gyro" && x.node != "accel4") {
         r.Fail(e["node"], f + ".node",
-               fmt::format("'{}' is not gyro or accel4 (encoders: node_id)", x.node));
+               fmt::format("'{}' is not gyro, accel4 or the name of a device (encoders: node_id)",
+                           x.node));
       }
       r.Fail(e["node"], f + ".node", fmt::format("sensors.{} is not configured", x.node));
     };
@@ -214,12 +235,14 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
         x.channel = static_cast<int>(r.Number(e, "channel", f, 0, 4, 0.0));
       } else if (x.sensor_name == "encoder") {
         wheel();
-        const bool has = std::any_of(s.encoders.begin(), s.encoders.end(),
+        const bool has = std::any_of(encoders.begin(), encoders.end(),
                                      [&](const auto& en) { return en.wheel == x.wheel; });
         if (!has) r.Fail(e["wheel"], f + ".wheel", "no encoder node on this wheel");
-      } else {
+      } else if (!device_channel(x.sensor_name)) {
         r.Fail(e["sensor"], f + ".sensor",
-               fmt::format("'{}' is not one of gyro, encoder, accel4", x.sensor_name));
+               fmt::format("'{}' is not one of gyro, encoder, accel4, DEVICE.rate_x .. "
+                           "DEVICE.accel_z",
+                           x.sensor_name));
       }
       if (e["wheel"] && x.sensor_name != "encoder") {
         r.Fail(e["wheel"], f + ".wheel", "only an encoder fault names a wheel");

@@ -49,6 +49,7 @@ std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
                                     const SensorsSpec& sensors);
 /// faults: (scenario_faults.cc).
 std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const SensorsSpec& s,
+                                  const std::vector<DeviceSpec>& devices,
                                   const platforms::Platform& platform);
 
 }  // namespace wheelhil::emulator::scenario::internal

@@ -47,5 +47,40 @@ TEST(OwnHardwareRun, Mm7ImuFramesDecodeToTheTruthAndTheFirmwareIsScoredFromItsDb
   fs::remove_all(dir);
 }
 
+// Faults address a `devices` entry by its name: a silent window drops its frames, a bias step
+// on one of its channels shifts what that signal reads.
+TEST(OwnHardwareRun, FaultsAddressADeviceByItsName) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("wheelhil_own_hw_faults_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string text = testing::Slurp(kScenario) +
+                           "faults:\n"
+                           "  - {type: device, kind: silent, node: imu, start_s: 0.5, end_s: 1.0}\n"
+                           "  - {type: sensor, kind: bias_step, sensor: imu.rate_z, value: 0.5,\n"
+                           "     start_s: 0.0}\n";
+  const Scenario s = ParseScenario(text, kScenario);
+  ASSERT_EQ(s.faults.size(), 2u);
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir));
+  EXPECT_EQ(r.failure, "");
+  // 10 ms frames: a 0.5 s window keeps 50 instants of three frames off the bus.
+  EXPECT_EQ(r.report["metrics"]["faults"]["device_suppressed_frames"].get<int>(), 150)
+      << r.report["metrics"]["faults"].dump(1);
+  // At rest after the motion the yaw rate reads the bias: 0.5 rad/s = 28.65 deg/s (the MM7.10's
+  // YawRate: bits 0..15, 0.005 deg/s, offset -163.84), within 6 sigma of its noise.
+  const std::string log = testing::Slurp(dir / "can.log");
+  const auto at = log.rfind(" 174#");
+  ASSERT_NE(at, std::string::npos);
+  const std::string hex = log.substr(at + 5, 4);
+  const unsigned raw = std::stoul(hex.substr(2, 2) + hex.substr(0, 2), nullptr, 16);
+  EXPECT_NEAR(raw * 0.005 - 163.84, 28.648, 0.7);
+  fs::remove_all(dir);
+  EXPECT_THAT([&] {
+    (void)ParseScenario(testing::Slurp(kScenario) +
+                            "faults:\n  - {type: sensor, kind: stuck, sensor: imu.yaw, start_s: 0}\n",
+                        kScenario);
+  }, ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr(
+         "'imu.yaw' is not one of gyro, encoder, accel4, DEVICE.rate_x")));
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator::scenario
