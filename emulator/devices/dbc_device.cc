@@ -176,9 +176,9 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
         continue;
       }
       if (b.quantity == DbcQuantity::kChecksum) {
-        if (!ChecksumFits(b.checksum, *sig)) {
-          Fail(b.field, fmt::format("{} ({} bits) cannot carry a {} checksum", b.signal,
-                                    sig->length, ChecksumKindName(b.checksum)));
+        if (const std::string why = WhyChecksumDoesNotFit(b.checksum, *sig, *m.msg);
+            !why.empty()) {
+          Fail(b.field, why);
         }
         m.checksums.push_back(bound);
         continue;

@@ -63,7 +63,7 @@ struct DbcSignalBinding {
   std::int64_t counter_step = 1;
   std::optional<std::uint64_t> counter_modulo;  ///< Default 2^bits.
   bool counter_shared = false;  ///< Counts the device's send instants, not the message's frames.
-  ChecksumKind checksum = ChecksumKind::kXor;
+  ChecksumSpec checksum;
   std::string field;  ///< Where it was configured, for messages ("devices[0].signals.CRC").
 };
 

@@ -10,6 +10,7 @@
 
 #include "bus/canopen_eds.h"
 #include "bus/dbc.h"
+#include "emulator/devices/checksum_yaml.h"
 #include "emulator/devices/cia406_eds.h"
 #include "emulator/scenario/internal/scenario_reader.h"
 
@@ -87,7 +88,8 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
       keys = {"quantity", "step", "modulo", "shared"};
       break;
     case DbcQuantity::kChecksum:
-      keys = {"quantity", "type"};
+      keys = ChecksumSpecKeys();
+      keys.insert("quantity");
       break;
     default:
       break;
@@ -112,15 +114,7 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
     }
     b.counter_shared = r.Bool(v, "shared", b.field, false);
   }
-  if (b.quantity == DbcQuantity::kChecksum) {
-    const std::string type = r.String(v, "type", b.field, std::nullopt);
-    const auto k = ParseChecksumKind(type);
-    if (!k) {
-      r.FailKey(v, "type", b.field + ".type",
-                fmt::format("'{}' is not one of {}", type, ChecksumKindNames()));
-    }
-    b.checksum = *k;
-  }
+  if (b.quantity == DbcQuantity::kChecksum) b.checksum = ReadChecksumSpec(r, v, b.field);
   return b;
 }
 

@@ -185,6 +185,10 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
         const auto ck = ParseChecksumKind(c);
         if (!ck)
           r.Fail(e["checksum"], f + ".checksum", fmt::format("'{}' is not one of {}", c, ChecksumKindNames()));
+        if (*ck == ChecksumKind::kE2eP11 || *ck == ChecksumKind::kE2eP22) {
+          r.Fail(e["checksum"], f + ".checksum",
+                 "an E2E profile needs its data ids: not a frame fault's recomputation");
+        }
         ff.checksum = *ck;
       }
       if (ff.kind == FrameFaultKind::kWrongCounter && ff.counter_signal.empty()) {

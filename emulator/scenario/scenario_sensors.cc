@@ -62,6 +62,11 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
         r.FailKey(ms[i], "checksum_kind", mf + ".checksum_kind",
                   fmt::format("'{}' is not one of {}", kind, ChecksumKindNames()));
       }
+      if (*k == ChecksumKind::kE2eP11 || *k == ChecksumKind::kE2eP22) {
+        r.FailKey(ms[i], "checksum_kind", mf + ".checksum_kind",
+                  "an E2E profile needs its data ids: describe the IMU as a devices entry "
+                  "(kind: dbc)");
+      }
       o.checksum = *k;
       d.node.message_options.push_back(o);
     }

@@ -8,6 +8,8 @@
 
 #include <fmt/format.h>
 
+#include "emulator/devices/checksum_yaml.h"
+
 namespace wheelhil::emulator::scoring {
 
 namespace {
@@ -129,18 +131,12 @@ OutputStreamSpec ReadStream(const FieldReader& r, const YAML::Node& key, const Y
     }
   }
   const YAML::Node checksum = FieldReader::Get(n, "checksum");
-  s.checksum = ReadSignal(r, n, "checksum", s.field, {"type"});
+  s.checksum = ReadSignal(r, n, "checksum", s.field, ChecksumSpecKeys());
   if (s.checksum.bound()) {
     if (!checksum.IsMap()) {
       r.Fail(checksum, s.checksum.field, "must be {signal, type}");
     }
-    const std::string type = r.String(checksum, "type", s.checksum.field, std::nullopt);
-    const auto ck = ParseChecksumKind(type);
-    if (!ck) {
-      r.FailKey(checksum, "type", s.checksum.field + ".type",
-                fmt::format("'{}' is not one of {}", type, ChecksumKindNames()));
-    }
-    s.checksum_kind = *ck;
+    s.checksum_kind = ReadChecksumSpec(r, checksum, s.checksum.field);
   }
   return s;
 }
@@ -294,10 +290,12 @@ OutputBinding OutputBinding::Resolve(OutputsSpec spec, const std::string& dbc_di
       }
     }
     rs.checksum = ResolveSignal(s.checksum, *rs.message, std::nullopt, dbc_name);
-    if (rs.checksum.signal != nullptr && !ChecksumFits(s.checksum_kind, *rs.checksum.signal)) {
-      Fail(s.checksum.where, s.checksum.field,
-           fmt::format("{} ({} bits) cannot carry a {} checksum", s.checksum.signal,
-                       rs.checksum.signal->length, ChecksumKindName(s.checksum_kind)));
+    if (rs.checksum.signal != nullptr) {
+      if (const std::string why =
+              WhyChecksumDoesNotFit(s.checksum_kind, *rs.checksum.signal, *rs.message);
+          !why.empty()) {
+        Fail(s.checksum.where, s.checksum.field, why);
+      }
     }
     if (s.cycle_time_ms) {
       rs.expected_cycle_s = *s.cycle_time_ms * 1e-3;

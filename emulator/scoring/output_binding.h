@@ -71,7 +71,7 @@ struct OutputStreamSpec {
   std::int64_t counter_step = 1;
   std::optional<std::uint64_t> counter_modulo;  ///< Default 2^bits of the counter signal.
   SignalBindingSpec checksum;
-  ChecksumKind checksum_kind = ChecksumKind::kXor;
+  ChecksumSpec checksum_kind;
 };
 
 struct OutputsSpec {

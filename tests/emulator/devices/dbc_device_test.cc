@@ -84,7 +84,7 @@ DbcDeviceConfig Config() {
                Bind("Temp", DbcQuantity::kTemperature), Bind("Cnt", DbcQuantity::kCounter),
                Bind("Crc", DbcQuantity::kChecksum), Bind("Angle", DbcQuantity::kWheelAngle),
                Bind("Speed", DbcQuantity::kWheelSpeed), Bind("Level", DbcQuantity::kConstant)};
-  c.signals[4].checksum = ChecksumKind::kCrc8H2F;
+  c.signals[4].checksum.kind = ChecksumKind::kCrc8H2F;
   c.signals[5].counts_per_rev = 4096;
   c.signals[5].wheel_index = 1;
   c.signals[6].wheel_index = 1;
@@ -191,7 +191,7 @@ TEST(DbcDevice, ConfigurationsTheDbcCannotCarryAreRefusedNamingTheField) {
   c.signals[5].counts_per_rev = 0;  // "counts" is no angle
   throws(c, "for encoder counts give counts_per_rev");
   c = Config();
-  c.signals[4].checksum = ChecksumKind::kCrc16Ccitt;
+  c.signals[4].checksum.kind = ChecksumKind::kCrc16Ccitt;
   throws(c, "Crc (8 bits) cannot carry a crc16_ccitt checksum");
   c = Config();
   c.signals[3].counter_modulo = 17;

@@ -77,6 +77,72 @@ TEST(FrameChecksum, CrcPresetsMatchPublishedCheckValues) {
   EXPECT_EQ(ParseChecksumKind("crc16_ccitt"), ChecksumKind::kCrc16Ccitt);
 }
 
+// AUTOSAR E2E profiles 11 and 22 against the test vectors of the autosar-e2e library
+// (zariiii9003/autosar-e2e test_p11.py, and test_p02.py for profile 2, whose CRC profile 22
+// keeps): CRC in byte 0, counter in the low nibble of byte 1.
+TEST(FrameChecksum, E2eProfilesMatchPublishedVectors) {
+  auto signal = [](int start_bit) {
+    bus::DbcSignal s;
+    s.name = "CRC";
+    s.start_bit = start_bit;
+    s.length = 8;
+    return s;
+  };
+  const bus::DbcSignal crc = signal(0);
+  auto compute = [&](const ChecksumSpec& spec, std::vector<std::uint8_t> data) {
+    return ComputeChecksum(spec, crc, data);
+  };
+  ChecksumSpec p11;
+  p11.kind = ChecksumKind::kE2eP11;
+  p11.data_id = 0x123;
+  EXPECT_EQ(compute(p11, {0, 0x00, 0, 0, 0, 0, 0, 0}), 0xCCu);
+  EXPECT_EQ(compute(p11, {0, 0x01, 0, 0, 0, 0, 0, 0}), 0x91u);
+  p11.data_id_nibble = true;  // the id's bits 8..11 ride in byte 1's high nibble
+  EXPECT_EQ(compute(p11, {0, 0x10, 0, 0, 0, 0, 0, 0}), 0x2Au);
+  EXPECT_EQ(compute(p11, {0, 0x11, 0, 0, 0, 0, 0, 0}), 0x77u);
+  ChecksumSpec p22;
+  p22.kind = ChecksumKind::kE2eP22;
+  EXPECT_EQ(compute(p22, {0, 0x01, 0, 0, 0, 0, 0, 0}), 0x45u);
+  for (std::uint8_t i = 0; i < 16; ++i) p22.data_id_list[i] = i;
+  EXPECT_EQ(compute(p22, {0, 2, 2, 3, 4, 5, 6, 7}), 0xBCu);
+  EXPECT_EQ(compute(p22, {0, 1, 2, 3, 4, 5, 6, 7}), 0x61u);
+  // The CRC byte itself is left out, so whatever it holds the result is the same; written, it
+  // checks.
+  std::vector<std::uint8_t> frame{0x5A, 1, 2, 3, 4, 5, 6, 7};
+  EXPECT_EQ(compute(p22, frame), 0x61u);
+  ASSERT_TRUE(WriteChecksum(p22, crc, frame));
+  EXPECT_EQ(frame[0], 0x61);
+  // An E2E CRC sits on a byte boundary and needs its counter byte.
+  EXPECT_FALSE(ChecksumFits(ChecksumKind::kE2eP11, signal(4)));
+  EXPECT_EQ(compute(p11, {0}), 0u);
+}
+
+// A custom CRC (the Rocksoft model): CRC-8/MAXIM-DOW (reflected, 0x31) and CRC-16/KERMIT as a
+// scenario would declare them reproduce reveng's check values over "123456789" placed before a
+// zeroed checksum field.
+TEST(FrameChecksum, CustomCrcOverTheZeroedPayload) {
+  bus::DbcSignal sig;
+  sig.name = "C";
+  sig.start_bit = 72;
+  sig.length = 8;
+  std::vector<std::uint8_t> payload{'1', '2', '3', '4', '5', '6', '7', '8', '9', 0xEE};
+  ChecksumSpec maxim;
+  maxim.kind = ChecksumKind::kCrcCustom;
+  maxim.crc = CrcParams{8, 0x31, 0x00, true, true, 0x00};
+  // Over the ten bytes with the last zeroed: the check value's CRC continued by one zero byte.
+  const std::vector<std::uint8_t> with_zero{'1', '2', '3', '4', '5', '6', '7', '8', '9', 0};
+  EXPECT_EQ(Crc(maxim.crc, std::span<const std::uint8_t>(with_zero.data(), 9)), 0xA1u);
+  EXPECT_EQ(ComputeChecksum(maxim, sig, payload), Crc(maxim.crc, with_zero));
+  ASSERT_TRUE(WriteChecksum(maxim, sig, payload));
+  EXPECT_EQ(payload[9], Crc(maxim.crc, with_zero));
+  maxim.crc.width = 16;  // no longer the signal's width
+  EXPECT_FALSE(WriteChecksum(maxim, sig, payload));
+  bus::DbcMessage msg;
+  msg.name = "M";
+  msg.length = 10;
+  EXPECT_EQ(WhyChecksumDoesNotFit(maxim, sig, msg), "C has 8 bits, the crc 16");
+}
+
 // A spinning, accelerating, slightly tilted body: every frame decodes (through the DBC) to the
 // analytic specific force along each sensor axis within half a quantisation step.
 TEST(Accel4Node, FramesDecodeToSpecificForceWithinQuantisation) {

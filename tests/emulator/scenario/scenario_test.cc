@@ -133,6 +133,18 @@ TEST(ScenarioLoader, DevicesAreReadAndTheirBindingsCheckedAgainstTheDbc) {
                             kFile);
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr("devices[2].node_id: node id 1 is taken")));
+  EXPECT_THAT([&] {
+    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: e2e_p11}\n", kFile);
+  }, ThrowsMessage<std::invalid_argument>(HasSubstr("devices[0].signals.CRC_TX1.data_id: is required")));
+  EXPECT_THAT([&] {
+    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: crc8_h2f, data_id: 3}\n",
+                        kFile);
+  }, ThrowsMessage<std::invalid_argument>(HasSubstr("data_id: is for e2e_p11 only")));
+  EXPECT_THAT([&] {
+    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: e2e_p11, data_id: 0x174}\n",
+                        kFile);
+  }, ThrowsMessage<std::invalid_argument>(HasSubstr(
+         "CRC_TX1 is the last byte of MM7_10_TX1_z_ay: a e2e_p11 counter follows its CRC byte")));
   EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n  - {kind: lidar}\n", kFile); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("devices[1].kind: 'lidar' is not one of dbc, canopen_cia406")));
