@@ -83,8 +83,12 @@ void BuildDeviceList(const DeviceBuildContext& c, Devices& out) {
         out.push_back(MakeEncoder(c, codec, d.encoder, d.lines_per_rev, d.quadrature_x4, ++k,
                                   d.eds.empty() ? nullptr : &d.eds_node));
         break;
-      case DeviceSpec::Kind::kDbc: {
-        auto dbc = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
+      case DeviceSpec::Kind::kDbc:
+      case DeviceSpec::Kind::kMm5_10: {
+        const std::string path = d.kind == DeviceSpec::Kind::kMm5_10
+                                     ? c.dbc_dir + "/bosch_mm5_10.dbc"
+                                     : d.dbc;
+        auto dbc = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(path));
         DbcDeviceConfig dc = d.dbc_device;
         dc.seed = c.seed * 2654435761ull + index;
         out.push_back(std::make_unique<DbcDevice>(dbc, dc));

@@ -5,8 +5,9 @@
 /// bus/dbc/cia406_encoder.dbc with an incremental encoder on its wheel), the "mm5_10" yaw-rate
 /// node when `sensors.gyro` (bus/dbc/bosch_mm5_10.dbc), the "accel4" node when
 /// `sensors.accel4` (bus/dbc/wheelhil_accel4.dbc) and a "dbc_imu" (a user's IMU from its own
-/// DBC file) for `sensors.dbc_imu`. Every random stream is seeded from the run
-/// seed. Throws std::invalid_argument naming the file for a DBC file that cannot be read.
+/// DBC file) for `sensors.dbc_imu`; then the `devices:` list in its order ("dbc" and "mm5_10":
+/// DbcDevice, "canopen_cia406": the encoder node, from its EDS when it has one). Every random
+/// stream is seeded from the run seed. Throws std::invalid_argument naming the file for a DBC file that cannot be read.
 
 #include <cstdint>
 #include <memory>

@@ -126,10 +126,11 @@ struct DeviceSpec {
   enum class Kind {
     kDbc,            ///< Every cyclic message of a node of the user's DBC (DbcDevice).
     kCanopenCia406,  ///< A CiA 406 encoder node on a wheel (as sensors.encoders' nodes).
+    kMm5_10,         ///< A kDbc device over the shipped bus/dbc/bosch_mm5_10.dbc, all 6 axes.
   };
   Kind kind = Kind::kDbc;
   std::string where;  ///< file:line:column of the entry.
-  std::string dbc;    ///< kDbc: the DBC file (absolute).
+  std::string dbc;    ///< kDbc: the DBC file (absolute); kMm5_10: "${DBC_DIR}/bosch_mm5_10.dbc".
   DbcDeviceConfig dbc_device;  ///< kDbc; the seed and the start are the run's.
   EncoderDeviceSpec encoder;   ///< kCanopenCia406.
   int lines_per_rev = 500;

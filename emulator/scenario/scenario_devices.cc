@@ -118,6 +118,35 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
   return b;
 }
 
+void ReadSensorModels(const Reader& r, const YAML::Node& n, const std::string& f,
+                      DbcDeviceConfig& c);
+
+// The shipped MM5.10 as a `dbc` device: its six signals bound (bus/dbc/bosch_mm5_10.dbc).
+DeviceSpec ReadMm5Device(const Reader& r, const YAML::Node& n, const std::string& f) {
+  r.CheckKeys(n, f, {"kind", "name", "mount", "messages", "gyro", "accel"});
+  DeviceSpec d;
+  d.kind = DeviceSpec::Kind::kMm5_10;
+  d.dbc = "${DBC_DIR}/bosch_mm5_10.dbc";
+  DbcDeviceConfig& c = d.dbc_device;
+  c.field = f;
+  c.node = "MM5_10";
+  c.name = r.String(n, "name", f, std::string("mm5_10"));
+  ReadMount(r, n, f, c);
+  const std::pair<const char*, DbcQuantity> kSignals[] = {
+      {"MM5_YawRate", DbcQuantity::kRateZ},   {"MM5_AccelY", DbcQuantity::kAccelY},
+      {"MM5_RollRate", DbcQuantity::kRateX},  {"MM5_AccelX", DbcQuantity::kAccelX},
+      {"MM5_PitchRate", DbcQuantity::kRateY}, {"MM5_AccelZ", DbcQuantity::kAccelZ}};
+  for (const auto& [signal, quantity] : kSignals) {
+    DbcSignalBinding b;
+    b.signal = signal;
+    b.quantity = quantity;
+    b.field = fmt::format("{}.{}", f, signal);
+    c.signals.push_back(b);
+  }
+  ReadSensorModels(r, n, f, c);
+  return d;
+}
+
 DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string& f,
                          const platforms::Platform& platform) {
   r.CheckKeys(n, f, {"kind", "name", "dbc", "node", "mount", "signals", "messages", "gyro", "accel",
@@ -139,41 +168,8 @@ DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string
     c.signals.push_back(ReadSignal(r, it->first, it->second, f + ".signals", platform));
     where[c.signals.back().field] = it->first;
   }
-  if (const YAML::Node ms = Reader::Get(n, "messages"); Reader::Present(ms)) {
-    if (!ms.IsMap()) r.Fail(ms, f + ".messages", "must map message names to timings");
-    for (auto it = ms.begin(); it != ms.end(); ++it) {
-      DbcMessageTiming t;
-      t.message = r.ToString(it->first, f + ".messages");
-      t.field = fmt::format("{}.messages.{}", f, t.message);
-      r.CheckKeys(it->second, t.field, {"cycle_time_ms", "phase_ms", "start_delay_ms"});
-      if (Reader::Present(Reader::Get(it->second, "cycle_time_ms"))) {
-        t.cycle_time_ms = r.Number(it->second, "cycle_time_ms", t.field, 0.01, 3.6e6);
-      }
-      t.phase_ms = r.Number(it->second, "phase_ms", t.field, 0, 3.6e6, 0.0);
-      if (Reader::Present(Reader::Get(it->second, "start_delay_ms"))) {
-        t.start_delay_ms = r.Number(it->second, "start_delay_ms", t.field, 0, 3.6e6);
-      }
-      c.timing.push_back(t);
-      where[t.field] = it->first;
-    }
-  }
-  if (const YAML::Node g = Reader::Get(n, "gyro"); Reader::Present(g)) {
-    const std::string gf = f + ".gyro";
-    r.CheckKeys(g, gf, {"noise_density_rad_s_sqrt_hz", "bias_rad_s",
-                        "bias_random_walk_rad_s_sqrt_s", "scale_factor_error"});
-    c.gyro.noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", gf, 0, 1, 0.0);
-    c.gyro.bias_rad_s = r.Number(g, "bias_rad_s", gf, -10, 10, 0.0);
-    c.gyro.bias_random_walk_rad_s_sqrt_s =
-        r.Number(g, "bias_random_walk_rad_s_sqrt_s", gf, 0, 1, 0.0);
-    c.gyro.scale_factor_error = r.Number(g, "scale_factor_error", gf, -0.5, 0.5, 0.0);
-  }
-  if (const YAML::Node a = Reader::Get(n, "accel"); Reader::Present(a)) {
-    const std::string af = f + ".accel";
-    r.CheckKeys(a, af, {"noise_density_m_s2_sqrt_hz", "bias_m_s2"});
-    c.accel.noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
-    const double bias = r.Number(a, "bias_m_s2", af, -10, 10, 0.0);
-    if (bias != 0) c.accel.bias_m_s2.assign(3, bias);
-  }
+  ReadSensorModels(r, n, f, c);
+  for (const DbcMessageTiming& t : c.timing) where[t.field] = n["messages"];
   c.temperature_k = r.Number(n, "temperature_c", f, -100, 300, 25.0) + 273.15;
   // The bindings against the DBC, now: an error names the entry's line.
   std::shared_ptr<const bus::DbcDatabase> db;
@@ -193,6 +189,45 @@ DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string
            colon == std::string::npos ? what : what.substr(colon + 2));
   }
   return d;
+}
+
+// `messages`, `gyro`, `accel` of a dbc-based device.
+void ReadSensorModels(const Reader& r, const YAML::Node& n, const std::string& f,
+                      DbcDeviceConfig& c) {
+  if (const YAML::Node ms = Reader::Get(n, "messages"); Reader::Present(ms)) {
+    if (!ms.IsMap()) r.Fail(ms, f + ".messages", "must map message names to timings");
+    for (auto it = ms.begin(); it != ms.end(); ++it) {
+      DbcMessageTiming t;
+      t.message = r.ToString(it->first, f + ".messages");
+      t.field = fmt::format("{}.messages.{}", f, t.message);
+      r.CheckKeys(it->second, t.field, {"cycle_time_ms", "phase_ms", "start_delay_ms"});
+      if (Reader::Present(Reader::Get(it->second, "cycle_time_ms"))) {
+        t.cycle_time_ms = r.Number(it->second, "cycle_time_ms", t.field, 0.01, 3.6e6);
+      }
+      t.phase_ms = r.Number(it->second, "phase_ms", t.field, 0, 3.6e6, 0.0);
+      if (Reader::Present(Reader::Get(it->second, "start_delay_ms"))) {
+        t.start_delay_ms = r.Number(it->second, "start_delay_ms", t.field, 0, 3.6e6);
+      }
+      c.timing.push_back(t);
+    }
+  }
+  if (const YAML::Node g = Reader::Get(n, "gyro"); Reader::Present(g)) {
+    const std::string gf = f + ".gyro";
+    r.CheckKeys(g, gf, {"noise_density_rad_s_sqrt_hz", "bias_rad_s",
+                        "bias_random_walk_rad_s_sqrt_s", "scale_factor_error"});
+    c.gyro.noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", gf, 0, 1, 0.0);
+    c.gyro.bias_rad_s = r.Number(g, "bias_rad_s", gf, -10, 10, 0.0);
+    c.gyro.bias_random_walk_rad_s_sqrt_s =
+        r.Number(g, "bias_random_walk_rad_s_sqrt_s", gf, 0, 1, 0.0);
+    c.gyro.scale_factor_error = r.Number(g, "scale_factor_error", gf, -0.5, 0.5, 0.0);
+  }
+  if (const YAML::Node a = Reader::Get(n, "accel"); Reader::Present(a)) {
+    const std::string af = f + ".accel";
+    r.CheckKeys(a, af, {"noise_density_m_s2_sqrt_hz", "bias_m_s2"});
+    c.accel.noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
+    const double bias = r.Number(a, "bias_m_s2", af, -10, 10, 0.0);
+    if (bias != 0) c.accel.bias_m_s2.assign(3, bias);
+  }
 }
 
 // `objects: {"0x6200": 10, "0x1018sub4": 1234}` after the EDS.
@@ -302,6 +337,12 @@ std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
         r.Fail(n[i], f + ".name",
                fmt::format("'{}' is taken: give each device its own name", d.dbc_device.name));
       }
+    } else if (kind == "mm5_10") {
+      d = ReadMm5Device(r, n[i], f);
+      if (!names.insert(d.dbc_device.name).second) {
+        r.Fail(n[i], f + ".name",
+               fmt::format("'{}' is taken: give each device its own name", d.dbc_device.name));
+      }
     } else if (kind == "canopen_cia406") {
       d = ReadCia406Device(r, n[i], f, platform);
       if (!node_ids.insert(d.encoder.node_id).second) {
@@ -310,7 +351,7 @@ std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
       }
     } else {
       r.FailKey(n[i], "kind", f + ".kind",
-                fmt::format("'{}' is not one of dbc, canopen_cia406", kind));
+                fmt::format("'{}' is not one of dbc, mm5_10, canopen_cia406", kind));
     }
     d.where = r.Where(n[i]);
     out.push_back(std::move(d));

@@ -68,7 +68,9 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
   std::vector<std::string> device_names;
   for (const DeviceSpec& d : devices) {
     if (d.kind == DeviceSpec::Kind::kCanopenCia406) encoders.push_back(d.encoder);
-    if (d.kind == DeviceSpec::Kind::kDbc) device_names.push_back(d.dbc_device.name);
+    if (d.kind == DeviceSpec::Kind::kDbc || d.kind == DeviceSpec::Kind::kMm5_10) {
+      device_names.push_back(d.dbc_device.name);
+    }
   }
   auto named_device = [&](const std::string& name) {
     return std::find(device_names.begin(), device_names.end(), name) != device_names.end();

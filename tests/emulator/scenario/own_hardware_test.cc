@@ -10,6 +10,9 @@
 #include <filesystem>
 #include <string>
 
+#include "bus/dbc.h"
+#include "bus/dbc_codec.h"
+#include "emulator/scenario/device_registry.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 #include "tests/emulator/scenario/runner_test_support.h"
@@ -80,6 +83,46 @@ TEST(OwnHardwareRun, FaultsAddressADeviceByItsName) {
                         kScenario);
   }, ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr(
          "'imu.yaw' is not one of gyro, encoder, accel4, DEVICE.rate_x")));
+}
+
+class RecordingPort final : public DevicePort {
+ public:
+  void Send(std::vector<NodeFrame> frames, bool) override {
+    for (auto& f : frames) sent.push_back(f);
+  }
+  void CountSilenced(std::size_t) override {}
+  void Event(nlohmann::json) override {}
+  double MotionSeconds(std::int64_t t_ns) const override { return 1e-9 * static_cast<double>(t_ns); }
+  void Fail(std::string) override {}
+  std::vector<NodeFrame> sent;
+};
+
+// `kind: mm5_10` is the shipped MM5.10 DBC as a dbc device: its three frames every 10 ms, the
+// yaw rate in deg/s, the specific force in g (mounted upside down, z reads -1 g at rest).
+TEST(OwnHardwareDevices, Mm5IsADbcDeviceOverTheShippedDbc) {
+  const Scenario s = ParseScenario(
+      "name: t\nplatform: platforms/diff2.yaml\nmotion:\n"
+      "  - {type: hold, duration_s: 1}\n"
+      "devices:\n"
+      "  - {kind: canopen_cia406, wheel: left, node_id: 1}\n"
+      "  - {kind: mm5_10, mount: {rpy_deg: [180, 0, 0]}}\n",
+      std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/inline.yaml");
+  const std::string dbc_dir = std::string(WHEELHIL_SOURCE_DIR) + "/bus/dbc";
+  std::vector<physics::WheelTruth> wheels(4);
+  auto devices = BuildScenarioDevices(DeviceBuildContext{s, 1, dbc_dir, wheels});
+  ASSERT_EQ(devices.size(), 2u);
+  EXPECT_EQ(devices[1]->name(), "mm5_10");
+  physics::BodyTruth body;
+  body.omega_WB_W = {0, 0, 0.3};
+  DeviceWorld world{&body, &wheels, {}};
+  RecordingPort port;
+  devices[1]->Poll(25'000'000, world, port);
+  ASSERT_EQ(port.sent.size(), 9u);  // 0, 10, 20 ms x three frames
+  const auto db = bus::DbcDatabase::LoadFile(dbc_dir + "/bosch_mm5_10.dbc");
+  const auto yaw = bus::DecodeMessage(*db.FindMessage(0x174, false), port.sent[3].frame);
+  EXPECT_NEAR(yaw.at("MM5_YawRate"), -0.3 * 180 / 3.141592653589793, 0.005);  // upside down
+  const auto z = bus::DecodeMessage(*db.FindMessage(0x17C, false), port.sent[5].frame);
+  EXPECT_NEAR(z.at("MM5_AccelZ"), -1.0, 0.0002);
 }
 
 }  // namespace
