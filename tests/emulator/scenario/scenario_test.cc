@@ -147,7 +147,7 @@ TEST(ScenarioLoader, DevicesAreReadAndTheirBindingsCheckedAgainstTheDbc) {
          "CRC_TX1 is the last byte of MM7_10_TX1_z_ay: a e2e_p11 counter follows its CRC byte")));
   EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n  - {kind: lidar}\n", kFile); },
               ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("devices[1].kind: 'lidar' is not one of dbc, canopen_cia406")));
+                  HasSubstr("devices[1].kind: 'lidar' is not one of dbc, mm5_10, canopen_cia406")));
 }
 
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
