@@ -159,6 +159,11 @@ OutputsSpec ReadMapping(const FieldReader& r, const YAML::Node& n, const std::st
   }
   for (auto it = streams.begin(); it != streams.end(); ++it) {
     o.streams.push_back(ReadStream(r, it->first, it->second, sf));
+    for (std::size_t i = 0; i + 1 < o.streams.size(); ++i) {
+      if (o.streams[i].name == o.streams.back().name) {
+        r.Fail(it->first, o.streams.back().field, "is named twice");
+      }
+    }
   }
   return o;
 }

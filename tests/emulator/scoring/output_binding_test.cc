@@ -199,6 +199,9 @@ TEST_F(OutputBindingTest, ErrorsNameFileLineAndField) {
   throws(head + "  p: {kind: pose, message: EST_Pose, x: X, y: Y, speed: X}\n",
          "p.speed: unknown key");
   throws("dbc: nowhere.dbc\nstreams: {}\n", file + ":1:6: firmware.outputs.dbc: ");
+  throws(head + "  p: {kind: pose, message: EST_Pose, x: X, y: Y}\n"
+                "  p: {kind: pose, message: EST_Pose, x: X, y: Y}\n",
+         file + ":4:3: firmware.outputs.streams.p: is named twice");
 }
 
 TEST_F(OutputBindingTest, ABindingFileIsReadRelativeToTheScenarioAndItsDbcRelativeToItself) {
