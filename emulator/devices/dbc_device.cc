@@ -11,8 +11,6 @@
 #include <fmt/format.h>
 
 #include "bus/dbc_codec.h"
-#include "emulator/devices/accel4_device.h"
-#include "emulator/faults/sensor_faults.h"
 
 namespace wheelhil::emulator {
 
@@ -23,8 +21,6 @@ using bus::PhysicalQuantity;
 constexpr std::array<std::string_view, 12> kQuantityNames = {
     "rate_x",     "rate_y",      "rate_z",      "accel_x",  "accel_y", "accel_z",
     "wheel_angle", "wheel_speed", "temperature", "constant", "counter", "checksum"};
-constexpr std::array<const char*, 6> kChannelSuffix = {".rate_x",  ".rate_y",  ".rate_z",
-                                                       ".accel_x", ".accel_y", ".accel_z"};
 
 [[noreturn]] void Fail(const std::string& field, const std::string& problem) {
   throw std::invalid_argument(fmt::format("{}: {}", field, problem));
@@ -208,20 +204,9 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
   }
   std::int64_t fastest = messages_.front().period_ns;
   for (const Message& m : messages_) fastest = std::min(fastest, m.period_ns);
-  const double rate_hz = 1e9 / static_cast<double>(fastest);
-  for (int axis = 0; axis < 3; ++axis) {
-    GyroParams gp = config_.gyro;
-    gp.axis_B = config_.R_BS.col(axis);
-    gp.rate_hz = rate_hz;
-    gp.seed = config_.seed * 31 + static_cast<std::uint64_t>(axis);
-    gyros_.emplace_back(gp);
-  }
-  AccelerometerParams ap = config_.accel;
-  ap.rate_hz = rate_hz;
-  ap.r_BP_B = config_.r_BS_B;
-  ap.axes_B = {config_.R_BS.col(0), config_.R_BS.col(1), config_.R_BS.col(2)};
-  ap.seed = config_.seed * 31 + 3;
-  accel_ = std::make_unique<AccelerometerModel>(ap);
+  imu_ = std::make_unique<SixAxisImu>(name_, config_.gyro, config_.accel, config_.R_BS,
+                                      config_.r_BS_B, 1e9 / static_cast<double>(fastest),
+                                      config_.seed);
 }
 
 DbcDevice::~DbcDevice() = default;
@@ -232,26 +217,15 @@ std::int64_t DbcDevice::NextEventNs() const {
   return next;
 }
 
-std::vector<std::string> DbcDevice::sensor_channels() const {
-  std::vector<std::string> out;
-  for (const char* s : kChannelSuffix) out.push_back(name_ + s);
-  return out;
-}
+std::vector<std::string> DbcDevice::sensor_channels() const { return imu_->channels(); }
 
 double DbcDevice::channel_noise_std(const std::string& channel) const {
-  for (std::size_t c = 0; c < 3; ++c) {
-    if (channel == name_ + kChannelSuffix[c]) return gyros_[c].noise_std_rad_s();
-  }
-  return accel_->noise_std_m_s2();
+  return imu_->noise_std(channel);
 }
 
 void DbcDevice::ArmFaults(DeviceFaults faults) {
   TakeDeviceFaults(faults);
-  for (auto& [channel, injector] : faults.sensors) {
-    for (std::size_t c = 0; c < kChannelSuffix.size(); ++c) {
-      if (channel == name_ + kChannelSuffix[c]) faults_[c] = std::move(injector);
-    }
-  }
+  imu_->ArmFaults(faults);
 }
 
 void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out) {
@@ -314,12 +288,8 @@ void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bu
 void DbcDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
   while (NextEventNs() <= t_ns) {
     const std::int64_t ts = NextEventNs();
-    const BodyKinematics k = AccelKinematics(*world.body);
     Sample s;
-    for (std::size_t c = 0; c < 3; ++c) s.imu[c] = gyros_[c].Sample(k.omega_WB_B);
-    const std::vector<double>& a = accel_->Sample(k);
-    for (std::size_t c = 0; c < 3; ++c) s.imu[3 + c] = a[c];
-    const bool dropped = !ApplyToChannels(faults_, s.imu, ts);
+    const bool dropped = !imu_->Sample(*world.body, ts, s.imu);
     std::vector<NodeFrame> frames;
     for (Message& m : messages_) {
       if (m.next_ns != ts) continue;

@@ -35,8 +35,7 @@
 #include "bus/dbc_units.h"
 #include "emulator/devices/device.h"
 #include "emulator/devices/frame_checksum.h"
-#include "emulator/sensors/accelerometer_model.h"
-#include "emulator/sensors/gyro_model.h"
+#include "emulator/devices/six_axis_imu.h"
 
 namespace wheelhil::emulator {
 
@@ -143,9 +142,7 @@ class DbcDevice final : public Device {
   DbcDeviceConfig config_;
   std::vector<Message> messages_;
   std::uint64_t shared_counter_ = 0;
-  std::vector<GyroModel> gyros_;
-  std::unique_ptr<AccelerometerModel> accel_;
-  std::array<std::unique_ptr<SensorFaultInjector>, 6> faults_;
+  std::unique_ptr<SixAxisImu> imu_;
   std::uint64_t frames_sent_ = 0;
   std::uint64_t clamped_ = 0;
 };

@@ -15,6 +15,7 @@
 
 #include "emulator/devices/dbc_imu_node.h"
 #include "emulator/devices/device.h"
+#include "emulator/devices/six_axis_imu.h"
 #include "emulator/sensors/accelerometer_model.h"
 #include "emulator/sensors/gyro_model.h"
 
@@ -48,9 +49,7 @@ class DbcImuDevice final : public Device {
  private:
   std::string name_ = "dbc_imu";
   DbcImuNode node_;
-  std::vector<GyroModel> gyros_;  // x, y, z
-  std::unique_ptr<AccelerometerModel> accel_;
-  std::array<std::unique_ptr<SensorFaultInjector>, 6> faults_;  // rate x y z, accel x y z
+  SixAxisImu imu_;  // along the body axes
 };
 
 }  // namespace wheelhil::emulator
