@@ -55,6 +55,12 @@ struct DbcSignal {
   /// BA_ values of the signal (GenSigStartValue, ...) or their BA_DEF_DEF_ defaults, as
   /// written; an ENUM attribute's value is its string, not its index.
   std::map<std::string, std::string, std::less<>> attributes;
+
+  /// An integer whose physical value is its raw value (factor 1, offset 0): what a counter or
+  /// a cycle number must be.
+  bool IsRawInteger() const {
+    return value_type == DbcValueType::kInteger && factor == 1.0 && offset == 0.0;
+  }
 };
 
 /// One message (frame). `id` has no flag bits; `length` is the DLC in bytes (0..64).

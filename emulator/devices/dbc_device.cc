@@ -67,10 +67,6 @@ std::optional<PhysicalQuantity> UnitQuantity(DbcQuantity q) {
   }
 }
 
-bool IsRawInteger(const bus::DbcSignal& s) {
-  return s.value_type == bus::DbcValueType::kInteger && s.factor == 1.0 && s.offset == 0.0;
-}
-
 }  // namespace
 
 std::optional<DbcQuantity> ParseDbcQuantity(std::string_view name) noexcept {
@@ -158,7 +154,7 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
       }
       Bound bound{&b, sig, {}, 0, 0};
       if (b.quantity == DbcQuantity::kCounter) {
-        if (!IsRawInteger(*sig)) {
+        if (!sig->IsRawInteger()) {
           Fail(b.field, fmt::format("counter {} must be an integer signal with factor 1, offset 0",
                                     b.signal));
         }

@@ -172,12 +172,7 @@ DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string
   for (const DbcMessageTiming& t : c.timing) where[t.field] = n["messages"];
   c.temperature_k = r.Number(n, "temperature_c", f, -100, 300, 25.0) + 273.15;
   // The bindings against the DBC, now: an error names the entry's line.
-  std::shared_ptr<const bus::DbcDatabase> db;
-  try {
-    db = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
-  } catch (const std::exception& e) {
-    r.FailKey(n, "dbc", f + ".dbc", e.what());
-  }
+  const auto db = LoadDbcAt(r, n, "dbc", f + ".dbc", d.dbc);
   try {
     (void)DbcDevice(db, c);
   } catch (const std::invalid_argument& e) {

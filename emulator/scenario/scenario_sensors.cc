@@ -86,12 +86,7 @@ DbcImuSpec ReadDbcImu(const Reader& r, const YAML::Node& n) {
     d.accel_noise_density_m_s2_sqrt_hz = r.Number(a, "noise_density_m_s2_sqrt_hz", af, 0, 10, 0.0);
     d.accel_bias_m_s2 = r.Number(a, "bias_m_s2", af, -10, 10, 0.0);
   }
-  std::shared_ptr<const bus::DbcDatabase> db;
-  try {
-    db = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(d.dbc));
-  } catch (const std::exception& e) {
-    r.FailKey(n, "dbc", f + ".dbc", e.what());
-  }
+  const auto db = LoadDbcAt(r, n, "dbc", f + ".dbc", d.dbc);
   try {
     (void)DbcImuNode(db, d.node, 0);
   } catch (const std::invalid_argument& e) {

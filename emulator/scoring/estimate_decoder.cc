@@ -36,7 +36,6 @@ EstimateDecoder::EstimateDecoder(OutputBinding binding) : binding_(std::move(bin
 }
 
 void EstimateDecoder::OnSync(double t_s) {
-  ++syncs_;
   sync_times_.push_back(t_s);
 }
 
@@ -45,7 +44,7 @@ void EstimateDecoder::OnFrame(const bus::CanFrame& f, double t_s) {
   if (it == by_id_.end() || f.rtr) return;
   for (StreamState& st : it->second) {
     Check(st, f, t_s);
-    int cycle = static_cast<int>(syncs_) - 1;
+    int cycle = static_cast<int>(sync_times_.size()) - 1;
     if (const auto t = SampleTime(st, f, t_s, cycle)) Record(st, f, *t, cycle);
   }
 }
@@ -102,7 +101,7 @@ std::optional<double> EstimateDecoder::SampleTime(StreamState& st, const bus::Ca
     // The latest SYNC whose number matches the counter (mod its range).
     const auto m = static_cast<std::int64_t>(s.cycle_modulo);
     const auto c = static_cast<std::int64_t>(*v);
-    const std::int64_t last = syncs_ - 1;
+    const auto last = static_cast<std::int64_t>(sync_times_.size()) - 1;
     if (last < 0 || c < 0 || c >= m) return std::nullopt;
     const std::int64_t n = last - ((last - c) % m + m) % m;
     if (n < 0) return std::nullopt;

@@ -78,7 +78,6 @@ class EstimateDecoder {
   OutputBinding binding_;
   std::map<std::uint64_t, std::vector<StreamState>> by_id_;
   std::vector<double> sync_times_;  // by SYNC number
-  std::int64_t syncs_ = 0;
   std::vector<EstimateRow> rows_;
   std::map<std::string, std::vector<PoseSample>> pose_;
   std::set<std::string> position_only_;

@@ -206,8 +206,7 @@ ResolvedSignal ResolveSignal(const SignalBindingSpec& b, const bus::DbcMessage& 
 }
 
 void RequireInteger(const SignalBindingSpec& b, const ResolvedSignal& s, const char* what) {
-  const bus::DbcSignal& sig = *s.signal;
-  if (sig.value_type != bus::DbcValueType::kInteger || sig.factor != 1.0 || sig.offset != 0.0) {
+  if (!s.signal->IsRawInteger()) {
     Fail(b.where, b.field,
          fmt::format("{} {} must be an integer signal with factor 1 and offset 0", what,
                      b.signal));

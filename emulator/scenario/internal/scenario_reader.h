@@ -4,12 +4,14 @@
 // section readers each file owns. Not for other modules.
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include <yaml-cpp/yaml.h>
 
+#include "bus/dbc.h"
 #include "bus/yaml_fields.h"
 #include "emulator/scenario/scenario.h"
 
@@ -39,6 +41,18 @@ inline Friction ReadFriction(const Reader& r, const YAML::Node& n, const std::st
     r.FailKey(n, "mu_slide", field + ".mu_slide", "must not exceed mu_peak");
   }
   return f;
+}
+
+/// The DBC file at `path` that parent[key] names; its load error fails at that key.
+inline std::shared_ptr<const bus::DbcDatabase> LoadDbcAt(const Reader& r, const YAML::Node& parent,
+                                                         const std::string& key,
+                                                         const std::string& field,
+                                                         const std::string& path) {
+  try {
+    return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(path));
+  } catch (const std::exception& e) {
+    r.FailKey(parent, key, field, e.what());
+  }
 }
 
 /// sensors: (scenario_sensors.cc).

@@ -14,6 +14,7 @@
 #include "bus/dbc.h"
 #include "bus/dbc_codec.h"
 #include "emulator/devices/dbc_device.h"
+#include "tests/emulator/devices/recording_port.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -55,17 +56,7 @@ std::shared_ptr<const bus::DbcDatabase> Db() {
   return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kDbc, "box.dbc"));
 }
 
-class RecordingPort final : public DevicePort {
- public:
-  void Send(std::vector<NodeFrame> frames, bool) override {
-    for (auto& f : frames) sent.push_back(f);
-  }
-  void CountSilenced(std::size_t) override {}
-  void Event(nlohmann::json) override {}
-  double MotionSeconds(std::int64_t t_ns) const override { return 1e-9 * static_cast<double>(t_ns); }
-  void Fail(std::string) override {}
-  std::vector<NodeFrame> sent;
-};
+using testing::RecordingPort;
 
 DbcSignalBinding Bind(const char* signal, DbcQuantity q, const char* message = "") {
   DbcSignalBinding b;

@@ -15,6 +15,7 @@
 #include "emulator/scenario/device_registry.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
+#include "tests/emulator/devices/recording_port.h"
 #include "tests/emulator/scenario/runner_test_support.h"
 
 namespace wheelhil::emulator::scenario {
@@ -85,17 +86,7 @@ TEST(OwnHardwareRun, FaultsAddressADeviceByItsName) {
          "'imu.yaw' is not one of gyro, encoder, accel4, DEVICE.rate_x")));
 }
 
-class RecordingPort final : public DevicePort {
- public:
-  void Send(std::vector<NodeFrame> frames, bool) override {
-    for (auto& f : frames) sent.push_back(f);
-  }
-  void CountSilenced(std::size_t) override {}
-  void Event(nlohmann::json) override {}
-  double MotionSeconds(std::int64_t t_ns) const override { return 1e-9 * static_cast<double>(t_ns); }
-  void Fail(std::string) override {}
-  std::vector<NodeFrame> sent;
-};
+using emulator::testing::RecordingPort;
 
 // `kind: mm5_10` is the shipped MM5.10 DBC as a dbc device: its three frames every 10 ms, the
 // yaw rate in deg/s, the specific force in g (mounted upside down, z reads -1 g at rest).
