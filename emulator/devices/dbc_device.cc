@@ -129,6 +129,11 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
     }
     Message msg;
     msg.msg = &m;
+    for (const bus::DbcSignal& sig : m.signals) {
+      if (const auto start = AttributeNumber(sig.attributes, "GenSigStartValue")) {
+        msg.start_values.emplace_back(&sig, static_cast<std::uint64_t>(std::llround(*start)));
+      }
+    }
     msg.period_ns = std::llround(period_ms * 1e6);
     const double delay_ms = t != nullptr && t->start_delay_ms
                                 ? *t->start_delay_ms
@@ -230,11 +235,7 @@ void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bu
   out.extended = m.msg->extended;
   out.len = static_cast<std::uint8_t>(m.msg->length);
   const std::span<std::uint8_t> payload(out.data.data(), out.len);
-  for (const bus::DbcSignal& sig : m.msg->signals) {
-    if (const auto start = AttributeNumber(sig.attributes, "GenSigStartValue")) {
-      bus::InsertRaw(sig, static_cast<std::uint64_t>(std::llround(*start)), payload);
-    }
-  }
+  for (const auto& [sig, raw] : m.start_values) bus::InsertRaw(*sig, raw, payload);
   for (const Bound& b : m.values) {
     const DbcSignalBinding& cfg = *b.binding;
     double si = 0;

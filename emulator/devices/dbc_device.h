@@ -129,6 +129,8 @@ class DbcDevice final : public Device {
     std::vector<Bound> values;
     std::vector<Bound> counters;
     std::vector<Bound> checksums;
+    /// GenSigStartValue (raw) of the signals that have one, read once.
+    std::vector<std::pair<const bus::DbcSignal*, std::uint64_t>> start_values;
     std::int64_t period_ns = 0;
     std::int64_t next_ns = 0;
   };
