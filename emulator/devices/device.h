@@ -19,6 +19,7 @@
 
 #include "bus/can_frame.h"
 #include "emulator/devices/canopen_encoder_node.h"
+#include "emulator/devices/wheel_drive.h"
 #include "emulator/physics/roller_vehicle.h"
 
 namespace wheelhil::emulator {
@@ -57,6 +58,8 @@ struct DeviceFaults {
   std::unique_ptr<DeviceFaultInjector> device;
   /// Sensor faults by the device's channel name (see Device::sensor_channels()).
   std::vector<std::pair<std::string, std::unique_ptr<SensorFaultInjector>>> sensors;
+  /// Faults of a drive (over-current, stuck, torque limit), windows in virtual time.
+  std::vector<DriveFault> drive;
 };
 
 class Device {
@@ -93,6 +96,9 @@ class Device {
   virtual std::optional<SyncAnswer> sync_answer() const { return std::nullopt; }
   /// Ready for the motion phase (a CANopen node: started by the master).
   virtual bool Ready() const { return true; }
+  /// A drive: the wheel it powers and what its power stage applies now (before the next
+  /// physics step). Other devices: none.
+  virtual std::optional<WheelDrive> wheel_drive() const { return std::nullopt; }
 
   /// Scenario faults on the device as a whole: it stops sending while silent ...
   virtual void SetSilent(bool silent) { silent_ = silent; }

@@ -250,6 +250,14 @@ bool RollerVehicle::SetWheelDisturbanceTorque(std::size_t i, double torque_nm) n
   return true;
 }
 
+bool RollerVehicle::SetMotorTorqueLimit(std::size_t i, double limit_nm) noexcept {
+  if (i >= state_.size() || !spec_.wheels[i].driven || std::isnan(limit_nm) || limit_nm < 0) {
+    return false;
+  }
+  state_[i].drive_limit_nm = limit_nm;
+  return true;
+}
+
 double RollerVehicle::wheel_spin_inertia(std::size_t i) const noexcept {
   if (i >= state_.size() || state_[i].inv_inertia <= 0) return 0.0;
   return 1.0 / state_[i].inv_inertia;
@@ -509,6 +517,9 @@ void RollerVehicle::PreStep(double dt) noexcept {
         lo = std::max(lo, kt * (-m.supply_voltage_v - emf) / m.winding_resistance_ohm);
         if (lo > hi) lo = hi = 0.5 * (lo + hi);
       }
+      // The drive's limit bounds whatever the motor could give (0: no torque at all).
+      hi = std::clamp(hi, -st.drive_limit_nm, st.drive_limit_nm);
+      lo = std::clamp(lo, -st.drive_limit_nm, st.drive_limit_nm);
       // Integral part: an explicit torque inside the same window; proportional part: a soft
       // row (cfm = 1/(gain*dt)) solved with the contacts.
       st.motor_integral_nm = std::clamp(st.motor_integral_nm, lo, hi);

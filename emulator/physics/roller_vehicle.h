@@ -97,6 +97,11 @@ class RollerVehicle : public btActionInterface {
   /// servo of a driven wheel reacts to it as to any load. Returns false for a bad index or a
   /// non-finite value.
   bool SetWheelDisturbanceTorque(std::size_t i, double torque_nm) noexcept;
+  /// A limit (N*m, wheel side, >= 0) on driven wheel i's motor torque on top of the motor's own
+  /// window, set by the drive that powers it: 0 = the power stage is off and the wheel coasts
+  /// (only its contacts, bearing and rotor inertia act on it); infinity = none. Returns false
+  /// for a bad index, a passive wheel or a negative/NaN value.
+  bool SetMotorTorqueLimit(std::size_t i, double limit_nm) noexcept;
   /// Spin inertia of wheel i about its axle (wheel + reflected rotor), kg*m^2; 0 for a bad index.
   [[nodiscard]] double wheel_spin_inertia(std::size_t i) const noexcept;
 
@@ -131,6 +136,7 @@ class RollerVehicle : public btActionInterface {
     double friction_scale = 1;                  // fault hook: multiplies mu_peak and mu_slide
     std::optional<Friction> friction_override;  // fault hook: replaces the floor's friction
     double disturbance_nm = 0;                  // fault hook: external spin torque
+    double drive_limit_nm = 1e300;              // the drive's torque limit (0: power stage off)
   };
   double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
 
