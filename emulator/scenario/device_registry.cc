@@ -7,6 +7,7 @@
 #include "bus/canopen.h"
 #include "bus/dbc.h"
 #include "emulator/devices/accel4_device.h"
+#include "emulator/devices/cia402_drive_device.h"
 #include "emulator/devices/cia406_encoder_device.h"
 #include "emulator/devices/dbc_cia406_codec.h"
 #include "emulator/devices/dbc_device.h"
@@ -82,6 +83,9 @@ void BuildDeviceList(const DeviceBuildContext& c, Devices& out) {
         if (!codec) codec = DbcCia406Codec::FromFile(c.dbc_dir + "/cia406_encoder.dbc");
         out.push_back(MakeEncoder(c, codec, d.encoder, d.lines_per_rev, d.quadrature_x4, ++k,
                                   d.eds.empty() ? nullptr : &d.eds_node));
+        break;
+      case DeviceSpec::Kind::kCanopenCia402:
+        out.push_back(std::make_unique<Cia402DriveDevice>(d.drive));
         break;
       case DeviceSpec::Kind::kDbc:
       case DeviceSpec::Kind::kMm5_10: {

@@ -41,6 +41,7 @@ void FaultPlan::Arm(std::int64_t t0, Devices& devices, sim::BusHub& hub) {
   std::vector<FrameFault> frame;
   std::vector<BusFault> bus;
   std::map<int, std::vector<DeviceFault>> device;  // by device index
+  std::map<int, std::vector<DriveFault>> drive;    // by device index
   std::map<std::string, std::vector<SensorFault>> sensor;  // by channel
   for (const auto& f : s_.faults) {
     switch (f.kind) {
@@ -65,6 +66,13 @@ void FaultPlan::Arm(std::int64_t t0, Devices& devices, sim::BusHub& hub) {
         DeviceFault x = f.device;
         x.window = shift(x.window);
         device[DeviceOf(f, devices)].push_back(x);
+        break;
+      }
+      case FaultSpec::Kind::kDrive: {
+        DriveFault x = f.drive;
+        x.t0_ns += t0;
+        if (x.t1_ns != std::numeric_limits<std::int64_t>::max()) x.t1_ns += t0;
+        drive[DeviceOf(f, devices)].push_back(x);
         break;
       }
       case FaultSpec::Kind::kSensor: {
@@ -109,6 +117,9 @@ void FaultPlan::Arm(std::int64_t t0, Devices& devices, sim::BusHub& hub) {
     const std::uint8_t id = dev.canopen_node_id() != 0 ? dev.canopen_node_id() : 0x7F;
     per_device[static_cast<std::size_t>(d)].device =
         std::make_unique<DeviceFaultInjector>(dev.fault_name(), id, faults, &log_);
+  }
+  for (auto& [d, faults] : drive) {
+    if (d >= 0) per_device[static_cast<std::size_t>(d)].drive = std::move(faults);
   }
   for (auto& [channel, faults] : sensor) {
     bool owned = false;

@@ -118,7 +118,15 @@ void PhysicsStage::StartMotion(std::int64_t t0_ns) {
   motion0_ns_ = t0_ns;
 }
 
+void PhysicsStage::SetDrives(const std::vector<WheelDrive>& drives) {
+  for (const WheelDrive& d : drives) {
+    (void)vehicle_->SetWheelSpeedCommand(d.wheel, d.command.omega_rad_s);
+    (void)vehicle_->SetMotorTorqueLimit(d.wheel, d.command.torque_limit_nm);
+  }
+}
+
 void PhysicsStage::Command(std::int64_t t_ns, bool motion) {
+  if (s_.firmware_motion) return;  // the drives command the wheels (SetDrives)
   if (!motion) {
     platforms::CommandTwist(*vehicle_, s_.platform, platforms::BodyTwist{});
     return;

@@ -5,8 +5,11 @@
 /// profile or wheel speeds during it), applies the physical faults active at t (wheel friction,
 /// torque disturbance; their start/end become events) and steps the world.
 ///
-/// In the motion phase the physics depends on time only, not on the bus or the firmware, so it
-/// may run on a worker thread on another CPU, up to 2048 steps ahead of the run's thread
+/// Closed loop (motion.source firmware): in every phase the driven wheels follow their drives
+/// (SetDrives before each step: set point and torque limit of each drive's power stage), so
+/// the physics depends on the bus and runs on the run's thread only.
+/// With a scripted motion the physics of the motion phase depends on time only, not on the bus
+/// or the firmware, so it may run on a worker thread on another CPU, up to 2048 steps ahead of the run's thread
 /// (StartWorker; the results are the same bits). The devices' readings that may be taken ahead
 /// (Device::ReadsAhead) are taken there too. Thread-compatible otherwise.
 
@@ -39,6 +42,8 @@ class PhysicsStage {
 
   /// The motion starts at t0_ns (the motion profile's and the faults' time origin).
   void StartMotion(std::int64_t t0_ns);
+  /// Closed loop: what the drives' power stages apply in the next step.
+  void SetDrives(const std::vector<WheelDrive>& drives);
   /// Steps from t_ns to t_ns + step. False when the worker failed (the reason is in the run).
   bool Step(std::int64_t t_ns, bool motion);
 

@@ -68,6 +68,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // sim::RunStages
   std::int64_t step_ns() const override { return physics_->step_ns(); }
   bool StepPhysics(std::int64_t t_end_ns, bool motion) override {
+    if (s_.firmware_motion) CommandDrives();
     return physics_->Step(t_end_ns - physics_->step_ns(), motion);
   }
   void StepDevices(std::int64_t t_ns, bool motion) override;
@@ -97,6 +98,8 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
 
  private:
   void Build();
+  // Closed loop: the drives' power stages onto their wheels, before each physics step.
+  void CommandDrives();
   void StartFirmware();
   // Virtual clock: the firmware runs at the bus's instant until every thread of it is blocked.
   void SettleFirmware();
@@ -136,8 +139,17 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   std::unique_ptr<scoring::EstimateDecoder> estimates_;
   std::unique_ptr<scoring::TruthRecorder> truth_;
   std::unique_ptr<FaultPlan> faults_;
+  std::vector<WheelDrive> drives_;  // scratch of CommandDrives
   Clock::time_point wall0_, last_progress_;
 };
+
+void Run::CommandDrives() {
+  drives_.clear();
+  for (const auto& d : devices_) {
+    if (const auto drive = d->wheel_drive()) drives_.push_back(*drive);
+  }
+  physics_->SetDrives(drives_);
+}
 
 int Run::SendSync(std::int64_t t_ns) {
   bus::CanFrame sync;
@@ -401,7 +413,8 @@ void Run::RunPhases() {
     }
   }
   handshake_->ExpectSyncAnswers(std::move(answers));
-  if (lockstep_ && !run_.failed()) StartWorker(cycles * steps_per_cycle);
+  // Closed loop: the physics depends on the bus, so it cannot run ahead.
+  if (lockstep_ && !run_.failed() && !s_.firmware_motion) StartWorker(cycles * steps_per_cycle);
   tick.Start({.motion = true,
               .record_truth = true,
               .wait_boot_answers = false,

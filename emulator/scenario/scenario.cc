@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <numbers>
 #include <set>
 #include <stdexcept>
 
@@ -192,8 +193,10 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
 std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
                                       const platforms::Platform& platform) {
   const YAML::Node n = Reader::Get(root, "motion");
+  if (n.IsMap()) return {};  // {source: firmware}: ReadFirmwareMotion
   if (!n.IsSequence() || n.size() == 0) {
-    r.FailKey(root, "motion", "motion", "must be a non-empty list of segments");
+    r.FailKey(root, "motion", "motion",
+              "must be a non-empty list of segments, or {source: firmware}");
   }
   std::vector<MotionSegment> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
@@ -254,6 +257,58 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
   return out;
 }
 
+
+std::optional<FirmwareMotionSpec> ReadFirmwareMotion(const Reader& r, const YAML::Node& root) {
+  const YAML::Node n = Reader::Get(root, "motion");
+  if (!n.IsMap()) return std::nullopt;
+  r.CheckKeys(n, "motion", {"source", "goal"});
+  const std::string source = r.String(n, "source", "motion", std::nullopt);
+  if (source != "firmware") {
+    r.Fail(n["source"], "motion.source",
+           fmt::format("'{}' is not firmware (a scripted motion is a list of segments)", source));
+  }
+  FirmwareMotionSpec m;
+  if (const YAML::Node g = Reader::Get(n, "goal"); Reader::Present(g)) {
+    r.CheckKeys(g, "motion.goal", {"x_m", "y_m", "theta_deg"});
+    m.goal = Eigen::Vector3d(r.Number(g, "x_m", "motion.goal", -1e5, 1e5, std::nullopt),
+                             r.Number(g, "y_m", "motion.goal", -1e5, 1e5, std::nullopt),
+                             r.Number(g, "theta_deg", "motion.goal", -1e6, 1e6, 0.0) *
+                                 std::numbers::pi / 180.0);
+    m.goal_has_heading = Reader::Present(Reader::Get(g, "theta_deg"));
+  }
+  return m;
+}
+
+// Closed loop: every driven wheel has exactly one drive, and drives only come with it.
+void CheckDrives(const Reader& r, const YAML::Node& root, const Scenario& s) {
+  std::vector<int> drives_of(s.platform.vehicle.wheels.size(), 0);
+  for (const DeviceSpec& d : s.devices) {
+    if (d.kind != DeviceSpec::Kind::kCanopenCia402) continue;
+    if (!s.firmware_motion) {
+      r.FailKey(root, "motion", "motion",
+                fmt::format("device '{}' drives wheel '{}': a scenario with drives takes its "
+                            "motion from the firmware (motion: {{source: firmware}})",
+                            d.drive.name, d.drive.wheel_name));
+    }
+    if (++drives_of[d.drive.wheel_index] > 1) {
+      r.FailKey(root, "devices", "devices",
+                fmt::format("wheel '{}' has two drives", d.drive.wheel_name));
+    }
+  }
+  if (!s.firmware_motion) return;
+  for (std::size_t w = 0; w < drives_of.size(); ++w) {
+    const auto& wheel = s.platform.vehicle.wheels[w];
+    if (wheel.driven && drives_of[w] == 0) {
+      r.FailKey(root, "devices", "devices",
+                fmt::format("motion.source firmware: driven wheel '{}' has no drive (add a "
+                            "device of kind canopen_cia402 on it)", wheel.name));
+    }
+  }
+  if (!Reader::Present(Reader::Get(Reader::Get(root, "timing"), "duration_s"))) {
+    r.FailKey(root, "timing", "timing.duration_s",
+              "is required with motion.source firmware (there is no script to time)");
+  }
+}
 
 FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
   FirmwareSpec fw;
@@ -461,11 +516,13 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   }
   s.terrain = ReadTerrain(r, Reader::Get(root, "terrain"));
   s.motion = ReadMotion(r, root, s.platform);
+  s.firmware_motion = ReadFirmwareMotion(r, root);
   s.sensors = ReadSensors(r, root, s.platform);
   s.devices = ReadDevices(r, Reader::Get(root, "devices"), s.platform, s.sensors);
   s.faults = ReadFaults(r, Reader::Get(root, "faults"), s.sensors, s.devices, s.platform);
   s.firmware = ReadFirmware(r, Reader::Get(root, "firmware"));
   s.timing = ReadTiming(r, Reader::Get(root, "timing"), MotionDuration(s.motion));
+  CheckDrives(r, root, s);
   s.expectations = ReadExpectations(r, Reader::Get(root, "expectations"));
   s.metric_components = ReadScoring(r, Reader::Get(root, "scoring"));
   if (root["slip_threshold_m_s"]) {

@@ -16,6 +16,7 @@
 #include <Eigen/Core>
 
 #include "emulator/devices/canopen_encoder_node.h"
+#include "emulator/devices/cia402_drive_device.h"
 #include "emulator/devices/dbc_device.h"
 #include "emulator/devices/dbc_imu_node.h"
 #include "emulator/faults/bus_faults.h"
@@ -47,6 +48,15 @@ struct MotionSegment {
   double speed = 0;
   double accel = 0;
   std::vector<double> wheel_speeds_rad_s;  ///< kWheels.
+};
+
+/// `motion: {source: firmware}`: no script. The wheels' drives (devices of kind canopen_cia402)
+/// power them with what the firmware commands; the trajectory is what the firmware makes of it.
+struct FirmwareMotionSpec {
+  /// Where the firmware's path ends (x_m, y_m, theta_rad in the start frame: x forward, y left
+  /// at the motion start), scored by the closed_loop metrics; unset: not scored against a goal.
+  std::optional<Eigen::Vector3d> goal;
+  bool goal_has_heading = false;
 };
 
 /// A low-friction spot on the floor (terrain patch).
@@ -127,6 +137,7 @@ struct DeviceSpec {
     kDbc,            ///< Every cyclic message of a node of the user's DBC (DbcDevice).
     kCanopenCia406,  ///< A CiA 406 encoder node on a wheel (as sensors.encoders' nodes).
     kMm5_10,         ///< A kDbc device over the shipped bus/dbc/bosch_mm5_10.dbc, all 6 axes.
+    kCanopenCia402,  ///< A CiA 402 servo drive powering a driven wheel (Cia402DriveDevice).
   };
   Kind kind = Kind::kDbc;
   std::string where;  ///< file:line:column of the entry.
@@ -135,8 +146,9 @@ struct DeviceSpec {
   EncoderDeviceSpec encoder;   ///< kCanopenCia406.
   int lines_per_rev = 500;
   bool quadrature_x4 = true;
-  std::string eds;             ///< kCanopenCia406: the vendor's EDS/DCF (absolute), or empty.
+  std::string eds;  ///< kCanopenCia406/402: the vendor's EDS/DCF (absolute), or empty.
   Cia406NodeConfig eds_node;   ///< Its dictionary from the EDS and the entry's `objects`.
+  Cia402DriveDeviceConfig drive;  ///< kCanopenCia402, with its EDS and `objects` applied.
 };
 
 /// A fault injected over a window [start_s, end_s) of motion time (end_s infinite: to the end).
@@ -154,6 +166,7 @@ struct FaultSpec {
     kWheelFriction,      ///< Per-wheel friction scale / override (RollerVehicle::SetWheelFriction).
     kTorqueDisturbance,  ///< Per-wheel external spin torque (SetWheelDisturbanceTorque).
     kBump,               ///< A ramped obstacle on the floor (terrain triangles), whole run.
+    kDrive,              ///< A drive's fault (over-current, stuck, torque limit): `drive`.
   };
   Kind kind = Kind::kEncoderEmcy;
   std::string where;  ///< file:line:column of the entry, for messages.
@@ -167,6 +180,7 @@ struct FaultSpec {
   BusFault bus;        ///< kBus (window and bus node set by the runner).
   SensorFault sensor;  ///< kSensor (window set by the runner).
   DeviceFault device;  ///< kDevice (window set by the runner).
+  DriveFault drive;    ///< kDrive (window set by the runner); the drive's name is `node`.
   /// kSensor: "gyro" (yaw rate, rad/s), "encoder" (counts, the node of `wheel`), "accel4"
   /// (m/s^2; channel 1..4, 0 = all four).
   std::string sensor_name;
@@ -220,7 +234,8 @@ struct Scenario {
   std::uint64_t seed = 1;
   platforms::Platform platform;
   TerrainSpec terrain;
-  std::vector<MotionSegment> motion;
+  std::vector<MotionSegment> motion;  ///< Empty with firmware_motion.
+  std::optional<FirmwareMotionSpec> firmware_motion;
   SensorsSpec sensors;
   std::vector<DeviceSpec> devices;
   std::vector<FaultSpec> faults;

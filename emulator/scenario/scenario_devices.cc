@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cctype>
 #include <charconv>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -11,6 +12,7 @@
 #include "bus/canopen_eds.h"
 #include "bus/dbc.h"
 #include "emulator/devices/checksum_yaml.h"
+#include "emulator/devices/cia402_eds.h"
 #include "emulator/devices/cia406_eds.h"
 #include "emulator/scenario/internal/scenario_reader.h"
 
@@ -226,7 +228,9 @@ void ReadSensorModels(const Reader& r, const YAML::Node& n, const std::string& f
 }
 
 // `objects: {"0x6200": 10, "0x1018sub4": 1234}` after the EDS.
-void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f, Cia406NodeConfig& node) {
+// `set` stores one object's value (throws std::invalid_argument when the device has none such).
+void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f,
+                 const std::function<void(std::uint16_t, std::uint8_t, std::uint32_t)>& set) {
   const YAML::Node objs = Reader::Get(n, "objects");
   if (!Reader::Present(objs)) return;
   if (!objs.IsMap()) r.Fail(objs, f + ".objects", "must map \"0xINDEX\" or \"0xINDEXsubN\" to values");
@@ -250,8 +254,7 @@ void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f, Cia
     if (!ok) r.Fail(it->first, kf, "is not an object: write \"0x6200\" or \"0x1018sub4\"");
     const auto value = static_cast<std::uint32_t>(r.ToInteger(it->second, kf, 0, 0xFFFFFFFFLL));
     try {
-      SetCia406Object(node, static_cast<std::uint16_t>(index), static_cast<std::uint8_t>(sub),
-                      value);
+      set(static_cast<std::uint16_t>(index), static_cast<std::uint8_t>(sub), value);
     } catch (const std::invalid_argument& e) {
       r.Fail(it->first, kf, e.what());
     }
@@ -289,7 +292,9 @@ DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::str
     } catch (const std::invalid_argument& e) {
       r.FailKey(n, "eds", f + ".eds", e.what());
     }
-    ReadObjects(r, n, f, d.eds_node);
+    ReadObjects(r, n, f, [&](std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
+      SetCia406Object(d.eds_node, index, sub, value);
+    });
   } else if (Reader::Present(Reader::Get(n, "objects"))) {
     r.Fail(n["objects"], f + ".objects", "needs an eds (the objects it sets are the EDS's)");
   }
@@ -307,6 +312,70 @@ DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::str
   }
   d.lines_per_rev = eds_counts ? static_cast<int>(*eds_counts / per_line)
                                : static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
+  return d;
+}
+
+// A CiA 402 drive on a driven wheel; its units and limits default to the wheel's motor.
+DeviceSpec ReadCia402Device(const Reader& r, const YAML::Node& n, const std::string& f,
+                            const platforms::Platform& platform) {
+  r.CheckKeys(n, f, {"kind", "name", "wheel", "node_id", "eds", "objects", "velocity_unit",
+                     "counts_per_rev", "gear_ratio", "trip_current_a", "trip_time_s"});
+  DeviceSpec d;
+  d.kind = DeviceSpec::Kind::kCanopenCia402;
+  Cia402DriveDeviceConfig& c = d.drive;
+  c.wheel_name = r.String(n, "wheel", f, std::nullopt);
+  try {
+    c.wheel_index = platform.wheel_index(c.wheel_name);
+  } catch (const std::exception&) {
+    r.Fail(n["wheel"], f + ".wheel",
+           fmt::format("platform {} has no wheel '{}'", platform.name, c.wheel_name));
+  }
+  const physics::WheelSpec& wheel = platform.vehicle.wheels[c.wheel_index];
+  if (!wheel.driven) {
+    r.Fail(n["wheel"], f + ".wheel",
+           fmt::format("wheel '{}' of platform {} has no motor: a drive powers a driven wheel",
+                       c.wheel_name, platform.name));
+  }
+  const physics::MotorSpec& m = wheel.motor;
+  c.motor_torque_limit_nm =
+      std::min(m.max_torque_nm, m.torque_constant_nm_a * m.gear_ratio * m.max_current_a);
+  Cia402DriveConfig& node = c.node;
+  node.gear_ratio = r.Number(n, "gear_ratio", f, 1e-3, 1e4, m.gear_ratio);
+  node.rated_torque_mnm =
+      static_cast<std::uint32_t>(std::max(1.0, std::round(c.motor_torque_limit_nm / node.gear_ratio * 1e3)));
+  node.rated_current_ma = static_cast<std::uint32_t>(std::max(1.0, std::round(m.max_current_a * 1e3)));
+  const std::string unit = r.String(n, "velocity_unit", f, std::string("rpm"));
+  if (unit != "rpm" && unit != "counts_per_s") {
+    r.Fail(n["velocity_unit"], f + ".velocity_unit",
+           fmt::format("'{}' is not rpm or counts_per_s (of the motor shaft)", unit));
+  }
+  node.velocity_rpm = unit == "rpm";
+  node.counts_per_rev =
+      static_cast<std::uint32_t>(r.Integer(n, "counts_per_rev", f, 1, 1 << 30, 4096));
+  node.trip_current_a = r.Number(n, "trip_current_a", f, 0, 1e4, 0.0);
+  node.trip_time_s = r.Number(n, "trip_time_s", f, 0, 10, 0.01);
+  d.eds = r.String(n, "eds", f, std::string());
+  const bool have_id = Reader::Present(Reader::Get(n, "node_id"));
+  if (!have_id && d.eds.empty()) r.FailKey(n, "node_id", f + ".node_id", "is required");
+  node.node_id = have_id ? static_cast<std::uint8_t>(r.Integer(n, "node_id", f, 1, 127)) : 0;
+  if (!d.eds.empty()) {
+    d.eds = r.Path(d.eds);
+    try {
+      ApplyCia402Eds(bus::EdsFile::LoadFile(d.eds), node);
+    } catch (const std::invalid_argument& e) {
+      r.FailKey(n, "eds", f + ".eds", e.what());
+    }
+  }
+  ReadObjects(r, n, f, [&](std::uint16_t index, std::uint8_t sub, std::uint32_t value) {
+    SetCia402Object(node, index, sub, value);
+  });
+  c.name = r.String(n, "name", f, fmt::format("drive{}", node.node_id));
+  // The node's own checks (mapping, transmission types), at the entry.
+  try {
+    Cia402DriveNode check(node, c.motor_torque_limit_nm);
+  } catch (const std::invalid_argument& e) {
+    r.Fail(n, f, e.what());
+  }
   return d;
 }
 
@@ -344,9 +413,20 @@ std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
         r.Fail(n[i]["node_id"], f + ".node_id",
                fmt::format("node id {} is taken", d.encoder.node_id));
       }
+    } else if (kind == "canopen_cia402") {
+      d = ReadCia402Device(r, n[i], f, platform);
+      if (!node_ids.insert(d.drive.node.node_id).second) {
+        r.Fail(n[i]["node_id"], f + ".node_id",
+               fmt::format("node id {} is taken", d.drive.node.node_id));
+      }
+      if (!names.insert(d.drive.name).second) {
+        r.Fail(n[i], f + ".name",
+               fmt::format("'{}' is taken: give each device its own name", d.drive.name));
+      }
     } else {
       r.FailKey(n[i], "kind", f + ".kind",
-                fmt::format("'{}' is not one of dbc, mm5_10, canopen_cia406", kind));
+                fmt::format("'{}' is not one of dbc, mm5_10, canopen_cia406, canopen_cia402",
+                            kind));
     }
     d.where = r.Where(n[i]);
     out.push_back(std::move(d));

@@ -52,7 +52,7 @@ void LibraryCheck(const Reader& r, const YAML::Node& entry, const std::string& f
 }
 
 const char* kFaultTypes =
-    "encoder_emcy, encoder_silent, frame, bus, sensor, device, wheel_friction, "
+    "encoder_emcy, encoder_silent, frame, bus, sensor, device, drive, wheel_friction, "
     "torque_disturbance, bump";
 
 }  // namespace
@@ -66,7 +66,12 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
   // NAME.rate_x .. NAME.accel_z).
   std::vector<EncoderDeviceSpec> encoders = s.encoders;
   std::vector<std::string> device_names;
+  std::vector<std::string> drive_names;
   for (const DeviceSpec& d : devices) {
+    if (d.kind == DeviceSpec::Kind::kCanopenCia402) {
+      device_names.push_back(d.drive.name);
+      drive_names.push_back(d.drive.name);
+    }
     if (d.kind == DeviceSpec::Kind::kCanopenCia406) encoders.push_back(d.encoder);
     if (d.kind == DeviceSpec::Kind::kDbc || d.kind == DeviceSpec::Kind::kMm5_10) {
       device_names.push_back(d.dbc_device.name);
@@ -275,12 +280,51 @@ std::vector<FaultSpec> ReadFaults(const Reader& r, const YAML::Node& n, const Se
       if (x.device.kind == DeviceFaultKind::kReboot && !e["end_s"]) {
         r.Fail(e, f + ".end_s", "is required for a reboot (the power-on instant)");
       }
-      target_node(x.device.kind == DeviceFaultKind::kSilent);
+      const std::string node_name = e["node"] && e["node"].IsScalar() ? e["node"].Scalar() : "";
+      if (std::find(drive_names.begin(), drive_names.end(), node_name) != drive_names.end() &&
+          x.device.kind != DeviceFaultKind::kSilent &&
+          x.device.kind != DeviceFaultKind::kHeartbeatLost) {
+        r.Fail(e["kind"], f + ".kind",
+               "a drive takes silent or heartbeat_lost here; its own faults are type: drive");
+      }
+      const bool on_drive =
+          std::find(drive_names.begin(), drive_names.end(), node_name) != drive_names.end();
+      target_node(x.device.kind == DeviceFaultKind::kSilent ||
+                  (x.device.kind == DeviceFaultKind::kHeartbeatLost && on_drive));
       x.device.emcy_code =
           static_cast<std::uint16_t>(ReadId(r, e, "error_code", f, 0xFFFF, 0x7305));
       x.device.error_register =
           static_cast<std::uint8_t>(ReadId(r, e, "error_register", f, 0xFF, 0x01));
       LibraryCheck(r, e, f, [&] { DeviceFaultInjector("check", 1, {x.device}); });
+    } else if (type == "drive") {
+      r.CheckKeys(e, f, {"type", "kind", "drive", "start_s", "end_s", "torque_limit_nm"});
+      x.kind = FaultSpec::Kind::kDrive;
+      const std::string k = r.String(e, "kind", f, std::nullopt);
+      if (k == "overcurrent") {
+        x.drive.kind = DriveFault::Kind::kOverCurrent;
+      } else if (k == "stuck") {
+        x.drive.kind = DriveFault::Kind::kStuck;
+      } else if (k == "torque_limit") {
+        x.drive.kind = DriveFault::Kind::kTorqueLimit;
+      } else {
+        r.Fail(e["kind"], f + ".kind",
+               fmt::format("'{}' is not one of overcurrent, stuck, torque_limit", k));
+      }
+      const FaultWindow w = lib_window();
+      x.drive.t0_ns = w.t0_ns;
+      x.drive.t1_ns = w.t1_ns == FaultWindow::kForever ? std::numeric_limits<std::int64_t>::max()
+                                                       : w.t1_ns;
+      x.node = r.String(e, "drive", f, std::nullopt);
+      if (std::find(drive_names.begin(), drive_names.end(), x.node) == drive_names.end()) {
+        r.Fail(e["drive"], f + ".drive",
+               fmt::format("'{}' is not the name of a drive (devices of kind canopen_cia402)",
+                           x.node));
+      }
+      const bool limit = x.drive.kind == DriveFault::Kind::kTorqueLimit;
+      if (!limit && e["torque_limit_nm"]) {
+        r.Fail(e["torque_limit_nm"], f + ".torque_limit_nm", "belongs to kind torque_limit");
+      }
+      if (limit) x.drive.torque_limit_nm = r.Number(e, "torque_limit_nm", f, 0, 1e4, std::nullopt);
     } else if (type == "wheel_friction") {
       r.CheckKeys(e, f, {"type", "wheel", "start_s", "end_s", "mu_scale", "mu_peak", "mu_slide"});
       x.kind = FaultSpec::Kind::kWheelFriction;

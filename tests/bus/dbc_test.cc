@@ -446,7 +446,7 @@ TEST(DbcParseTest, TruncatedAndMutatedFilesNeverCrash) {
 
 TEST(ProjectDbcTest, EveryFileLoadsAndIdsAreUniqueOnTheBus) {
   const auto files = ProjectDbcFiles();
-  ASSERT_EQ(files.size(), 4u);
+  ASSERT_EQ(files.size(), 5u);
   std::set<std::pair<std::uint32_t, bool>> ids;
   for (const auto& path : files) {
     const auto db = DbcDatabase::LoadFile(path);

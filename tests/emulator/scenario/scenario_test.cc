@@ -94,7 +94,7 @@ TEST(ScenarioLoader, DbcImuIsReadAndCheckedAgainstItsDbc) {
   EXPECT_THAT([] { (void)ParseScenario(Minimal(DbcImu("IMU_Yaw")), kFile); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("inline.yaml:11:5: sensors.dbc_imu.channels[0].signal: message "
-                                "'IMU_Rates' has no signal 'IMU_Yaw'")));
+                            "'IMU_Rates' has no signal 'IMU_Yaw'")));
 }
 
 // `devices:` (docs/own-hardware.md): the shipped MM7.10 example loads; a binding the DBC cannot
@@ -115,39 +115,49 @@ TEST(ScenarioLoader, DevicesAreReadAndTheirBindingsCheckedAgainstTheDbc) {
       "    dbc: own_hardware/bosch_mm7_10.dbc\n"
       "    node: MM7_10\n"
       "    signals:\n";
-  EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n      AY: rate_y\n", kFile); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr(
-                  "inline.yaml:11:7: devices[0].signals.AY: AY's unit 'g' is not a unit of "
-                  "angular rate")));
+  EXPECT_THAT(
+      [&] { (void)ParseScenario(head + "      YawRate: rate_z\n      AY: rate_y\n", kFile); },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("inline.yaml:11:7: devices[0].signals.AY: AY's unit 'g' is not a unit of "
+                    "angular rate")));
   EXPECT_THAT([&] { (void)ParseScenario(head + "      Yaw: rate_z\n", kFile); },
               ThrowsMessage<std::invalid_argument>(HasSubstr(
                   "inline.yaml:10:7: devices[0].signals.Yaw: no message node MM7_10 sends")));
   EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: spin\n", kFile); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr(
-                  "devices[0].signals.YawRate: 'spin' is not one of rate_x")));
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("devices[0].signals.YawRate: 'spin' is not one of rate_x")));
   EXPECT_THAT(
       [&] {
-        (void)ParseScenario(head + "      YawRate: rate_z\n"
-                                   "  - {kind: canopen_cia406, wheel: left, node_id: 1}\n"
-                                   "  - {kind: canopen_cia406, wheel: right, node_id: 1}\n",
+        (void)ParseScenario(head +
+                                "      YawRate: rate_z\n"
+                                "  - {kind: canopen_cia406, wheel: left, node_id: 1}\n"
+                                "  - {kind: canopen_cia406, wheel: right, node_id: 1}\n",
                             kFile);
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr("devices[2].node_id: node id 1 is taken")));
-  EXPECT_THAT([&] {
-    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: e2e_p11}\n", kFile);
-  }, ThrowsMessage<std::invalid_argument>(HasSubstr("devices[0].signals.CRC_TX1.data_id: is required")));
-  EXPECT_THAT([&] {
-    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: crc8_h2f, data_id: 3}\n",
-                        kFile);
-  }, ThrowsMessage<std::invalid_argument>(HasSubstr("data_id: is for e2e_p11 only")));
-  EXPECT_THAT([&] {
-    (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: e2e_p11, data_id: 0x174}\n",
-                        kFile);
-  }, ThrowsMessage<std::invalid_argument>(HasSubstr(
-         "CRC_TX1 is the last byte of MM7_10_TX1_z_ay: a e2e_p11 counter follows its CRC byte")));
-  EXPECT_THAT([&] { (void)ParseScenario(head + "      YawRate: rate_z\n  - {kind: lidar}\n", kFile); },
-              ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("devices[1].kind: 'lidar' is not one of dbc, mm5_10, canopen_cia406")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(head + "      CRC_TX1: {quantity: checksum, type: e2e_p11}\n", kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("devices[0].signals.CRC_TX1.data_id: is required")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(
+            head + "      CRC_TX1: {quantity: checksum, type: crc8_h2f, data_id: 3}\n", kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("data_id: is for e2e_p11 only")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(
+            head + "      CRC_TX1: {quantity: checksum, type: e2e_p11, data_id: 0x174}\n", kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr(
+          "CRC_TX1 is the last byte of MM7_10_TX1_z_ay: a e2e_p11 counter follows its CRC byte")));
+  EXPECT_THAT(
+      [&] { (void)ParseScenario(head + "      YawRate: rate_z\n  - {kind: lidar}\n", kFile); },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("devices[1].kind: 'lidar' is not one of dbc, mm5_10, canopen_cia406")));
 }
 
 TEST(ScenarioLoader, UnknownTopLevelKeyNamesLineAndColumn) {
@@ -183,14 +193,12 @@ TEST(ScenarioLoader, ClockAndSyncProducer) {
   EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {clock: fast}\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr(":10:17: timing.clock: 'fast' is not virtual or cooperative")));
-  EXPECT_THAT(
-      [] { (void)ParseScenario(Minimal("timing: {sync_producer: master}\n"), kFile); },
-      ThrowsMessage<std::invalid_argument>(
-          HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {sync_producer: master}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
   // The handshake needs the emulator's SYNC; real time does not.
-  EXPECT_THAT(
-      [] { (void)ParseScenario(Minimal("timing: {sync_producer: firmware}\n"), kFile); },
-      ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {sync_producer: firmware}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
   EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
                   .timing.firmware_produces_sync);
 }
@@ -486,6 +494,86 @@ TEST(MotionProfile, TwistAtFollowsSegments) {
   EXPECT_DOUBLE_EQ(TwistAt(m, 1.5).wz_rad_s, 0.5);
   EXPECT_DOUBLE_EQ(TwistAt(m, 3.5).wz_rad_s, 0.0);
   EXPECT_DOUBLE_EQ(MotionDuration(m), 3.0);
+}
+
+std::string ClosedLoop(const std::string& devices, const std::string& extra = "") {
+  return "name: t\n"
+         "platform: platforms/diff2.yaml\n"
+         "motion: {source: firmware, goal: {x_m: 10, y_m: 0}}\n"
+         "devices:\n" +
+         devices + "timing: {duration_s: 5}\n" + extra;
+}
+
+TEST(ScenarioLoader, DrivesMakeAClosedLoop) {
+  const Scenario s = ParseScenario(
+      ClosedLoop("  - {kind: canopen_cia402, wheel: left, node_id: 11, name: drive_left}\n"
+                 "  - {kind: canopen_cia402, wheel: right, node_id: 12,\n"
+                 "     objects: {\"0x6060\": 9, \"0x1400sub5\": 100}}\n",
+                 "faults:\n"
+                 "  - {type: drive, kind: overcurrent, drive: drive_left, start_s: 1}\n"
+                 "  - {type: drive, kind: torque_limit, drive: drive12, start_s: 1, end_s: 2,\n"
+                 "     torque_limit_nm: 0.5}\n"
+                 "  - {type: device, kind: silent, node: drive12, start_s: 3}\n"),
+      kFile);
+  ASSERT_TRUE(s.firmware_motion);
+  ASSERT_TRUE(s.firmware_motion->goal);
+  EXPECT_DOUBLE_EQ(s.firmware_motion->goal->x(), 10);
+  EXPECT_TRUE(s.motion.empty());
+  ASSERT_EQ(s.devices.size(), 2u);
+  const auto& d = s.devices[1].drive;
+  EXPECT_EQ(d.name, "drive12");
+  EXPECT_EQ(d.node.default_mode, 9);
+  EXPECT_EQ(d.node.rpdo[0].event_ms, 100);
+  EXPECT_DOUBLE_EQ(d.node.gear_ratio, 20);  // the platform motor's
+  EXPECT_NEAR(d.motor_torque_limit_nm, 4.8, 1e-12);  // kt x gear x max current < 5 N*m
+  ASSERT_EQ(s.faults.size(), 3u);
+  EXPECT_EQ(s.faults[1].drive.kind, DriveFault::Kind::kTorqueLimit);
+  EXPECT_DOUBLE_EQ(s.faults[1].drive.torque_limit_nm, 0.5);
+}
+
+TEST(ScenarioLoader, ClosedLoopMistakesAreNamed) {
+  const std::string both =
+      "  - {kind: canopen_cia402, wheel: left, node_id: 11}\n"
+      "  - {kind: canopen_cia402, wheel: right, node_id: 12}\n";
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(ClosedLoop("  - {kind: canopen_cia402, wheel: left, node_id: 11}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("driven wheel 'right' has no drive")));
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(
+            ClosedLoop("  - {kind: canopen_cia402, wheel: caster_front, node_id: 11}\n"), kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("has no motor")));
+  EXPECT_THAT(
+      [&] { (void)ParseScenario(Minimal("devices:\n" + both), kFile); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("takes its motion from the firmware")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(ClosedLoop(both,
+                                       "faults:\n  - {type: drive, kind: stuck, drive: nope, "
+                                       "start_s: 1}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("'nope' is not the name of a drive")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(ClosedLoop(both,
+                                       "faults:\n  - {type: device, kind: reboot, node: drive11, "
+                                       "start_s: 1, end_s: 2}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("its own faults are type: drive")));
+  EXPECT_THAT(
+      [&] {
+        (void)ParseScenario(ClosedLoop("  - {kind: canopen_cia402, wheel: left, node_id: 11,\n"
+                                       "     objects: {\"0x1A00sub1\": 0x10000020}}\n"
+                                       "  - {kind: canopen_cia402, wheel: right, node_id: 12}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("TPDO1 mapping")));
 }
 
 }  // namespace
