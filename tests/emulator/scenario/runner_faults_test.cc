@@ -160,7 +160,7 @@ TEST(ScenarioFaultsParse, ErrorsNameFileLineColumnAndField) {
               "unknown key");
   ExpectError("  - {type: meteor, start_s: 1}\n", 1, "meteor", "faults[0].type",
               "'meteor' is not one of encoder_emcy, encoder_silent, frame, bus, sensor, device, "
-              "wheel_friction, torque_disturbance, bump");
+              "drive, wheel_friction, torque_disturbance, bump");
 }
 
 // ---- End to end -----------------------------------------------------------------------------
