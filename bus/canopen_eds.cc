@@ -136,7 +136,8 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
       continue;
     }
     if (line.front() == '[') {
-      if (line.back() != ']') fail(line_no, fmt::format("'{}': a section header ends with ']'", line));
+      if (line.back() != ']')
+        fail(line_no, fmt::format("'{}': a section header ends with ']'", line));
       Section s;
       s.name = Lower(Trim(line.substr(1, line.size() - 2)));
       s.line = line_no;
@@ -161,12 +162,14 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
     const auto it = s.keys.find(k);
     return it == s.keys.end() ? nullptr : &it->second;
   };
-  auto number = [&](const Section& s, std::string_view k, std::uint64_t max) -> std::optional<std::uint64_t> {
+  auto number = [&](const Section& s, std::string_view k,
+                    std::uint64_t max) -> std::optional<std::uint64_t> {
     const auto* v = key(s, k);
     if (v == nullptr || v->first.empty()) return std::nullopt;
     const auto n = ParseUnsigned(v->first);
     if (!n || *n > max) {
-      fail(v->second, fmt::format("[{}] {}: '{}' is not a number up to {}", s.name, k, v->first, max));
+      fail(v->second,
+           fmt::format("[{}] {}: '{}' is not a number up to {}", s.name, k, v->first, max));
     }
     return n;
   };
@@ -234,7 +237,8 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
     static const std::vector<std::string> kAccess{"ro", "wo", "rw", "rwr", "rww", "const"};
     if (std::find(kAccess.begin(), kAccess.end(), e.access) == kAccess.end()) {
       fail(access->second, fmt::format("[{}] AccessType: '{}' is not one of ro, wo, rw, rwr, "
-                                       "rww, const", n, access->first));
+                                       "rww, const",
+                                       n, access->first));
     }
     if (const auto* v = key(s, "defaultvalue")) e.default_value = v->first;
     if (const auto* v = key(s, "parametervalue"); v != nullptr && !v->first.empty()) {
@@ -244,17 +248,33 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
     // An integer value must read as one now (with a node id of 1): a typo is a load error.
     if (IntegerSize(e.data_type) > 0 && !e.default_value.empty() &&
         !EvaluateValue(e.default_value, 1)) {
-      const auto* v = key(s, "parametervalue") != nullptr && !key(s, "parametervalue")->first.empty()
-                          ? key(s, "parametervalue")
-                          : key(s, "defaultvalue");
-      fail(v->second, fmt::format("[{}] {}: '{}' is not an integer (decimal, 0x.., or with "
-                                  "$NODEID)", n,
-                                  v == key(s, "defaultvalue") ? "DefaultValue" : "ParameterValue",
-                                  e.default_value));
+      const auto* v =
+          key(s, "parametervalue") != nullptr && !key(s, "parametervalue")->first.empty()
+              ? key(s, "parametervalue")
+              : key(s, "defaultvalue");
+      fail(v->second,
+           fmt::format("[{}] {}: '{}' is not an integer (decimal, 0x.., or with "
+                       "$NODEID)",
+                       n, v == key(s, "defaultvalue") ? "DefaultValue" : "ParameterValue",
+                       e.default_value));
     }
     eds.entries_[{e.index, e.sub}] = std::move(e);
   }
   return eds;
+}
+
+std::uint8_t EdsFile::NodeIdFor(std::uint8_t configured, std::string_view device) const {
+  if (node_id_) {
+    if (configured == 0) configured = static_cast<std::uint8_t>(*node_id_);
+    if (*node_id_ != configured) {
+      throw std::invalid_argument(fmt::format("{}: the DCF is for node {}, the {} is node {}",
+                                              source_, *node_id_, device, configured));
+    }
+  }
+  if (configured == 0) {
+    throw std::invalid_argument(source_ + ": an EDS names no node id: give node_id");
+  }
+  return configured;
 }
 
 const EdsEntry* EdsFile::Find(std::uint16_t index, std::uint8_t sub) const {
@@ -270,11 +290,10 @@ std::uint64_t EdsFile::Integer(std::uint16_t index, std::uint8_t sub, int node_i
   }
   const auto v = EvaluateValue(e->default_value, node_id);
   if (!v) {
-    throw std::invalid_argument(fmt::format("{}:{}: [{:04X}{}] DefaultValue: '{}' is not an "
-                                            "integer",
-                                            source_, e->line, index,
-                                            sub != 0 ? fmt::format("sub{}", sub) : "",
-                                            e->default_value));
+    throw std::invalid_argument(fmt::format(
+        "{}:{}: [{:04X}{}] DefaultValue: '{}' is not an "
+        "integer",
+        source_, e->line, index, sub != 0 ? fmt::format("sub{}", sub) : "", e->default_value));
   }
   return static_cast<std::uint64_t>(*v);
 }

@@ -33,7 +33,9 @@ struct EdsEntry {
   bool pdo_mapping = false;
   int line = 0;  ///< Of its section header.
 
-  bool writable() const { return access == "rw" || access == "wo" || access == "rwr" || access == "rww"; }
+  bool writable() const {
+    return access == "rw" || access == "wo" || access == "rwr" || access == "rww";
+  }
 };
 
 class EdsFile {
@@ -46,6 +48,10 @@ class EdsFile {
   const std::map<std::string, std::string, std::less<>>& device_info() const { return info_; }
   /// [DeviceComissioning] NodeID (DCF), if given.
   std::optional<int> node_id() const { return node_id_; }
+  /// The node id a device built from this file has: `configured`, or the DCF's when 0. Throws
+  /// std::invalid_argument when a DCF names another node ("... the <device> is node N") or
+  /// neither gives one.
+  std::uint8_t NodeIdFor(std::uint8_t configured, std::string_view device) const;
   /// Every VAR (or sub-object of an ARRAY/RECORD) with its value, by (index, sub).
   const std::map<std::pair<std::uint16_t, std::uint8_t>, EdsEntry>& entries() const {
     return entries_;

@@ -174,17 +174,19 @@ void Cia402DriveNode::ResetApplication() {
   error_register_ = 0;
   demand_ = 0;
   over_current_s_ = 0;
-  for (std::size_t i = 0; i < config_.extra_objects.size(); ++i) {
-    if (extra_.size() != config_.extra_objects.size()) extra_ = config_.extra_objects;
-    if (extra_[i].index >= 0x2000) extra_[i].value = config_.extra_objects[i].value;
+  ResetExtraObjects(false);
+}
+
+void Cia402DriveNode::ResetExtraObjects(bool communication) {
+  if (extra_.size() != config_.extra_objects.size()) extra_ = config_.extra_objects;
+  for (std::size_t i = 0; i < extra_.size(); ++i) {
+    if ((extra_[i].index < 0x2000) == communication)
+      extra_[i].value = config_.extra_objects[i].value;
   }
 }
 
 void Cia402DriveNode::ResetCommunication() {
-  if (extra_.size() != config_.extra_objects.size()) extra_ = config_.extra_objects;
-  for (std::size_t i = 0; i < extra_.size(); ++i) {
-    if (extra_[i].index < 0x2000) extra_[i].value = config_.extra_objects[i].value;
-  }
+  ResetExtraObjects(true);
   heartbeat_ms_ = config_.heartbeat_ms;
   consumer_heartbeat_ = config_.consumer_heartbeat;
   const std::uint8_t id = config_.node_id;
@@ -323,8 +325,7 @@ std::uint16_t Cia402DriveNode::statusword() const {
 WheelDriveCommand Cia402DriveNode::WheelCommand() const {
   WheelDriveCommand c;
   const bool torque_on = (state_ == State::kOperationEnabled || state_ == State::kQuickStopActive ||
-                          state_ == State::kFaultReactionActive) &&
-                         !reaction_coast_;
+                          state_ == State::kFaultReactionActive);
   if (!torque_on) return c;
   double v = demand_ * UnitToWheelRadS();
   if (polarity_ & 0x40) v = -v;
@@ -358,13 +359,12 @@ void Cia402DriveNode::EnterFault(std::uint16_t code, std::uint8_t error_register
   EmitEmcy(code, t_ns);
   const bool torque_on = state_ == State::kOperationEnabled || state_ == State::kQuickStopActive;
   // Fault reaction (0x605E): 0 disables the drive function at once; 1/2 ramp down first.
-  reaction_coast_ = coast || !torque_on || fault_reaction_option_ <= 0;
   reaction_profile_ramp_ = fault_reaction_option_ == 1;
-  state_ = State::kFaultReactionActive;
-  if (reaction_coast_) {
+  if (coast || !torque_on || fault_reaction_option_ <= 0) {
     demand_ = 0;
     state_ = State::kFault;
-    reaction_coast_ = false;
+  } else {
+    state_ = State::kFaultReactionActive;
   }
 }
 
@@ -434,14 +434,10 @@ void Cia402DriveNode::Controlword(std::uint16_t cw, std::int64_t t_ns) {
       if (shutdown) state_ = State::kReadyToSwitchOn;          // 8
       if (disable_voltage) state_ = State::kSwitchOnDisabled;  // 9
       if (quick_stop) {                                        // 11
-        state_ = State::kQuickStopActive;
-        reaction_coast_ = quick_stop_option_ <= 0;
         reaction_profile_ramp_ = quick_stop_option_ == 1 || quick_stop_option_ == 5;
         stay_in_quick_stop_ = quick_stop_option_ == 5 || quick_stop_option_ == 6;
-        if (reaction_coast_) {
-          reaction_coast_ = false;
-          state_ = State::kSwitchOnDisabled;
-        }
+        // Option 0 disables the drive function at once: the wheel coasts.
+        state_ = quick_stop_option_ <= 0 ? State::kSwitchOnDisabled : State::kQuickStopActive;
       }
       break;
     case State::kQuickStopActive:

@@ -177,6 +177,8 @@ class Cia402DriveNode {
 
   void ResetApplication();
   void ResetCommunication();
+  // Extra (EDS) objects back to their defaults: the communication area (< 0x2000) or the rest.
+  void ResetExtraObjects(bool communication);
   void ScheduleBoot(std::int64_t t_ns);
   void EnterOperational(std::int64_t t_ns);
   void LeaveOperational(std::int64_t t_ns);
@@ -233,8 +235,7 @@ class Cia402DriveNode {
   std::uint8_t error_register_ = 0;
   std::vector<Cia406NodeConfig::ExtraObject> extra_;
   // Drive function.
-  double demand_ = 0;            // velocity unit, motor side, before polarity
-  bool reaction_coast_ = false;  // fault reaction / quick stop without torque
+  double demand_ = 0;  // velocity unit, motor side, before polarity
   bool reaction_profile_ramp_ = false;
   bool stay_in_quick_stop_ = false;
   // Measurement.

@@ -120,16 +120,7 @@ void SetCia402Object(Cia402DriveConfig& c, std::uint16_t index, std::uint8_t sub
 }
 
 void ApplyCia402Eds(const bus::EdsFile& eds, Cia402DriveConfig& c) {
-  if (eds.node_id()) {
-    if (c.node_id == 0) c.node_id = static_cast<std::uint8_t>(*eds.node_id());
-    if (*eds.node_id() != c.node_id) {
-      throw std::invalid_argument(fmt::format("{}: the DCF is for node {}, the drive is node {}",
-                                              eds.source(), *eds.node_id(), c.node_id));
-    }
-  }
-  if (c.node_id == 0) {
-    throw std::invalid_argument(eds.source() + ": an EDS names no node id: give node_id");
-  }
+  c.node_id = eds.NodeIdFor(c.node_id, "drive");
   const int id = c.node_id;
   // A mapping record in the file replaces the default mapping as a whole.
   for (std::uint16_t rec : {0x1600, 0x1601, 0x1A00, 0x1A01}) {

@@ -10,8 +10,16 @@ namespace {
 
 bool BuiltIn(std::uint16_t index) {
   switch (index) {
-    case 0x1000: case 0x1001: case 0x1017: case 0x1018: case 0x1800: case 0x1A00:
-    case 0x6000: case 0x6004: case 0x6030: case 0x6200:
+    case 0x1000:
+    case 0x1001:
+    case 0x1017:
+    case 0x1018:
+    case 0x1800:
+    case 0x1A00:
+    case 0x6000:
+    case 0x6004:
+    case 0x6030:
+    case 0x6200:
       return true;
     default:
       return false;
@@ -33,8 +41,10 @@ void SetCia406Object(Cia406NodeConfig& node, std::uint16_t index, std::uint8_t s
   } else if (key(0x1017, 0)) {
     node.heartbeat_ms = static_cast<std::uint16_t>(value);
   } else if (index == 0x1018 && sub >= 1 && sub <= 4) {
-    (sub == 1 ? node.vendor_id : sub == 2 ? node.product_code : sub == 3 ? node.revision
-                                                                        : node.serial) = value;
+    (sub == 1   ? node.vendor_id
+     : sub == 2 ? node.product_code
+     : sub == 3 ? node.revision
+                : node.serial) = value;
   } else if (key(0x1800, 2)) {
     node.tpdo1_transmission_type = static_cast<std::uint8_t>(value);
   } else if (key(0x1800, 5) || key(0x6200, 0)) {
@@ -55,16 +65,7 @@ void SetCia406Object(Cia406NodeConfig& node, std::uint16_t index, std::uint8_t s
 
 Cia406EdsValues ApplyCia406Eds(const bus::EdsFile& eds, Cia406NodeConfig& node) {
   Cia406EdsValues out;
-  if (eds.node_id()) {
-    if (node.node_id == 0) node.node_id = static_cast<std::uint8_t>(*eds.node_id());
-    if (*eds.node_id() != node.node_id) {
-      throw std::invalid_argument(fmt::format("{}: the DCF is for node {}, the device is node {}",
-                                              eds.source(), *eds.node_id(), node.node_id));
-    }
-  }
-  if (node.node_id == 0) {
-    throw std::invalid_argument(eds.source() + ": an EDS names no node id: give node_id");
-  }
+  node.node_id = eds.NodeIdFor(node.node_id, "device");
   const int id = node.node_id;
   for (const auto& [key, e] : eds.entries()) {
     const int size = bus::EdsFile::IntegerSize(e.data_type);
@@ -76,8 +77,10 @@ Cia406EdsValues ApplyCia406Eds(const bus::EdsFile& eds, Cia406NodeConfig& node) 
     if (e.index == 0x1A00 && e.sub >= 1) {
       const std::uint32_t want = e.sub == 1 ? 0x60040020u : 0x60300110u;
       if (e.sub > 2 || v != want) {
-        Fail(eds, e, fmt::format("TPDO1 mapping 0x{:08X}: this node maps 0x6004 (position) and "
-                                 "0x6030:1 (speed)", v));
+        Fail(eds, e,
+             fmt::format("TPDO1 mapping 0x{:08X}: this node maps 0x6004 (position) and "
+                         "0x6030:1 (speed)",
+                         v));
       }
       continue;
     }
