@@ -9,7 +9,9 @@
 #include <numbers>
 #include <vector>
 
+#include "bus/canopen_eds.h"
 #include "emulator/devices/cia402_drive_node.h"
+#include "emulator/devices/cia402_eds.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -438,6 +440,42 @@ TEST(Cia402DriveNode, RejectsABadConfiguration) {
   c.tpdo[0].map = {0x60410010};
   EXPECT_NO_THROW(Cia402DriveNode(c, 1.0));
   EXPECT_THROW(Cia402DriveNode(c, 0.0), std::invalid_argument);
+}
+
+TEST(Cia402Eds, ADcfSetsTheDriveDefaultsAndItsMapping) {
+  const bus::EdsFile dcf = bus::EdsFile::Parse(
+      "[DeviceComissioning]\nNodeID=7\n"
+      "[6060]\nDataType=0x0002\nAccessType=rw\nDefaultValue=9\n"
+      "[6007]\nDataType=0x0003\nAccessType=rw\nDefaultValue=3\n"
+      "[1800sub1]\nDataType=0x0007\nAccessType=rw\nDefaultValue=$NODEID+0x180\n"
+      "[1A00sub0]\nDataType=0x0005\nAccessType=rw\nDefaultValue=1\n"
+      "[1A00sub1]\nDataType=0x0007\nAccessType=rw\nDefaultValue=0x60640020\n"
+      "[2100]\nDataType=0x0006\nAccessType=rw\nDefaultValue=42\n",
+      "servo.dcf");
+  Cia402DriveConfig c;
+  c.node_id = 0;
+  ApplyCia402Eds(dcf, c);
+  EXPECT_EQ(c.node_id, 7);
+  EXPECT_EQ(c.default_mode, 9);
+  EXPECT_EQ(c.abort_connection_option, 3);
+  EXPECT_EQ(c.tpdo[0].cob_id, 0x187u);
+  EXPECT_EQ(c.tpdo[0].map, std::vector<std::uint32_t>{0x60640020});
+  ASSERT_EQ(c.extra_objects.size(), 1u);
+  EXPECT_EQ(c.extra_objects[0].index, 0x2100);
+  Cia402DriveNode d(c, 1.0);
+  (void)d.Poll(100 * kMs);
+  const auto up = d.OnFrame(Std(0x607, {0x40, 0x00, 0x21, 0, 0, 0, 0, 0}), 100 * kMs);
+  ASSERT_EQ(up.size(), 1u);
+  EXPECT_EQ(up[0].frame.data[0], 0x4B);  // 2-byte upload
+  EXPECT_EQ(Data(up[0].frame), 42u);
+  Cia402DriveConfig other;
+  other.node_id = 8;
+  EXPECT_THAT([&] { ApplyCia402Eds(dcf, other); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  ::testing::HasSubstr("servo.dcf: the DCF is for node 7, the drive is node 8")));
+  EXPECT_THAT([&] { SetCia402Object(other, 0x6502, 0, 1); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  ::testing::HasSubstr("0x6502 sub 0 is not a setting of the drive")));
 }
 
 }  // namespace
