@@ -375,8 +375,15 @@ void Run::RunPhases() {
             sources({&tick}),
             [&] {
               if (run_.now_ns > boot_limit_ns) {
-                run_.Fail("the encoder nodes were not started (NMT start) within 10 s of "
-                          "virtual time");
+                std::string waiting;
+                for (const auto& d : devices_) {
+                  if (!d->Ready()) waiting += (waiting.empty() ? "" : ", ") + d->name();
+                }
+                run_.Fail(fmt::format("the CANopen nodes were not started (NMT start) within 10 s "
+                                      "of virtual time: {}",
+                                      waiting.empty() ? "every node waits for the firmware's "
+                                                        "SDO/NMT answer"
+                                                      : waiting));
               }
               return std::all_of(devices_.begin(), devices_.end(),
                                  [](const auto& d) { return d->Ready(); }) &&

@@ -380,6 +380,34 @@ TEST_F(ScenarioRun, DbcImuFromTheScenarioSendsItsOwnFrames) {
   EXPECT_NEAR(accz_sum / n_accel, 1.0, 0.01);  // g
 }
 
+// Drives on the bus that the firmware does not master (the reference firmware does not yet
+// command CiA 402 drives): the drives boot (their boot-ups are in can.log) and the run fails
+// naming the first one the firmware left unanswered.
+TEST_F(ScenarioRun, DrivesTheFirmwareDoesNotAnswerAreNamed) {
+  Scenario s = ShortPaper000();
+  s.motion.clear();
+  s.firmware_motion = FirmwareMotionSpec{};
+  s.faults.clear();
+  s.timing.timeout_s = 1.0;
+  for (const auto& [wheel, id] : {std::pair<std::string, int>{"left", 11}, {"right", 12}}) {
+    DeviceSpec d;
+    d.kind = DeviceSpec::Kind::kCanopenCia402;
+    d.drive.name = "drive" + std::to_string(id);
+    d.drive.wheel_name = wheel;
+    d.drive.wheel_index = s.platform.wheel_index(wheel);
+    d.drive.motor_torque_limit_nm = 4.8;
+    d.drive.node.node_id = static_cast<std::uint8_t>(id);
+    d.drive.node.gear_ratio = 20;
+    s.devices.push_back(d);
+  }
+  const RunResult r = RunScenario(s, Options(dir_));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("did not answer node 11's boot-up"));
+  const std::string log = Slurp(dir_ / "can.log");
+  EXPECT_THAT(log, HasSubstr("70B#00"));
+  EXPECT_THAT(log, HasSubstr("70C#00"));
+}
+
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {
   const Scenario s =
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml");
