@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "bus/canopen.h"
+#include "bus/cia402.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -19,31 +20,12 @@ namespace sdo = bus::canopen::sdo;
 constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
 constexpr std::int64_t kNsPerMs = 1'000'000;
 
-// CiA 402 objects (drive profile).
-constexpr std::uint16_t kAbortConnectionOption = 0x6007;
-constexpr std::uint16_t kErrorCode = 0x603F;
-constexpr std::uint16_t kControlword = 0x6040;
-constexpr std::uint16_t kStatusword = 0x6041;
-constexpr std::uint16_t kQuickStopOption = 0x605A;
-constexpr std::uint16_t kFaultReactionOption = 0x605E;
-constexpr std::uint16_t kModesOfOperation = 0x6060;
-constexpr std::uint16_t kModesDisplay = 0x6061;
-constexpr std::uint16_t kPositionActual = 0x6064;
-constexpr std::uint16_t kVelocityActual = 0x606C;
-constexpr std::uint16_t kVelocityWindow = 0x606D;
-constexpr std::uint16_t kVelocityThreshold = 0x606F;
-constexpr std::uint16_t kMaxTorque = 0x6072;
-constexpr std::uint16_t kRatedCurrent = 0x6075;
-constexpr std::uint16_t kRatedTorque = 0x6076;
-constexpr std::uint16_t kTorqueActual = 0x6077;
-constexpr std::uint16_t kCurrentActual = 0x6078;
-constexpr std::uint16_t kPolarity = 0x607E;
-constexpr std::uint16_t kMaxMotorSpeed = 0x6080;
-constexpr std::uint16_t kProfileAcceleration = 0x6083;
-constexpr std::uint16_t kProfileDeceleration = 0x6084;
-constexpr std::uint16_t kQuickStopDeceleration = 0x6085;
-constexpr std::uint16_t kTargetVelocity = 0x60FF;
-constexpr std::uint16_t kSupportedModes = 0x6502;
+// CiA 402 definitions (bus/cia402.h).
+using namespace bus::cia402::od;
+using bus::cia402::StatuswordPattern;
+using bus::cia402::mode::kCyclicSyncVelocity;
+using bus::cia402::mode::kProfileVelocity;
+namespace sw_bits = bus::cia402::statusword;
 // CiA 301 objects beyond bus/canopen.h's.
 constexpr std::uint16_t kConsumerHeartbeat = 0x1016;
 constexpr std::uint16_t kRpdoCommunication = 0x1400;
@@ -51,13 +33,10 @@ constexpr std::uint16_t kRpdoMapping = 0x1600;
 constexpr std::uint16_t kTpdoCommunication = 0x1800;
 constexpr std::uint16_t kTpdoMapping = 0x1A00;
 
-constexpr std::int8_t kModeProfileVelocity = 3;
-constexpr std::int8_t kModeCyclicSyncVelocity = 9;
-
-// EMCY error codes and error register bits (CiA 301 / CiA 402).
-constexpr std::uint16_t kEmcyOverCurrent = 0x2310;
-constexpr std::uint16_t kEmcyHeartbeat = 0x8130;
-constexpr std::uint16_t kEmcyRpdoTimeout = 0x8250;
+// EMCY error codes (bus/cia402.h) and error register bits (CiA 301).
+using bus::cia402::emcy::kHeartbeat;
+using bus::cia402::emcy::kOverCurrent;
+using bus::cia402::emcy::kRpdoTimeout;
 constexpr std::uint8_t kRegGeneric = 0x01, kRegCurrent = 0x02, kRegCommunication = 0x10;
 
 bool ValidTransmissionType(std::uint32_t t) { return t <= 240 || t == 254 || t == 255; }
@@ -132,27 +111,7 @@ Cia402DriveNode::Cia402DriveNode(const Cia402DriveConfig& config, double motor_t
   last_ramp_ns_ = power_on_ns;
 }
 
-const char* Cia402DriveNode::StateName(State s) {
-  switch (s) {
-    case State::kNotReadyToSwitchOn:
-      return "not_ready_to_switch_on";
-    case State::kSwitchOnDisabled:
-      return "switch_on_disabled";
-    case State::kReadyToSwitchOn:
-      return "ready_to_switch_on";
-    case State::kSwitchedOn:
-      return "switched_on";
-    case State::kOperationEnabled:
-      return "operation_enabled";
-    case State::kQuickStopActive:
-      return "quick_stop_active";
-    case State::kFaultReactionActive:
-      return "fault_reaction_active";
-    case State::kFault:
-      return "fault";
-  }
-  return "?";
-}
+const char* Cia402DriveNode::StateName(State s) { return bus::cia402::StateName(s); }
 
 void Cia402DriveNode::ResetApplication() {
   state_ = State::kNotReadyToSwitchOn;
@@ -229,7 +188,7 @@ void Cia402DriveNode::LeaveOperational(std::int64_t t_ns) {
   for (Pdo& p : tpdo_) p.next_ns = kNever;
   for (Pdo& p : rpdo_) p.next_ns = kNever;
   // The master took the node out of operational while it drove: the connection is lost.
-  if (state_ == State::kOperationEnabled) AbortConnection(kEmcyHeartbeat, t_ns);
+  if (state_ == State::kOperationEnabled) AbortConnection(kHeartbeat, t_ns);
 }
 
 void Cia402DriveNode::SetMeasurement(double angle_rad, double omega_rad_s, double torque_nm,
@@ -277,48 +236,24 @@ std::int16_t Cia402DriveNode::CurrentActual() const {
 }
 
 std::uint16_t Cia402DriveNode::statusword() const {
-  std::uint16_t sw = 0;
-  switch (state_) {
-    case State::kNotReadyToSwitchOn:
-      sw = 0x0000;
-      break;
-    case State::kSwitchOnDisabled:
-      sw = 0x0040;
-      break;
-    case State::kReadyToSwitchOn:
-      sw = 0x0031;
-      break;
-    case State::kSwitchedOn:
-      sw = 0x0033;
-      break;
-    case State::kOperationEnabled:
-      sw = 0x0037;
-      break;
-    case State::kQuickStopActive:
-      sw = 0x0017;
-      break;
-    case State::kFaultReactionActive:
-      sw = 0x001F;
-      break;
-    case State::kFault:
-      sw = 0x0008;
-      break;
-  }
-  sw |= 0x0200;  // remote: controlled over the bus
+  std::uint16_t sw = StatuswordPattern(state_);
+  sw |= sw_bits::kRemote;  // remote: controlled over the bus
   const double actual = VelocityActual();
   if (state_ == State::kOperationEnabled) {
-    const double target = mode_ == kModeProfileVelocity || mode_ == kModeCyclicSyncVelocity
+    const double target = mode_ == kProfileVelocity || mode_ == kCyclicSyncVelocity
                               ? static_cast<double>(target_velocity_)
                               : 0.0;
-    if (std::abs(actual - target) <= velocity_window_) sw |= 0x0400;
-    if (mode_ == kModeProfileVelocity && std::abs(actual) <= velocity_threshold_) sw |= 0x1000;
-    if (mode_ == kModeCyclicSyncVelocity) sw |= 0x1000;
+    if (std::abs(actual - target) <= velocity_window_) sw |= sw_bits::kTargetReached;
+    if (mode_ == kProfileVelocity && std::abs(actual) <= velocity_threshold_)
+      sw |= sw_bits::kModeSpecific12;
+    if (mode_ == kCyclicSyncVelocity) sw |= sw_bits::kModeSpecific12;
   } else if (state_ == State::kQuickStopActive && demand_ == 0 &&
              std::abs(actual) <= velocity_window_) {
-    sw |= 0x0400;
+    sw |= sw_bits::kTargetReached;
   }
   const WheelDriveCommand cmd = WheelCommand();
-  if (cmd.torque_limit_nm > 0 && std::abs(torque_nm_) >= 0.98 * cmd.torque_limit_nm) sw |= 0x0800;
+  if (cmd.torque_limit_nm > 0 && std::abs(torque_nm_) >= 0.98 * cmd.torque_limit_nm)
+    sw |= sw_bits::kInternalLimit;
   return sw;
 }
 
@@ -370,7 +305,7 @@ void Cia402DriveNode::EnterFault(std::uint16_t code, std::uint8_t error_register
 
 void Cia402DriveNode::TripOverCurrent(std::int64_t t_ns, bool persists) {
   overcurrent_cause_ = persists;
-  EnterFault(kEmcyOverCurrent, kRegCurrent, true, t_ns);
+  EnterFault(kOverCurrent, kRegCurrent, true, t_ns);
 }
 
 void Cia402DriveNode::RaiseFault(std::uint16_t error_code, std::int64_t t_ns) {
@@ -464,16 +399,16 @@ void Cia402DriveNode::StepRamp(std::int64_t t_ns) {
   };
   switch (state_) {
     case State::kOperationEnabled: {
-      if (stuck_ || (dt == 0 && mode_ != kModeCyclicSyncVelocity)) break;
+      if (stuck_ || (dt == 0 && mode_ != kCyclicSyncVelocity)) break;
       double target = 0;
-      if (mode_ == kModeProfileVelocity || mode_ == kModeCyclicSyncVelocity) {
+      if (mode_ == kProfileVelocity || mode_ == kCyclicSyncVelocity) {
         target = target_velocity_;
       }
       if (max_motor_speed_ > 0) {
         target = std::clamp(target, -static_cast<double>(max_motor_speed_),
                             static_cast<double>(max_motor_speed_));
       }
-      if (mode_ == kModeCyclicSyncVelocity) {
+      if (mode_ == kCyclicSyncVelocity) {
         demand_ = target;
       } else {
         // Away from zero: acceleration; toward zero (or through it): deceleration.
@@ -501,8 +436,7 @@ void Cia402DriveNode::StepRamp(std::int64_t t_ns) {
   const bool torque_on = WheelCommand().torque_limit_nm > 0;
   if (config_.trip_current_a > 0 && torque_on && std::abs(current_a_) > config_.trip_current_a) {
     over_current_s_ += dt;
-    if (over_current_s_ >= config_.trip_time_s)
-      EnterFault(kEmcyOverCurrent, kRegCurrent, true, t_ns);
+    if (over_current_s_ >= config_.trip_time_s) EnterFault(kOverCurrent, kRegCurrent, true, t_ns);
   } else {
     over_current_s_ = 0;
   }
@@ -524,12 +458,12 @@ std::vector<NodeFrame> Cia402DriveNode::Poll(std::int64_t t_ns) {
   if (nmt_ != NmtState::kOff) {
     if (consumer_deadline_ns_ <= t_ns) {
       consumer_deadline_ns_ = kNever;  // supervision resumes with the next heartbeat
-      AbortConnection(kEmcyHeartbeat, t_ns);
+      AbortConnection(kHeartbeat, t_ns);
     }
     for (Pdo& p : rpdo_) {
       if (p.next_ns <= t_ns) {
         p.next_ns = kNever;
-        AbortConnection(kEmcyRpdoTimeout, t_ns);
+        AbortConnection(kRpdoTimeout, t_ns);
       }
     }
   }
@@ -926,7 +860,7 @@ std::uint32_t Cia402DriveNode::Read(std::uint16_t index, std::uint8_t sub, std::
       value = static_cast<std::uint32_t>(target_velocity_);
       break;
     case kSupportedModes:
-      value = 1u << (kModeProfileVelocity - 1) | 1u << (kModeCyclicSyncVelocity - 1);
+      value = 1u << (kProfileVelocity - 1) | 1u << (kCyclicSyncVelocity - 1);
       break;
     default:
       for (const auto& e : extra_) {
@@ -1047,7 +981,7 @@ std::uint32_t Cia402DriveNode::Write(std::uint16_t index, std::uint8_t sub, std:
       break;
     case kModesOfOperation: {
       const auto m = static_cast<std::int8_t>(SignedOf(value, 8));
-      const bool supported = m == 0 || m == kModeProfileVelocity || m == kModeCyclicSyncVelocity;
+      const bool supported = m == 0 || m == kProfileVelocity || m == kCyclicSyncVelocity;
       if (!supported) {
         if (!from_pdo) return sdo::kAbortValue;
         break;  // from a PDO: ignored, the display keeps the mode in effect

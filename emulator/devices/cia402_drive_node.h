@@ -48,6 +48,7 @@
 #include <vector>
 
 #include "bus/can_frame.h"
+#include "bus/cia402.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/wheel_drive.h"
 
@@ -110,16 +111,7 @@ class Cia402DriveNode {
     kOperational = 0x05,
     kStopped = 0x04
   };
-  enum class State : std::uint8_t {
-    kNotReadyToSwitchOn,
-    kSwitchOnDisabled,
-    kReadyToSwitchOn,
-    kSwitchedOn,
-    kOperationEnabled,
-    kQuickStopActive,
-    kFaultReactionActive,
-    kFault,
-  };
+  using State = bus::cia402::State;
 
   /// Powers on at power_on_ns. `motor_torque_limit_nm`: the motor's own wheel-side limit (the
   /// platform's), for the torque scaling. Throws std::invalid_argument on a bad configuration.
