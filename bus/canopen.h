@@ -90,6 +90,8 @@ inline constexpr std::uint32_t kPdoCobIdExtended = 1u << 29;  ///< 29-bit CAN id
 namespace od {
 inline constexpr std::uint16_t kDeviceType = 0x1000;
 inline constexpr std::uint16_t kErrorRegister = 0x1001;
+/// Consumer heartbeat time, sub 1..n: u32, node id << 16 | time in ms (0 = off).
+inline constexpr std::uint16_t kConsumerHeartbeatTime = 0x1016;
 inline constexpr std::uint16_t kProducerHeartbeatTime = 0x1017;  ///< u16, ms; 0 = off.
 inline constexpr std::uint16_t kIdentity = 0x1018;
 inline constexpr std::uint16_t kTpdo1Communication = 0x1800;

@@ -32,6 +32,15 @@ CanopenMaster::CanopenMaster(const CanopenMasterConfig& config, const FwProtocol
       throw std::invalid_argument(fmt::format("node_id {} is used twice", id));
     }
   }
+  for (const NodeSdoWrite& w : config_.node_writes) {
+    if (!seen.count(w.node_id)) {
+      throw std::invalid_argument(
+          fmt::format("SDO write to node {}, which is not supervised", w.node_id));
+    }
+    if (w.size < 1 || w.size > 4) {
+      throw std::invalid_argument(fmt::format("SDO write of {} bytes (1..4)", w.size));
+    }
+  }
   if (config_.node_ids.size() > 32) {
     throw std::invalid_argument("at most 32 CANopen nodes are supervised");
   }
@@ -54,6 +63,9 @@ CanopenMaster::CanopenMaster(const CanopenMasterConfig& config, const FwProtocol
     }
     if (config_.heartbeat_producer_ms != 0) {
       r.steps.push_back({od::kProducerHeartbeatTime, 0, config_.heartbeat_producer_ms, 2});
+    }
+    for (const NodeSdoWrite& w : config_.node_writes) {
+      if (w.node_id == id) r.steps.push_back({w.index, w.subindex, w.value, w.size});
     }
     runs_.push_back(r);
   }

@@ -5,7 +5,8 @@
 ///
 /// Start-up, per node: wait for its boot-up message (0x700+id [00]; a heartbeat also shows the
 /// node is there) up to boot_timeout -> configure by expedited SDO download (0x1800:2 TPDO1
-/// transmission type, u8; 0x1017 producer heartbeat time, u16 ms; each only when configured) ->
+/// transmission type, u8; 0x1017 producer heartbeat time, u16 ms; each only when configured;
+/// then the node's own writes of CanopenMasterConfig::node_writes, e.g. a drive's mode) ->
 /// NMT start (0x000 [01 id]) -> operational. A node whose boot-up never comes gets the fault
 /// kFaultBootTimeout and the rest goes on; if it boots later it is configured and started then.
 /// A boot-up at any time (node reset) restarts that node's sequence. An SDO abort or an SDO that
@@ -40,8 +41,18 @@ enum FaultBit : std::uint32_t {
   kFaultConfig = 1u << 8,           ///< Reserved: the configuration could not be applied.
 };
 
+/// One expedited SDO download to one node at start-up.
+struct NodeSdoWrite {
+  std::uint8_t node_id = 0;
+  std::uint16_t index = 0;
+  std::uint8_t subindex = 0;
+  std::uint32_t value = 0;
+  std::uint8_t size = 1;  ///< Bytes, 1..4.
+};
+
 struct CanopenMasterConfig {
-  std::vector<std::uint8_t> node_ids;  ///< 1..127, distinct.
+  std::vector<std::uint8_t> node_ids;     ///< 1..127, distinct.
+  std::vector<NodeSdoWrite> node_writes;  ///< After the common steps, in order, per node.
   std::int64_t boot_timeout_ns = 2'000'000'000;
   std::uint16_t heartbeat_producer_ms = 100;        ///< Written to 0x1017; 0 = not written.
   std::int64_t heartbeat_timeout_ns = 350'000'000;  ///< 0 = no supervision.

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "bus/canopen.h"
+#include "bus/cia402.h"
 
 namespace wheelhil::fw {
 namespace {
@@ -27,10 +28,39 @@ std::uint32_t Bit(bool b, std::uint32_t bit) { return b ? bit : 0u; }
 
 }  // namespace
 
+std::uint64_t MasterHeartbeatCycles(const FwConfig& config) {
+  if (!config.drives.enabled || config.drives.master_heartbeat_s <= 0) return 0;
+  return static_cast<std::uint64_t>(
+      std::max(1.0, std::ceil(config.drives.master_heartbeat_s / config.sync.period_s - 1e-9)));
+}
+
+double DriveHeartbeatTimeoutS(const FwConfig& config) {
+  if (config.drives.drive_heartbeat_timeout_s > 0) return config.drives.drive_heartbeat_timeout_s;
+  return 3.0 * static_cast<double>(MasterHeartbeatCycles(config)) * config.sync.period_s;
+}
+
 CanopenMasterConfig MasterConfigFrom(const FwConfig& config) {
   CanopenMasterConfig m;
   for (const auto& n : config.encoder_nodes()) {
     m.node_ids.push_back(static_cast<std::uint8_t>(n.node_id));
+  }
+  const DriveSettings& d = config.drives;
+  for (const auto& n : d.nodes) {
+    const auto id = static_cast<std::uint8_t>(n.node_id);
+    m.node_ids.push_back(id);
+    namespace c402 = bus::cia402::od;
+    m.node_writes.push_back(
+        {id, c402::kModesOfOperation, 0, static_cast<std::uint32_t>(d.mode), 1});
+    m.node_writes.push_back({id, c402::kAbortConnectionOption, 0,
+                             static_cast<std::uint32_t>(d.abort_connection_option), 2});
+    m.node_writes.push_back(
+        {id, c402::kQuickStopOption, 0, static_cast<std::uint32_t>(d.quick_stop_option), 2});
+    if (d.master_heartbeat_s > 0) {
+      const std::uint32_t ms =
+          static_cast<std::uint32_t>(std::llround(DriveHeartbeatTimeoutS(config) * 1e3));
+      m.node_writes.push_back({id, bus::canopen::od::kConsumerHeartbeatTime, 1,
+                               static_cast<std::uint32_t>(d.master_node_id) << 16 | ms, 4});
+    }
   }
   const CanopenSettings& c = config.canopen;
   m.boot_timeout_ns = ToNs(c.boot_timeout_s);
@@ -62,7 +92,7 @@ CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config) {
   return a;
 }
 
-FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
+FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol, const DriveProtocol* drives)
     : config_(config),
       protocol_(protocol),
       master_(MasterConfigFrom(config), protocol),
@@ -128,6 +158,26 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol)
     }
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(fmt::format("{}: {}", where, e.what()));
+  }
+  if (config.drives.enabled) {
+    if (!drives) {
+      throw std::invalid_argument(fmt::format(
+          "{}: drives: no drive protocol (cia402_drive.dbc) given", config.source_path));
+    }
+    const double hb_s = static_cast<double>(MasterHeartbeatCycles(config)) * config.sync.period_s;
+    if (hb_s > 0 && DriveHeartbeatTimeoutS(config) <= hb_s) {
+      throw std::invalid_argument(fmt::format(
+          "{}: drives: drive_heartbeat_timeout_s ({}) must exceed the firmware's heartbeat "
+          "period ({} s: master_heartbeat_s rounded up to whole sync periods)",
+          config.source_path, DriveHeartbeatTimeoutS(config), hb_s));
+    }
+    drives_.emplace(config.drives, *drives);
+    heartbeat_every_cycles_ = MasterHeartbeatCycles(config);
+    if (config.path.enabled) {
+      bool holonomic = false;
+      for (const auto& n : config.drives.nodes) holonomic = holonomic || n.has_rollers;
+      follower_.emplace(config.path, holonomic);
+    }
   }
 }
 
@@ -232,8 +282,18 @@ void FwApp::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns,
     for (const auto& n : nodes_) {
       if (n.node_id == id) return true;
     }
+    for (const auto& n : config_.drives.nodes) {
+      if (n.node_id == id) return true;
+    }
     return false;
   };
+  if (drives_) {
+    bool undecodable = false;
+    if (drives_->OnFrame(frame, undecodable)) {  // A drive's TPDO1 / TPDO2.
+      if (undecodable) bad();
+      return;
+    }
+  }
   switch (kind) {
     case FrameKind::kUnknown:
       ++stats_.unknown_frames;
@@ -384,6 +444,8 @@ void FwApp::OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out) {
     ++stats_.steps;
   }
 
+  if (drives_) CommandDrives(c.index, out);
+
   // Estimate frames (held values when no step happened), then the status frame.
   OutValues v;
   v.Set(OutField::kCycle, static_cast<double>(c.index));
@@ -451,6 +513,55 @@ void FwApp::OnCycle(const AssembledCycle& c, std::vector<bus::CanFrame>& out) {
   SendStatus(c.index, out);
 }
 
+bool FwApp::EstimateReady() const { return have_step_cycle_ && (!p000_ || p000_->calibrated()); }
+
+Pose2 FwApp::SteeringPose() const {
+  if (p000_) {
+    return config_.path.steer_from == SteerFrom::kRaw ? p000_->pose_encoder()
+                                                      : p000_->pose_corrected();
+  }
+  if (p001_) return PaperToForwardPose(p001_->pose());
+  return p002_pose_;
+}
+
+void FwApp::CommandDrives(std::uint64_t cycle, std::vector<bus::CanFrame>& out) {
+  // Supervision first: a drive or encoder that is gone stops the robot before it is commanded.
+  const auto& master_nodes = master_.nodes();
+  const std::size_t first_drive = nodes_.size();
+  std::vector<bool> operational(config_.drives.nodes.size(), false);
+  for (std::size_t j = 0; j < master_nodes.size(); ++j) {
+    const CanopenMaster::NodeStatus& n = master_nodes[j];
+    if (n.lost || n.state == CanopenMaster::NodeState::kMissing) {
+      drives_->Stop(DriveStopReason::kNodeLost, n.node_id);
+    }
+    if (j >= first_drive) {
+      if (n.emcy_active) drives_->Stop(DriveStopReason::kEmcy, n.node_id);
+      operational[j - first_drive] = n.state == CanopenMaster::NodeState::kOperational && !n.lost;
+    }
+  }
+  BodyVelocity v;
+  if (drives_->all_enabled() && EstimateReady()) {
+    const double period_s = config_.sync.period_s;
+    if (follower_ &&
+        static_cast<double>(enabled_cycles_) * period_s >= config_.path.start_delay_s) {
+      v = follower_->Step(SteeringPose(), period_s);
+    }
+    ++enabled_cycles_;
+  }
+  std::vector<double> wheel(config_.drives.nodes.size(), 0.0);
+  WheelSpeedsFor(config_.drives, v, wheel.data());
+  const std::size_t before = out.size();
+  drives_->Cycle(wheel, operational, out);
+  if (heartbeat_every_cycles_ > 0 && cycle % heartbeat_every_cycles_ == 0) {
+    bus::CanFrame hb;
+    if (protocol_.EncodeHeartbeat(static_cast<std::uint8_t>(config_.drives.master_node_id),
+                                  bus::canopen::nmt_state::kOperational, hb)) {
+      out.push_back(hb);
+    }
+  }
+  stats_.frames_out += out.size() - before;
+}
+
 void FwApp::SendStatus(std::uint64_t cycle, std::vector<bus::CanFrame>& out) {
   OutValues v;
   v.Set(OutField::kCycle, static_cast<double>(cycle));
@@ -463,7 +574,9 @@ void FwApp::SendStatus(std::uint64_t cycle, std::vector<bus::CanFrame>& out) {
   const std::uint32_t lost_mask = master_.nodes_lost_mask();
   OutValues st = v;
   st.Set(OutField::kHeartbeat, static_cast<double>(heartbeat_++ & 0xFFFFFFFFu));
-  if (!master_.started()) {
+  if (drives_ && drives_->stopped()) {
+    state_ = FwState::kFault;  // Safe stop: latched until the firmware restarts.
+  } else if (!master_.started()) {
     state_ = FwState::kWaitingForNodes;
   } else if (p000_ && !p000_->calibrated()) {
     state_ = FwState::kCalibrating;

@@ -29,6 +29,15 @@
 /// position, not their velocity (see VelocityFusion); a source silent for lost_after_cycles
 /// cycles is flagged lost; bad frames are counted. Every cycle with an input missing sets
 /// Status_FaultCycleIncomplete (state Degraded).
+/// Closed loop (a `drives` section): the drives are CANopen nodes of the master too (their
+/// start-up writes 0x6060 mode, 0x6007 abort connection option and 0x1016:1, the consumer of
+/// the firmware's own heartbeat, which goes out as node master_node_id every
+/// ceil(master_heartbeat_s / period) cycles). Per cycle, after the estimator step and before the
+/// estimate frames, the app gives the path follower (path_follower.h) its pose estimate, turns
+/// the body velocity into wheel speeds and sends each drive's RPDO1 (cia402_drives.h). The path
+/// starts once every drive is in Operation enabled and the estimator is ready (paper000:
+/// calibrated); a drive fault, EMCY or lost node (drive or encoder) stops every drive, latched,
+/// and the state becomes Fault.
 /// Thread-compatible.
 
 #include <array>
@@ -40,6 +49,7 @@
 
 #include "bus/can_frame.h"
 #include "firmware_stub/canopen_master.h"
+#include "firmware_stub/cia402_drives.h"
 #include "firmware_stub/cycle_assembler.h"
 #include "firmware_stub/encoder_counter.h"
 #include "firmware_stub/fw_config.h"
@@ -47,6 +57,7 @@
 #include "firmware_stub/paper000_slip_estimator.h"
 #include "firmware_stub/paper001_follower_odometry.h"
 #include "firmware_stub/paper002_velocity_fusion.h"
+#include "firmware_stub/path_follower.h"
 
 namespace wheelhil::fw {
 
@@ -82,7 +93,8 @@ class FwApp {
 
   /// Builds the estimator; throws std::invalid_argument "config-file: section: problem" when
   /// the estimator rejects the configuration. `protocol` must outlive the app.
-  FwApp(const FwConfig& config, const FwProtocol& protocol);
+  /// `drives`: the drives' binding, required when the config has a drives section.
+  FwApp(const FwConfig& config, const FwProtocol& protocol, const DriveProtocol* drives = nullptr);
 
   void Start(std::int64_t t_ns, std::vector<bus::CanFrame>& out);
   /// One frame off the bus (never throws on its content).
@@ -114,6 +126,9 @@ class FwApp {
   const CanopenMaster& master() const { return master_; }
   const CycleAssembler& assembler() const { return assembler_; }
   const FwAppStats& stats() const { return stats_; }
+  /// The drives (nullptr without a drives section) and the path follower (without a path).
+  const Cia402Drives* drives() const { return drives_ ? &*drives_ : nullptr; }
+  const PathFollower* path() const { return follower_ ? &*follower_ : nullptr; }
   FwState state() const { return state_; }
   /// OR of FaultBit of the last status frame.
   std::uint32_t last_faults() const { return last_faults_; }
@@ -127,6 +142,9 @@ class FwApp {
   void Step001(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step002(const AssembledCycle& c, double dt_s, std::vector<bus::CanFrame>& out);
   void Step002Unobserved();
+  void CommandDrives(std::uint64_t cycle, std::vector<bus::CanFrame>& out);
+  Pose2 SteeringPose() const;
+  bool EstimateReady() const;
   void HandleMasterPoll(CanopenMaster::PollResult r, std::int64_t t_ns,
                         std::vector<bus::CanFrame>& out);
 
@@ -164,6 +182,12 @@ class FwApp {
   int imu_silent_cycles_ = 0;
   int accel_silent_cycles_ = 0;
 
+  // Closed loop.
+  std::optional<Cia402Drives> drives_;
+  std::optional<PathFollower> follower_;
+  std::uint64_t heartbeat_every_cycles_ = 0;  // 0: no master heartbeat.
+  std::uint64_t enabled_cycles_ = 0;          // Cycles with every drive enabled and ready.
+
   // Per-status-frame event faults.
   std::uint32_t event_faults_ = 0;
   std::uint8_t last_emcy_node_ = 0;
@@ -187,5 +211,9 @@ std::int64_t ArrivalOnMonotonicNs(std::int64_t stamp_real_ns, std::int64_t now_r
 /// known to one period).
 CanopenMasterConfig MasterConfigFrom(const FwConfig& config);
 CycleAssemblerConfig AssemblerConfigFrom(const FwConfig& config);
+/// Closed loop: the firmware's heartbeat goes out every this many cycles (0: none).
+std::uint64_t MasterHeartbeatCycles(const FwConfig& config);
+/// The consumer time written to each drive's 0x1016:1 [s].
+double DriveHeartbeatTimeoutS(const FwConfig& config);
 
 }  // namespace wheelhil::fw

@@ -227,6 +227,107 @@ void ReadPaper002(const Section& s, Paper002Settings& p) {
   }
 }
 
+void ReadDrives(const Section& s, DriveSettings& d) {
+  s.Allow({"velocity_unit", "gear_ratio", "counts_per_rev", "wheel_radius_m",
+           "max_wheel_speed_rad_s", "mode", "abort_connection_option", "quick_stop_option",
+           "master_node_id", "master_heartbeat_s", "drive_heartbeat_timeout_s", "nodes"});
+  d.enabled = true;
+  if (s.Has("velocity_unit")) {
+    const std::string u = s.reader().ToString(s.Node("velocity_unit"), s.Field("velocity_unit"));
+    if (u != "rpm" && u != "counts_per_s") {
+      s.FailHere("velocity_unit", fmt::format("'{}' is not one of rpm, counts_per_s", u));
+    }
+    d.velocity_rpm = u == "rpm";
+  }
+  d.gear_ratio = s.Number("gear_ratio", d.gear_ratio, false, true);
+  d.counts_per_rev = s.Number("counts_per_rev", 0.0, !d.velocity_rpm, true);
+  d.wheel_radius_m = s.Number("wheel_radius_m", 0, true, true);
+  d.max_wheel_speed_rad_s = s.Number("max_wheel_speed_rad_s", 0.0, false, false, true);
+  if (s.Has("mode")) {
+    const std::string m = s.reader().ToString(s.Node("mode"), s.Field("mode"));
+    if (m != "csv" && m != "pv") s.FailHere("mode", fmt::format("'{}' is not one of csv, pv", m));
+    d.mode = m == "csv" ? 9 : 3;
+  }
+  d.abort_connection_option = static_cast<int>(
+      s.Integer("abort_connection_option", d.abort_connection_option, false, 0, 3));
+  d.quick_stop_option =
+      static_cast<int>(s.Integer("quick_stop_option", d.quick_stop_option, false, 0, 8));
+  d.master_node_id = static_cast<int>(s.Integer("master_node_id", d.master_node_id, false, 1, 127));
+  d.master_heartbeat_s = s.Number("master_heartbeat_s", d.master_heartbeat_s, false, false, true);
+  d.drive_heartbeat_timeout_s = s.Number("drive_heartbeat_timeout_s", 0.0, false, false, true);
+  if (d.drive_heartbeat_timeout_s > 65.535) {
+    s.FailHere("drive_heartbeat_timeout_s", "must be <= 65.535 (u16 ms)");
+  }
+  const YAML::Node list = s.Node("nodes");
+  if (!list.IsDefined() || !list.IsSequence() || list.size() == 0) {
+    s.Fail(list.IsDefined() ? list : s.node(), "nodes",
+           "must be a list of drives {node_id, x_m, y_m, roller_angle_deg?, sign?}");
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const Section n(s.reader(), list[i], fmt::format("{}[{}]", s.Field("nodes"), i));
+    n.Allow({"node_id", "x_m", "y_m", "roller_angle_deg", "sign"});
+    DriveNodeSettings dn;
+    dn.node_id = static_cast<int>(n.Integer("node_id", 0, true, 1, 127));
+    dn.x_m = n.Number("x_m", 0.0, true, false);
+    dn.y_m = n.Number("y_m", 0.0, true, false);
+    if (n.Has("roller_angle_deg")) {
+      dn.has_rollers = true;
+      dn.roller_angle_rad = n.Number("roller_angle_deg", 0.0, true, false) * kDegToRad;
+      if (std::abs(std::sin(dn.roller_angle_rad)) < 0.1) {
+        n.FailHere("roller_angle_deg", "must not be near 0 (a roller parallel to the axle)");
+      }
+    }
+    dn.sign = static_cast<int>(n.Integer("sign", 1, false, -1, 1));
+    if (dn.sign == 0) n.FailHere("sign", "must be +1 or -1");
+    d.nodes.push_back(dn);
+  }
+}
+
+void ReadPath(const Section& s, PathSettings& p) {
+  s.Allow({"waypoints", "speed_m_s", "accel_m_s2", "lookahead_m", "tolerance_m",
+           "heading_tolerance_deg", "yaw_rate_deg_s", "heading_gain_1_s", "start_delay_s",
+           "steer_from"});
+  p.enabled = true;
+  const YAML::Node list = s.Node("waypoints");
+  if (!list.IsDefined() || !list.IsSequence() || list.size() == 0) {
+    s.Fail(list.IsDefined() ? list : s.node(), "waypoints",
+           "must be a list of [x_m, y_m] or [x_m, y_m, theta_deg]");
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string field = fmt::format("{}[{}]", s.Field("waypoints"), i);
+    const YAML::Node w = list[i];
+    if (!w.IsSequence() || (w.size() != 2 && w.size() != 3)) {
+      s.reader().Fail(w, field, "must be [x_m, y_m] or [x_m, y_m, theta_deg]");
+    }
+    Waypoint wp;
+    wp.x_m = s.reader().ToNumber(w[0], field + "[0]");
+    wp.y_m = s.reader().ToNumber(w[1], field + "[1]");
+    if (w.size() == 3) {
+      wp.has_theta = true;
+      wp.theta_rad = s.reader().ToNumber(w[2], field + "[2]") * kDegToRad;
+    }
+    p.waypoints.push_back(wp);
+  }
+  p.speed_m_s = s.Number("speed_m_s", p.speed_m_s, false, true);
+  p.accel_m_s2 = s.Number("accel_m_s2", p.accel_m_s2, false, true);
+  p.lookahead_m = s.Number("lookahead_m", p.lookahead_m, false, true);
+  p.tolerance_m = s.Number("tolerance_m", p.tolerance_m, false, true);
+  p.heading_tolerance_rad =
+      s.Number("heading_tolerance_deg", p.heading_tolerance_rad / kDegToRad, false, true) *
+      kDegToRad;
+  p.yaw_rate_rad_s =
+      s.Number("yaw_rate_deg_s", p.yaw_rate_rad_s / kDegToRad, false, true) * kDegToRad;
+  p.heading_gain_1_s = s.Number("heading_gain_1_s", p.heading_gain_1_s, false, true);
+  p.start_delay_s = s.Number("start_delay_s", p.start_delay_s, false, false, true);
+  if (s.Has("steer_from")) {
+    const std::string v = s.reader().ToString(s.Node("steer_from"), s.Field("steer_from"));
+    if (v != "corrected" && v != "raw") {
+      s.FailHere("steer_from", fmt::format("'{}' is not one of corrected, raw", v));
+    }
+    p.steer_from = v == "raw" ? SteerFrom::kRaw : SteerFrom::kCorrected;
+  }
+}
+
 void CheckUniqueNodes(const Section& s, const char* key, const std::vector<EncoderNode>& nodes) {
   std::set<int> seen;
   for (const auto& n : nodes) {
@@ -268,7 +369,7 @@ FwConfig ReadFwConfig(const bus::yaml::FieldReader& reader, const YAML::Node& ro
   const std::string& path = reader.file();
   const Section top(reader, root, "");
   top.Allow({"estimator", "dbc_dir", "canopen", "sync", "imu", "accel", "paper000", "paper001",
-             "paper002"});
+             "paper002", "drives", "path"});
   FwConfig cfg;
   cfg.source_path = path;
   const YAML::Node est = top.Node("estimator");
@@ -320,6 +421,31 @@ FwConfig ReadFwConfig(const bus::yaml::FieldReader& reader, const YAML::Node& ro
       if (!cfg.accel.enabled) top.Fail(root, "accel", "paper002 needs the accel section");
       CheckUniqueNodes(top, "paper002", cfg.encoder_nodes());
       break;
+  }
+  if (root["drives"]) {
+    ReadDrives(top.Child("drives"), cfg.drives);
+    std::set<int> used;
+    for (const auto& n : cfg.encoder_nodes()) used.insert(n.node_id);
+    for (const auto& d : cfg.drives.nodes) {
+      if (!used.insert(d.node_id).second) {
+        top.FailHere("drives", fmt::format("node_id {} is used twice (drives and encoders "
+                                           "are separate CANopen nodes)",
+                                           d.node_id));
+      }
+    }
+    if (used.count(cfg.drives.master_node_id) != 0) {
+      top.FailHere("drives",
+                   fmt::format("master_node_id {} is also a node's id", cfg.drives.master_node_id));
+    }
+  }
+  if (root["path"]) {
+    if (!cfg.drives.enabled) top.Fail(root["path"], "path", "needs a drives section to follow it");
+    ReadPath(top.Child("path"), cfg.path);
+    if (cfg.path.steer_from == SteerFrom::kRaw &&
+        cfg.estimator != EstimatorKind::kPaper000SlipCorrection) {
+      top.Fail(root["path"]["steer_from"], "path.steer_from",
+               "raw odometry exists only for paper000 (its uncorrected pose)");
+    }
   }
   return cfg;
 }

@@ -108,6 +108,61 @@ struct Paper002Settings {
   double k_min = 0.01;
 };
 
+/// One CiA 402 drive the firmware commands: its node, where its wheel sits on the body and how
+/// the wheel rolls (rollers for Mecanum / omni wheels).
+struct DriveNodeSettings {
+  int node_id = 0;
+  double x_m = 0.0, y_m = 0.0;  ///< Wheel contact in the body frame (x forward, y left).
+  bool has_rollers = false;     ///< Mecanum / omni: rollers at roller_angle to the axle.
+  double roller_angle_rad = 0.0;
+  int sign = 1;  ///< -1: the drive turns the wheel backwards for a positive set point.
+};
+
+/// The drives the firmware masters (CiA 402, bus/dbc/cia402_drive.dbc) and how their set
+/// points are made from a body velocity.
+struct DriveSettings {
+  bool enabled = false;
+  bool velocity_rpm = true;   ///< Velocity unit of 0x60FF / 0x606C: rpm (true) or increments/s.
+  double gear_ratio = 1.0;    ///< Motor turns per wheel turn.
+  double counts_per_rev = 0;  ///< Motor encoder increments per motor turn (increments/s only).
+  double wheel_radius_m = 0.0;
+  double max_wheel_speed_rad_s = 0.0;  ///< Set points scaled down together above it; 0 = none.
+  int mode = 9;                        ///< 0x6060 written at start-up: 9 csv or 3 pv.
+  int abort_connection_option = 1;     ///< 0x6007 written at start-up (1: fault).
+  /// 0x605A written at start-up: 6 = quick stop ramp, then hold zero with torque on (a robot
+  /// that stops on a slope or with momentum stays put); 2 = ramp, then the wheel coasts.
+  int quick_stop_option = 6;
+  int master_node_id = 127;         ///< The firmware's own heartbeat id (0x700 + id).
+  double master_heartbeat_s = 0.1;  ///< Heartbeat period (sent with the cycles); 0 = none.
+  /// Written to each drive's 0x1016:1 (consumer time); 0 = 3x the effective heartbeat period.
+  double drive_heartbeat_timeout_s = 0.0;
+  std::vector<DriveNodeSettings> nodes;
+};
+
+/// One waypoint; heading only when has_theta (else the heading is held).
+struct Waypoint {
+  double x_m = 0.0, y_m = 0.0;
+  bool has_theta = false;
+  double theta_rad = 0.0;  ///< Absolute, not wrapped: -2 pi from 0 is a full turn clockwise.
+};
+
+enum class SteerFrom { kCorrected, kRaw };
+
+/// The path the firmware follows from its own estimate (start at the origin, heading 0).
+struct PathSettings {
+  bool enabled = false;
+  std::vector<Waypoint> waypoints;
+  double speed_m_s = 0.25;
+  double accel_m_s2 = 0.5;
+  double lookahead_m = 0.3;
+  double tolerance_m = 0.01;
+  double heading_tolerance_rad = 0.01;
+  double yaw_rate_rad_s = 0.5;                   ///< Largest commanded yaw rate.
+  double heading_gain_1_s = 2.0;                 ///< Heading error to yaw rate.
+  double start_delay_s = 0.0;                    ///< Standstill after the drives are enabled.
+  SteerFrom steer_from = SteerFrom::kCorrected;  ///< paper000: corrected or raw odometry.
+};
+
 struct FwConfig {
   std::string source_path;  ///< The file it was read from, for messages.
   EstimatorKind estimator = EstimatorKind::kPaper000SlipCorrection;
@@ -121,6 +176,8 @@ struct FwConfig {
   Paper000Settings paper000;
   Paper001Settings paper001;
   Paper002Settings paper002;
+  DriveSettings drives;
+  PathSettings path;
 
   /// The encoder nodes of the selected estimator, in the estimator's order.
   std::vector<EncoderNode> encoder_nodes() const;

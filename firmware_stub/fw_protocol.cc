@@ -11,6 +11,7 @@
 
 #include "bus/canopen.h"
 #include "bus/dbc_codec.h"
+#include "firmware_stub/dbc_binding.h"
 
 namespace wheelhil::fw {
 namespace {
@@ -24,34 +25,6 @@ using canopen::Function;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kStandardGravity = 9.80665;
-
-/// The Intel integer signal occupying exactly [start, start+len) of `m`, preferring one that is
-/// not multiplexed. nullptr when none.
-const DbcSignal* SignalAt(const DbcMessage& m, int start, int len) {
-  const DbcSignal* found = nullptr;
-  for (const auto& s : m.signals) {
-    if (!s.little_endian || s.start_bit != start || s.length != len ||
-        s.value_type != bus::DbcValueType::kInteger) {
-      continue;
-    }
-    if (!s.multiplex_value) return &s;
-    if (!found) found = &s;
-  }
-  return found;
-}
-
-/// A message for the CANopen function `f`: the exact id of one of `nodes` if the DBC lists it,
-/// else any message of that function for some node 1..127.
-const DbcMessage* FindFunction(const DbcDatabase& db, Function f, const std::vector<int>& nodes) {
-  for (int n : nodes) {
-    const std::uint32_t id = canopen::FunctionCode(f) + static_cast<std::uint32_t>(n);
-    if (const auto* m = db.FindMessage(id, false)) return m;
-  }
-  for (const auto& m : db.messages()) {
-    if (!m.extended && canopen::Is(f, m.id)) return &m;
-  }
-  return nullptr;
-}
 
 std::string Lower(std::string s) {
   std::string out;
@@ -98,14 +71,6 @@ std::uint64_t RawOf(const DbcSignal* s, const CanFrame& f) {
 bool IsRawField(OutField f) {
   return f == OutField::kCycle || f == OutField::kHeartbeat || f == OutField::kFaults ||
          f == OutField::kNodesLost;
-}
-
-CanFrame Blank(std::uint32_t id, const DbcMessage& m) {
-  CanFrame f;
-  f.id = id;
-  f.extended = m.extended;
-  f.len = static_cast<std::uint8_t>(m.length);
-  return f;
 }
 
 }  // namespace
@@ -385,24 +350,31 @@ FrameKind FwProtocol::Classify(const CanFrame& f, std::uint8_t& node_id) const n
 
 bool FwProtocol::EncodeNmt(std::uint8_t command, std::uint8_t node_id,
                            CanFrame& out) const noexcept {
-  out = Blank(canopen::kNmtCobId, *nmt_.msg);
+  out = BlankFrame(canopen::kNmtCobId, *nmt_.msg);
   return bus::InsertRaw(*nmt_.sig[0], command, out.data) &&
          bus::InsertRaw(*nmt_.sig[1], node_id, out.data);
 }
 
 bool FwProtocol::EncodeSync(CanFrame& out) const noexcept {
-  out = Blank(canopen::kSyncCobId, *sync_.msg);
+  out = BlankFrame(canopen::kSyncCobId, *sync_.msg);
   out.len = 0;  // SYNC without counter (CiA 301 0x1019 = 0).
   return true;
 }
 
 bool FwProtocol::EncodeSdoRequest(std::uint8_t node_id, const SdoFrame& sdo,
                                   CanFrame& out) const noexcept {
-  out = Blank(canopen::CobId(Function::kSdoRequest, node_id), *sdo_tx_.msg);
+  out = BlankFrame(canopen::CobId(Function::kSdoRequest, node_id), *sdo_tx_.msg);
   return bus::InsertRaw(*sdo_tx_.sig[0], sdo.command, out.data) &&
          bus::InsertRaw(*sdo_tx_.sig[1], sdo.index, out.data) &&
          bus::InsertRaw(*sdo_tx_.sig[2], sdo.subindex, out.data) &&
          bus::InsertRaw(*sdo_tx_.sig[3], sdo.data, out.data);
+}
+
+bool FwProtocol::EncodeHeartbeat(std::uint8_t node_id, std::uint8_t state,
+                                 CanFrame& out) const noexcept {
+  if (!canopen::IsValidNodeId(node_id)) return false;
+  out = BlankFrame(canopen::CobId(Function::kErrorControl, node_id), *errctl_.msg);
+  return bus::InsertRaw(*errctl_.sig[0], state, out.data);
 }
 
 bool FwProtocol::DecodeErrorControl(const CanFrame& f, std::uint8_t& state) const noexcept {
@@ -473,7 +445,7 @@ std::vector<OutField> FwProtocol::OutputFields(OutMessage m) const {
 bool FwProtocol::EncodeOutput(OutMessage m, const OutValues& values, CanFrame& out) const noexcept {
   const Output& o = outputs_[static_cast<std::size_t>(m)];
   if (!o.msg) return false;
-  out = Blank(o.msg->id, *o.msg);
+  out = BlankFrame(o.msg->id, *o.msg);
   bool ok = true;
   for (const auto& [sig, field] : o.fields) {
     const double v = values.Get(field);

@@ -160,6 +160,11 @@ class FwProtocol {
   [[nodiscard]] bool EncodeSdoRequest(std::uint8_t node_id, const SdoFrame& sdo,
                                       bus::CanFrame& out) const noexcept;
 
+  /// The NMT error-control frame of `node_id` (0x700+id) carrying `state` (a heartbeat the
+  /// firmware produces as a node itself, e.g. 0x05 operational).
+  [[nodiscard]] bool EncodeHeartbeat(std::uint8_t node_id, std::uint8_t state,
+                                     bus::CanFrame& out) const noexcept;
+
   /// Decoders return false for a frame whose length differs from its DBC message's.
   [[nodiscard]] bool DecodeErrorControl(const bus::CanFrame& f, std::uint8_t& state) const noexcept;
   [[nodiscard]] bool DecodeEmcy(const bus::CanFrame& f, std::uint16_t& code,

@@ -19,10 +19,12 @@
 #include <memory>
 #include <optional>
 #include <stdexcept>
+#include <string>
 #include <system_error>
 
 #include "bus/candump_log.h"
 #include "bus/socketcan_transport.h"
+#include "firmware_stub/drive_protocol.h"
 #include "firmware_stub/fw_app.h"
 #include "firmware_stub/fw_config.h"
 #include "firmware_stub/fw_protocol.h"
@@ -97,6 +99,7 @@ int main(int argc, char** argv) {
 
   fw::FwConfig cfg;
   std::unique_ptr<fw::FwProtocol> protocol;
+  std::unique_ptr<fw::DriveProtocol> drive_protocol;
   std::unique_ptr<fw::FwApp> fwapp;
   try {
     cfg = fw::LoadFwConfig(config_path);
@@ -112,11 +115,23 @@ int main(int argc, char** argv) {
     protocol = std::make_unique<fw::FwProtocol>(
         fw::FwProtocol::LoadDir(dir, ids, cfg.imu.enabled ? cfg.imu.yaw_frame_id : 0,
                                 cfg.accel.enabled ? cfg.accel.frame_id : 0));
-    fwapp = std::make_unique<fw::FwApp>(cfg, *protocol);
+    if (cfg.drives.enabled) {
+      std::vector<int> drive_ids;
+      for (const auto& n : cfg.drives.nodes) drive_ids.push_back(n.node_id);
+      drive_protocol =
+          std::make_unique<fw::DriveProtocol>(fw::DriveProtocol::LoadDir(dir, drive_ids));
+    }
+    fwapp = std::make_unique<fw::FwApp>(cfg, *protocol, drive_protocol.get());
     if (!quiet) {
       fmt::print(stderr, "wheelhil-fw: estimator {}, SYNC {} every {} s, DBC {}\n",
                  fw::EstimatorName(cfg.estimator), cfg.sync.produce ? "produced" : "followed",
                  cfg.sync.period_s, dir);
+      if (cfg.drives.enabled) {
+        fmt::print(stderr, "wheelhil-fw: {} CiA 402 drives, {}\n", cfg.drives.nodes.size(),
+                   cfg.path.enabled
+                       ? fmt::format("following {} waypoints", cfg.path.waypoints.size())
+                       : std::string("holding still (no path)"));
+      }
       for (const auto& s : protocol->unbound_output_signals()) {
         fmt::print(stderr, "wheelhil-fw: note: output signal {} is not filled (sent as 0)\n", s);
       }

@@ -27,7 +27,7 @@ using bus::cia402::mode::kCyclicSyncVelocity;
 using bus::cia402::mode::kProfileVelocity;
 namespace sw_bits = bus::cia402::statusword;
 // CiA 301 objects beyond bus/canopen.h's.
-constexpr std::uint16_t kConsumerHeartbeat = 0x1016;
+constexpr std::uint16_t kConsumerHeartbeat = canopen::od::kConsumerHeartbeatTime;
 constexpr std::uint16_t kRpdoCommunication = 0x1400;
 constexpr std::uint16_t kRpdoMapping = 0x1600;
 constexpr std::uint16_t kTpdoCommunication = 0x1800;

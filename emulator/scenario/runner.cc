@@ -165,9 +165,9 @@ int Run::SendSync(std::int64_t t_ns) {
 void Run::WaitBootAnswers() {
   const auto& awaiting = handshake_->awaiting_nodes();
   if (!awaiting.empty() && !WaitFirmware([&] { return awaiting.empty(); })) {
-    run_.Fail(fmt::format(
-        "timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
-        *awaiting.begin(), s_.timing.timeout_s));
+    run_.Fail(
+        fmt::format("timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
+                    *awaiting.begin(), s_.timing.timeout_s));
   }
 }
 
@@ -316,16 +316,16 @@ void Run::StartFirmware() {
     // The clock's library goes first: the bus library's own waits are then virtual too.
     const std::string lib = VtimeLibrary(env);
     if (!fs::exists(lib)) {
-      throw std::invalid_argument(fmt::format(
-          "timing.clock: virtual: {} not found (build target wheelhil_vtime)", lib));
+      throw std::invalid_argument(
+          fmt::format("timing.clock: virtual: {} not found (build target wheelhil_vtime)", lib));
     }
     for (auto& [key, value] : env) {
       if (key == "LD_PRELOAD") value = lib + ":" + value;
     }
     for (auto& kv : clock_->ChildEnvironment(lib)) env.push_back(kv);
     if (const std::string why_not = firmware::WhyNotVirtualClock(cmd); !why_not.empty()) {
-      throw std::invalid_argument(fmt::format("{}: timing.clock: virtual: {}", s_.source_path,
-                                              why_not));
+      throw std::invalid_argument(
+          fmt::format("{}: timing.clock: virtual: {}", s_.source_path, why_not));
     }
     clock_->ExpectFirstProcess();
   }
@@ -359,9 +359,8 @@ void Run::RunPhases() {
                                       : static_cast<sim::WaitPolicy&>(realtime_wait));
   sim::StepSource tick(*this, *this, run_);
   // On the virtual clock the firmware's own deadlines are instants of every phase.
-  sim::FirmwareDeadlineSource firmware_deadlines(*this, *this, [this] {
-    return clock_ ? clock_->NextDeadlineNs() : sim::kNever;
-  });
+  sim::FirmwareDeadlineSource firmware_deadlines(
+      *this, *this, [this] { return clock_ ? clock_->NextDeadlineNs() : sim::kNever; });
   auto sources = [&](std::vector<sim::EventSource*> v) {
     if (virtual_time_) v.push_back(&firmware_deadlines);
     return v;
@@ -371,19 +370,18 @@ void Run::RunPhases() {
   // Boot: the nodes boot, the firmware configures and starts them.
   const std::int64_t boot_limit_ns = std::llround(10e9);
   tick.Start({.motion = false, .record_truth = true, .wait_boot_answers = true, .steps = -1});
-  loop.Run({"boot",
-            sources({&tick}),
-            [&] {
+  loop.Run({"boot", sources({&tick}), [&] {
               if (run_.now_ns > boot_limit_ns) {
                 std::string waiting;
                 for (const auto& d : devices_) {
                   if (!d->Ready()) waiting += (waiting.empty() ? "" : ", ") + d->name();
                 }
-                run_.Fail(fmt::format("the CANopen nodes were not started (NMT start) within 10 s "
-                                      "of virtual time: {}",
-                                      waiting.empty() ? "every node waits for the firmware's "
-                                                        "SDO/NMT answer"
-                                                      : waiting));
+                run_.Fail(
+                    fmt::format("the CANopen nodes were not started (NMT start) within 10 s "
+                                "of virtual time: {}",
+                                waiting.empty() ? "every node waits for the firmware's "
+                                                  "SDO/NMT answer"
+                                                : waiting));
               }
               return std::all_of(devices_.begin(), devices_.end(),
                                  [](const auto& d) { return d->Ready(); }) &&
@@ -426,8 +424,8 @@ void Run::RunPhases() {
               .record_truth = true,
               .wait_boot_answers = false,
               .steps = cycles * steps_per_cycle});
-  sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns,
-                       period_ns, cycles);
+  sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns, period_ns,
+                       cycles);
   if (s_.timing.firmware_produces_sync) {
     loop.Run({"motion", sources({&tick}), steps_done});
   } else {
@@ -458,8 +456,14 @@ json Run::Report(double wall_s) {
   json metrics = json::object();
   std::vector<std::string> wheel_names;
   for (const auto& w : s_.platform.vehicle.wheels) wheel_names.push_back(w.name);
-  const scoring::RecordedRun recorded{*truth_, *estimates_, s_.timing.sync_period_s,
-                                      wheel_names, scoring::SlipIntervals(*truth_)};
+  scoring::RecordedRun recorded{*truth_, *estimates_, s_.timing.sync_period_s, wheel_names,
+                                scoring::SlipIntervals(*truth_), std::nullopt, false, {}};
+  if (s_.firmware_motion && s_.firmware_motion->goal) {
+    const Eigen::Vector3d& g = *s_.firmware_motion->goal;
+    recorded.goal = scoring::PoseSample{0.0, g.x(), g.y(), g.z()};
+    recorded.goal_has_heading = s_.firmware_motion->goal_has_heading;
+  }
+  recorded.run_events = run_.events;
   scoring::ScoreRun(recorded, s_.metric_components, metrics, run_.events);
   metrics["bus"] = hub_->Metrics();
   if (auto f = faults_->Metrics(devices_, *hub_)) metrics["faults"] = *f;
@@ -515,9 +519,8 @@ RunResult Run::Execute() {
   }
   hub_->CloseLog();
   if (run_.failed()) {
-    run_.events.push_back(json{{"t_s", run_.MotionSeconds(run_.now_ns)},
-                               {"event", "failure"},
-                               {"reason", run_.failure}});
+    run_.events.push_back(json{
+        {"t_s", run_.MotionSeconds(run_.now_ns)}, {"event", "failure"}, {"reason", run_.failure}});
   }
   json report = Report(wall_s);
   json expectations = json::array();

@@ -1,6 +1,8 @@
 #include "emulator/scoring/metric_components.h"
 
 #include <algorithm>
+#include <cmath>
+#include <optional>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -35,8 +37,8 @@ class PoseComponent final : public MetricComponent {
       // evo's conventions: nearest truth sample within 10 ms, no alignment.
       const auto pairs = AssociateNearest(run.truth.poses(), est, 0.01);
       const ErrorStats ape = AbsolutePositionError(pairs);
-      block["ape"] = json{{"pairs", ape.n},      {"rmse_m", ape.rmse}, {"mean_m", ape.mean},
-                          {"median_m", ape.median}, {"std_m", ape.std},  {"min_m", ape.min},
+      block["ape"] = json{{"pairs", ape.n},         {"rmse_m", ape.rmse}, {"mean_m", ape.mean},
+                          {"median_m", ape.median}, {"std_m", ape.std},   {"min_m", ape.min},
                           {"max_m", ape.max}};
       const RelativePoseError rpe = ComputeRelativePoseError(pairs, 1.0);
       json rpe_block{{"segments", rpe.translation_m.n},
@@ -147,8 +149,7 @@ class SlipDetectionComponent final : public MetricComponent {
   void Compute(const RecordedRun& run, json& metrics, std::vector<json>&) const override {
     for (const auto& [stream, detections] : run.estimates.detections()) {
       if (detections.empty()) continue;
-      const SlipMetrics sm =
-          ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
+      const SlipMetrics sm = ComputeSlipMetrics(run.slip_intervals, detections, run.sync_period_s);
       json j{{"precision", sm.precision},
              {"recall", sm.recall},
              {"true_positive", sm.true_positive},
@@ -218,14 +219,108 @@ class FramesComponent final : public MetricComponent {
   }
 };
 
+/// A truth pose stands still below these speeds.
+constexpr double kStandstillSpeedMs = 0.01;
+constexpr double kStandstillYawRads = 0.01;
+
+class ClosedLoopComponent final : public MetricComponent {
+ public:
+  std::string_view name() const override { return "closed_loop"; }
+  void Compute(const RecordedRun& run, json& metrics, std::vector<json>& events) const override {
+    const auto& poses = run.truth.poses();
+    const auto& vel = run.truth.velocities();
+    std::vector<const json*> drive_states, faults;
+    for (const json& e : run.run_events) {
+      const std::string ev = e.value("event", "");
+      if (ev == "drive_state") drive_states.push_back(&e);
+      if (ev == "fault_start") faults.push_back(&e);
+    }
+    if (poses.empty() || (!run.goal && drive_states.empty())) return;
+    json block = json::object();
+    const PoseSample& end = poses.back();
+    block["final_x_m"] = end.x_m;
+    block["final_y_m"] = end.y_m;
+    block["final_theta_rad"] = end.theta_rad;
+    if (run.goal) {
+      block["goal_x_m"] = run.goal->x_m;
+      block["goal_y_m"] = run.goal->y_m;
+      block["goal_error_m"] = std::hypot(end.x_m - run.goal->x_m, end.y_m - run.goal->y_m);
+      if (run.goal_has_heading) {
+        block["goal_heading_error_rad"] = std::abs(WrapAngle(end.theta_rad - run.goal->theta_rad));
+      }
+    }
+    // Drives by name, from their state events and the faults that name them.
+    auto drive_of = [&](const json& f) -> std::string {
+      if (f.contains("drive")) return f["drive"].get<std::string>();
+      const std::string target = f.value("target", "");
+      for (const json* d : drive_states) {
+        const std::string name = (*d)["drive"].get<std::string>();
+        if (target.rfind(name + " ", 0) == 0 || target == name) return name;
+      }
+      return "";
+    };
+    json reactions = json::array();
+    for (const json* f : faults) {
+      const std::string faulted = drive_of(*f);
+      if (faulted.empty()) continue;
+      const double t0 = (*f)["t_s"].get<double>();
+      json r{{"drive", faulted}, {"fault", f->value("fault", "")}, {"start_s", t0}};
+      // Detected: the firmware stops another drive (the faulted one may fail on its own).
+      std::optional<double> detected;
+      for (const json* d : drive_states) {
+        const double t = (*d)["t_s"].get<double>();
+        const std::string state = (*d)["state"].get<std::string>();
+        if (t < t0 || (*d)["drive"].get<std::string>() == faulted) continue;
+        if (state != "operation_enabled" && state != "fault" && state != "fault_reaction_active") {
+          detected = t;
+          break;
+        }
+      }
+      r["detected"] = detected.has_value();
+      if (detected) r["time_to_detect_s"] = *detected - t0;
+      // Distance the truth covered after the fault started, and when it stood still for good.
+      double distance = 0;
+      for (std::size_t i = 1; i < poses.size(); ++i) {
+        if (poses[i].t_s <= t0) continue;
+        distance += std::hypot(poses[i].x_m - poses[i - 1].x_m, poses[i].y_m - poses[i - 1].y_m);
+      }
+      r["distance_after_m"] = distance;
+      std::optional<double> still;
+      for (std::size_t i = vel.size(); i-- > 0;) {
+        const bool moving = std::hypot(vel[i].vx_m_s, vel[i].vy_m_s) >= kStandstillSpeedMs ||
+                            std::abs(vel[i].omega_rad_s) >= kStandstillYawRads;
+        if (moving || vel[i].t_s < t0) break;
+        still = vel[i].t_s;
+      }
+      r["stopped"] = still.has_value();
+      if (still) r["time_to_standstill_s"] = *still - t0;
+      events.push_back(json{{"t_s", t0},
+                            {"event", "drive_fault_reaction"},
+                            {"drive", faulted},
+                            {"detected", detected.has_value()},
+                            {"time_to_detect_s", detected ? *detected - t0 : -1.0},
+                            {"distance_after_m", distance}});
+      if (reactions.empty()) {  // The first fault's figures, for expectations.
+        block["fault_detected"] = detected.has_value();
+        if (detected) block["fault_time_to_detect_s"] = *detected - t0;
+        block["fault_distance_after_m"] = distance;
+        if (still) block["fault_time_to_standstill_s"] = *still - t0;
+      }
+      reactions.push_back(std::move(r));
+    }
+    if (!reactions.empty()) block["drive_faults"] = std::move(reactions);
+    metrics["closed_loop"] = std::move(block);
+  }
+};
+
 }  // namespace
 
 const std::vector<std::string>& MetricComponentNames() {
   // The canonical order: the events of "truth" (slip) come before those of "contact" at one
   // instant.
   static const std::vector<std::string> names{
-      "pose",    "correction_ratio", "velocity",           "truth",
-      "contact", "slip_detection",   "residual_normality", "frames"};
+      "pose",           "correction_ratio",   "velocity", "truth",      "contact",
+      "slip_detection", "residual_normality", "frames",   "closed_loop"};
   return names;
 }
 
@@ -238,12 +333,13 @@ std::unique_ptr<MetricComponent> MakeMetricComponent(std::string_view name) {
   if (name == "slip_detection") return std::make_unique<SlipDetectionComponent>();
   if (name == "residual_normality") return std::make_unique<ResidualNormalityComponent>();
   if (name == "frames") return std::make_unique<FramesComponent>();
+  if (name == "closed_loop") return std::make_unique<ClosedLoopComponent>();
   throw std::invalid_argument(fmt::format("unknown metric component '{}' (known: {})", name,
                                           fmt::join(MetricComponentNames(), ", ")));
 }
 
 std::vector<std::string> DefaultMetricComponents() {
-  return {"pose", "velocity", "truth", "contact", "frames"};
+  return {"pose", "velocity", "truth", "contact", "frames", "closed_loop"};
 }
 
 std::vector<Interval> SlipIntervals(const TruthRecorder& truth) {

@@ -6,14 +6,18 @@
 /// pose stream: paper 000 eq 13 final error, APE RMSE after interpolation, evo-style APE and RPE
 /// per metre, ...), "velocity" (RMSE per velocity stream), "truth" (slip intervals of the ground
 /// truth, distance, rotation), "contact" (ground-truth contact loss per wheel), "frames" (bus
-/// checks of each stream's frames: count, DLC, cycle time, counter, checksum). Paper-specific ones: "correction_ratio" (paper 000 Table 2:
-/// uncorrected over corrected final error), "slip_detection" (paper 000: precision, recall and
-/// latency of the firmware's slip flags against the truth), "residual_normality" (paper 000:
-/// skewness/kurtosis test of the firmware's calibrated residual). Components always run in this
-/// canonical order, so the metrics and events do not depend on how a scenario lists them.
-/// Thread-compatible.
+/// checks of each stream's frames: count, DLC, cycle time, counter, checksum). Paper-specific ones:
+/// "correction_ratio" (paper 000 Table 2: uncorrected over corrected final error), "slip_detection"
+/// (paper 000: precision, recall and latency of the firmware's slip flags against the truth),
+/// "residual_normality" (paper 000: skewness/kurtosis test of the firmware's calibrated residual).
+/// Closed loop: "closed_loop" (where the firmware took the robot against the scenario's goal; per
+/// drive fault, how the firmware reacted: time to detect = first drive other than the faulted one
+/// leaving Operation enabled, truth distance after the fault start, time until the robot stands
+/// still for good). Components always run in this canonical order, so the metrics and events do not
+/// depend on how a scenario lists them. Thread-compatible.
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -34,6 +38,11 @@ struct RecordedRun {
   std::vector<std::string> wheel_names;  ///< Vehicle wheel order.
   /// Ground-truth slip intervals (from truth.slipping(); merged over 20 ms gaps).
   std::vector<Interval> slip_intervals;
+  /// Closed loop: where the firmware's path ends (start frame; theta only with goal_has_heading).
+  std::optional<PoseSample> goal;
+  bool goal_has_heading = false;
+  /// The run's events so far (fault_start, drive_state, ...), t_s since the motion start.
+  std::vector<nlohmann::json> run_events;
 };
 
 class MetricComponent {

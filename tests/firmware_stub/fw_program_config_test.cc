@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <optional>
 #include <fstream>
 
+#include "firmware_stub/drive_protocol.h"
 #include "firmware_stub/fw_app.h"
 #include "firmware_stub/fw_config.h"
 #include "firmware_stub/fw_protocol.h"
@@ -123,10 +125,16 @@ TEST(FwProgramConfig, ShippedScenarioConfigsLoadAndBind) {
         FwProtocol::LoadDir(testing::DbcDir(), ids, c.imu.enabled ? c.imu.yaw_frame_id : 0,
                             c.accel.enabled ? c.accel.frame_id : 0);
     EXPECT_TRUE(p.unbound_output_signals().empty());
-    FwApp app(c, p);
+    std::optional<DriveProtocol> drives;
+    if (c.drives.enabled) {
+      std::vector<int> drive_ids;
+      for (const auto& d : c.drives.nodes) drive_ids.push_back(d.node_id);
+      drives.emplace(DriveProtocol::LoadDir(testing::DbcDir(), drive_ids));
+    }
+    FwApp app(c, p, drives ? &*drives : nullptr);
     ++n;
   }
-  EXPECT_EQ(n, 3);
+  EXPECT_EQ(n, 4);
 }
 
 TEST(FwProgramConfig, ProtocolBindsEveryOutputSignalOfTheDbc) {

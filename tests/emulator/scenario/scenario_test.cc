@@ -46,7 +46,8 @@ TEST(ScenarioLoader, MinimalLoadsWithDefaults) {
 
 TEST(ScenarioLoader, ScoringSelectsMetricComponentsGenericByDefault) {
   EXPECT_EQ(ParseScenario(Minimal(), kFile).metric_components,
-            (std::vector<std::string>{"pose", "velocity", "truth", "contact", "frames"}));
+            (std::vector<std::string>{"pose", "velocity", "truth", "contact", "frames",
+                                      "closed_loop"}));
   const Scenario s =
       ParseScenario(Minimal("scoring: {metrics: [pose, correction_ratio]}\n"), kFile);
   EXPECT_EQ(s.metric_components, (std::vector<std::string>{"pose", "correction_ratio"}));

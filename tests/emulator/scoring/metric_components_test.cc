@@ -84,7 +84,7 @@ TEST(MetricComponents, OnlySelectedComponentsAddBlocks) {
   d.OnSync(1.0);
   d.OnFrame(Pose(*db, "FW_Pose", "Pose", 0, 1.0 + 0.01), 1.0);     // corrected: 10 mm off
   d.OnFrame(Pose(*db, "FW_PoseRaw", "PoseRaw", 0, 1.0 + 0.1), 1.0);  // uncorrected: 100 mm off
-  const RecordedRun run{truth, d, 0.25, {"left"}, SlipIntervals(truth)};
+  const RecordedRun run{truth, d, 0.25, {"left"}, SlipIntervals(truth), std::nullopt, false, {}};
 
   json generic = json::object();
   std::vector<json> events;
