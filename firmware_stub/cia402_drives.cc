@@ -115,9 +115,12 @@ void Cia402Drives::Cycle(const std::vector<double>& wheel_rad_s,
                          const std::vector<bool>& node_operational,
                          std::vector<bus::CanFrame>& out) {
   for (std::size_t i = 0; i < drives_.size(); ++i) {
-    if (i >= node_operational.size() || !node_operational[i]) continue;
     const Drive& d = drives_[i];
     if (!d.seen) continue;  // No statusword yet: nothing to base a command on.
+    // A stop goes to every drive, also one the master lost: a drive that fell silent may
+    // still listen, and would otherwise run on at its last set point.
+    const bool operational = i < node_operational.size() && node_operational[i];
+    if (!operational && !stopped()) continue;
     const std::uint16_t word = Controlword(d);
     const bool moving = !stopped() && d.state == State::kOperationEnabled && i < wheel_rad_s.size();
     const std::int32_t target = moving ? ToDriveUnits(i, wheel_rad_s[i]) : 0;

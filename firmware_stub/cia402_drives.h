@@ -51,7 +51,7 @@ class Cia402Drives {
   bool OnFrame(const bus::CanFrame& f, bool& bad);
   /// The control cycle's RPDO1 frames. `wheel_rad_s`: one set point per drive (in the
   /// settings' order), ignored while stopped; `node_operational[i]`: the CANopen master has
-  /// started drive i (PDOs are sent only to started nodes).
+  /// started drive i (set points go only to started nodes; a stop goes to every drive).
   void Cycle(const std::vector<double>& wheel_rad_s, const std::vector<bool>& node_operational,
              std::vector<bus::CanFrame>& out);
   /// Latches a stop (the first reason is kept).

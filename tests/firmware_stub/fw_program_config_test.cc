@@ -134,7 +134,7 @@ TEST(FwProgramConfig, ShippedScenarioConfigsLoadAndBind) {
     FwApp app(c, p, drives ? &*drives : nullptr);
     ++n;
   }
-  EXPECT_EQ(n, 4);
+  EXPECT_EQ(n, 5);
 }
 
 TEST(FwProgramConfig, ProtocolBindsEveryOutputSignalOfTheDbc) {

@@ -331,8 +331,8 @@ TEST_F(ScenarioRun, DoorThresholdReportsContactLossWhereTheWheelsCrossIt) {
 // it spins: every message at its GenMsgCycleTime, counters and CRC right, the noiseless z rate
 // reaching the spin's peak rate and the z specific force 1 g.
 TEST_F(ScenarioRun, DbcImuFromTheScenarioSendsItsOwnFrames) {
-  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
-                                "/scenarios/paper001_spin_cw_T10.yaml");
+  Scenario s =
+      LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper001_spin_cw_T10.yaml");
   s.expectations.clear();
   DbcImuSpec imu;
   imu.dbc = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/dbc/user_imu.dbc";
@@ -406,6 +406,86 @@ TEST_F(ScenarioRun, DrivesTheFirmwareDoesNotAnswerAreNamed) {
   const std::string log = Slurp(dir_ / "can.log");
   EXPECT_THAT(log, HasSubstr("70B#00"));
   EXPECT_THAT(log, HasSubstr("70C#00"));
+}
+
+/// A shipped scenario with `extra` YAML appended (e.g. a faults list), read as that file.
+Scenario ShippedWith(const std::string& name, const std::string& extra) {
+  const std::string path = std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/" + name;
+  return ParseScenario(Slurp(path) + extra, path);
+}
+
+double GoalError(const RunResult& r) {
+  return r.report["metrics"]["closed_loop"]["goal_error_m"].get<double>();
+}
+
+// Paper 000 closed loop: the firmware steers the robot from its own estimate, so the slip
+// correction decides where the robot ends. Seeds 1-5 (docs/closed-loop.md): corrected
+// 0.10-0.13 m from the goal, raw odometry 0.73-0.99 m.
+TEST_F(ScenarioRun, ClosedLoopTheSlipCorrectionChangesWhereTheRobotEnds) {
+  const RunResult corrected =
+      RunScenario(ShippedWith("paper000_closed_loop.yaml", ""), Options(dir_ / "corrected"));
+  const RunResult raw =
+      RunScenario(ShippedWith("paper000_closed_loop_raw.yaml", ""), Options(dir_ / "raw"));
+  ASSERT_EQ(corrected.failure, "");
+  ASSERT_EQ(raw.failure, "");
+  EXPECT_EQ(corrected.exit_code, 0);
+  EXPECT_EQ(raw.exit_code, 0);
+  EXPECT_LT(GoalError(corrected), 0.2);
+  EXPECT_GT(GoalError(raw), 0.5);
+  EXPECT_GT(GoalError(raw), 4 * GoalError(corrected));
+  // Both drove the whole path: the truth covered the 10 m.
+  EXPECT_NEAR(corrected.report["metrics"]["truth"]["distance_m"].get<double>(), 10.0, 0.15);
+  EXPECT_NEAR(raw.report["metrics"]["truth"]["distance_m"].get<double>(), 10.0, 0.15);
+}
+
+TEST_F(ScenarioRun, ClosedLoopRunsAreByteIdenticalRunToRun) {
+  const Scenario s = ShippedWith("paper001_closed_loop_square.yaml", "");
+  const RunResult a = RunScenario(s, Options(dir_ / "a"));
+  const RunResult b = RunScenario(s, Options(dir_ / "b"));
+  ASSERT_EQ(a.failure, "");
+  ASSERT_EQ(b.failure, "");
+  EXPECT_LT(GoalError(a), 0.02);
+  for (const char* f : {"can.log", "truth.csv", "estimate.csv", "events.jsonl"}) {
+    const std::string text = Slurp(dir_ / "a" / f);
+    EXPECT_GT(text.size(), 1000u) << f;
+    EXPECT_EQ(text, Slurp(dir_ / "b" / f)) << f;
+  }
+  EXPECT_EQ(testing::ReportWithoutWall(dir_ / "a"), testing::ReportWithoutWall(dir_ / "b"));
+}
+
+// A drive that trips (over-current: Fault, EMCY 0x2310, its wheel coasts) and a drive that falls
+// silent (its heartbeat stops): the reference firmware quick-stops the other drive within a few
+// cycles and the robot comes to rest far short of the goal.
+TEST_F(ScenarioRun, ClosedLoopDriveFaultsShowTheFirmwaresReaction) {
+  const RunResult trip = RunScenario(
+      ShippedWith(
+          "paper000_closed_loop.yaml",
+          "faults:\n  - {type: drive, kind: overcurrent, drive: drive_left, start_s: 12}\n"),
+      Options(dir_ / "trip"));
+  const RunResult silent = RunScenario(
+      ShippedWith("paper000_closed_loop.yaml",
+                  "faults:\n  - {type: device, kind: silent, node: drive_right, start_s: 12}\n"),
+      Options(dir_ / "silent"));
+  for (const RunResult* r : {&trip, &silent}) {
+    ASSERT_EQ(r->failure, "");
+    const nlohmann::json& cl = r->report["metrics"]["closed_loop"];
+    SCOPED_TRACE(cl.dump());
+    ASSERT_TRUE(cl["fault_detected"].get<bool>());
+    EXPECT_LT(cl["fault_distance_after_m"].get<double>(), 0.6);
+    EXPECT_LT(cl["final_x_m"].get<double>(), 4.0);
+    EXPECT_GT(GoalError(*r), 6.0);
+    ASSERT_TRUE(cl.contains("fault_time_to_standstill_s"));
+  }
+  // The trip shows in the next TPDO1: one 0.25 s cycle. Silence needs the heartbeat consumer
+  // (0.35 s) to time out, and the cycle that reports it.
+  const double trip_s =
+      trip.report["metrics"]["closed_loop"]["fault_time_to_detect_s"].get<double>();
+  const double silent_s =
+      silent.report["metrics"]["closed_loop"]["fault_time_to_detect_s"].get<double>();
+  EXPECT_LE(trip_s, 0.26);
+  EXPECT_GT(silent_s, 0.35);
+  EXPECT_LE(silent_s, 0.76);
+  EXPECT_THAT(Slurp(dir_ / "trip" / "can.log"), HasSubstr("08B#1023"));  // EMCY 0x2310
 }
 
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {
