@@ -41,6 +41,8 @@ std::string_view PhysicalQuantityName(PhysicalQuantity q) noexcept {
     case PhysicalQuantity::kTime: return "time";
     case PhysicalQuantity::kTemperature: return "temperature";
     case PhysicalQuantity::kDimensionless: return "dimensionless value";
+    case PhysicalQuantity::kCurrent: return "current";
+    case PhysicalQuantity::kTorque: return "torque";
   }
   return "?";
 }
@@ -55,6 +57,8 @@ std::string_view AcceptedUnits(PhysicalQuantity q) noexcept {
     case PhysicalQuantity::kTime: return "s, ms, us, ns";
     case PhysicalQuantity::kTemperature: return "degC, K";
     case PhysicalQuantity::kDimensionless: return "none, -, 1, counts, %";
+    case PhysicalQuantity::kCurrent: return "A, mA";
+    case PhysicalQuantity::kTorque: return "N*m, Nm, mNm";
   }
   return "";
 }
@@ -84,6 +88,9 @@ std::optional<UnitToSi> ConvertUnit(std::string_view unit, PhysicalQuantity q) n
   static constexpr Spelling kDimensionless[] = {{"", 1.0},       {"-", 1.0},      {"1", 1.0},
                                                 {"counts", 1.0}, {"count", 1.0},  {"%", 1.0},
                                                 {"bit", 1.0},    {"flags", 1.0}};
+  static constexpr Spelling kCurrent[] = {{"A", 1.0}, {"mA", 1e-3}};
+  static constexpr Spelling kTorque[] = {
+      {"N*m", 1.0}, {"Nm", 1.0}, {"N.m", 1.0}, {"N m", 1.0}, {"mNm", 1e-3}, {"mN*m", 1e-3}};
   switch (q) {
     case PhysicalQuantity::kLength: return Find(kLength, unit);
     case PhysicalQuantity::kAngle: return Find(kAngle, unit);
@@ -93,6 +100,8 @@ std::optional<UnitToSi> ConvertUnit(std::string_view unit, PhysicalQuantity q) n
     case PhysicalQuantity::kTime: return Find(kTime, unit);
     case PhysicalQuantity::kTemperature: return Find(kTemperature, unit);
     case PhysicalQuantity::kDimensionless: return Find(kDimensionless, unit);
+    case PhysicalQuantity::kCurrent: return Find(kCurrent, unit);
+    case PhysicalQuantity::kTorque: return Find(kTorque, unit);
   }
   return std::nullopt;
 }

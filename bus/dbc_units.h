@@ -13,14 +13,16 @@ namespace wheelhil::bus {
 
 /// What a signal measures, for choosing the units that fit it.
 enum class PhysicalQuantity {
-  kLength,           ///< m, mm, cm, km.
-  kAngle,            ///< rad, mrad, urad, deg, °.
-  kSpeed,            ///< m/s, mm/s, cm/s, km/h.
-  kAngularRate,      ///< rad/s, mrad/s, deg/s, °/s, dps, rpm, 1/min, rps.
-  kAcceleration,     ///< m/s^2, m/s2, m/s², mm/s^2, g.
-  kTime,             ///< s, ms, us, µs, ns.
-  kTemperature,      ///< K; degC, °C, C (with an offset: UnitToSi).
-  kDimensionless,    ///< "", "-", "1", counts, flags, %: taken as they are (% is not scaled).
+  kLength,         ///< m, mm, cm, km.
+  kAngle,          ///< rad, mrad, urad, deg, °.
+  kSpeed,          ///< m/s, mm/s, cm/s, km/h.
+  kAngularRate,    ///< rad/s, mrad/s, deg/s, °/s, dps, rpm, 1/min, rps.
+  kAcceleration,   ///< m/s^2, m/s2, m/s², mm/s^2, g.
+  kTime,           ///< s, ms, us, µs, ns.
+  kTemperature,    ///< K; degC, °C, C (with an offset: UnitToSi).
+  kDimensionless,  ///< "", "-", "1", counts, flags, %: taken as they are (% is not scaled).
+  kCurrent,        ///< A, mA.
+  kTorque,         ///< N*m, Nm, N.m, mNm.
 };
 
 /// "length", "angle", ...: for messages.

@@ -2,7 +2,7 @@
 /// A wheel's servo drive as the CAN device a robot has: a CiA 402 node (Cia402DriveNode) whose
 /// power stage drives the wheel's motor. Every physics step the drive measures its wheel (angle,
 /// speed, motor torque and current), runs its state machine and ramps, and answers SYNC, SDO,
-/// NMT and RPDOs; wheel_drive() is the set point and torque limit the physics applies before the
+/// NMT and RPDOs; wheel_drives() is the set point and torque limit the physics applies before the
 /// next step. Device faults (silent, heartbeat lost) act on its frames; drive faults (over-current
 /// trip, stuck set point, lowered torque limit) on the drive, over their windows, each start and
 /// end an event ("drive_fault"). State changes are events ("drive_state", "node_state").
@@ -38,8 +38,8 @@ class Cia402DriveDevice final : public Device {
   bool Ready() const override {
     return node_.nmt_state() == Cia402DriveNode::NmtState::kOperational;
   }
-  std::optional<WheelDrive> wheel_drive() const override {
-    return WheelDrive{config_.wheel_index, node_.WheelCommand()};
+  std::vector<WheelDrive> wheel_drives() const override {
+    return {WheelDrive{config_.wheel_index, node_.WheelCommand()}};
   }
   void RaiseFault(std::uint16_t error_code, std::int64_t t_ns) override {
     node_.RaiseFault(error_code, t_ns);

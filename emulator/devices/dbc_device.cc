@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <span>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -18,9 +19,24 @@ namespace {
 
 using bus::PhysicalQuantity;
 
-constexpr std::array<std::string_view, 12> kQuantityNames = {
-    "rate_x",     "rate_y",      "rate_z",      "accel_x",  "accel_y", "accel_z",
-    "wheel_angle", "wheel_speed", "temperature", "constant", "counter", "checksum"};
+constexpr std::array<std::string_view, 16> kQuantityNames = {"rate_x",
+                                                             "rate_y",
+                                                             "rate_z",
+                                                             "accel_x",
+                                                             "accel_y",
+                                                             "accel_z",
+                                                             "wheel_angle",
+                                                             "wheel_speed",
+                                                             "temperature",
+                                                             "constant",
+                                                             "counter",
+                                                             "checksum",
+                                                             "wheel_speed_setpoint",
+                                                             "drive_enable",
+                                                             "motor_current",
+                                                             "motor_torque"};
+/// Events naming refused frames, at most this many per device (the count goes on).
+constexpr std::uint64_t kRejectedFrameEvents = 10;
 
 [[noreturn]] void Fail(const std::string& field, const std::string& problem) {
   throw std::invalid_argument(fmt::format("{}: {}", field, problem));
@@ -53,7 +69,12 @@ std::optional<PhysicalQuantity> UnitQuantity(DbcQuantity q) {
     case DbcQuantity::kRateY:
     case DbcQuantity::kRateZ:
     case DbcQuantity::kWheelSpeed:
+    case DbcQuantity::kWheelSpeedSetpoint:
       return PhysicalQuantity::kAngularRate;
+    case DbcQuantity::kMotorCurrent:
+      return PhysicalQuantity::kCurrent;
+    case DbcQuantity::kMotorTorque:
+      return PhysicalQuantity::kTorque;
     case DbcQuantity::kAccelX:
     case DbcQuantity::kAccelY:
     case DbcQuantity::kAccelZ:
@@ -78,7 +99,8 @@ std::optional<DbcQuantity> ParseDbcQuantity(std::string_view name) noexcept {
 
 std::string_view DbcQuantityNames() noexcept {
   return "rate_x, rate_y, rate_z, accel_x, accel_y, accel_z, wheel_angle, wheel_speed, "
-         "temperature, constant, counter, checksum";
+         "temperature, constant, counter, checksum, wheel_speed_setpoint, drive_enable, "
+         "motor_current, motor_torque";
 }
 
 Eigen::Matrix3d MountRotation(const Eigen::Vector3d& rpy_deg) {
@@ -145,6 +167,10 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
     Fail(config_.field + ".node", fmt::format("node {} sends no cyclic message", node));
   }
   for (const DbcSignalBinding& b : config_.signals) {
+    if (IsReceivedQuantity(b.quantity)) {
+      BindReceived(b);
+      continue;
+    }
     bool found = false;
     for (Message& m : messages_) {
       if (!b.message.empty() && m.msg->name != b.message) continue;
@@ -173,8 +199,7 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
         continue;
       }
       if (b.quantity == DbcQuantity::kChecksum) {
-        if (const std::string why = WhyChecksumDoesNotFit(b.checksum, *sig, *m.msg);
-            !why.empty()) {
+        if (const std::string why = WhyChecksumDoesNotFit(b.checksum, *sig, *m.msg); !why.empty()) {
           Fail(b.field, why);
         }
         m.checksums.push_back(bound);
@@ -182,7 +207,8 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
       }
       if (const auto q = UnitQuantity(b.quantity)) {
         const bool counts = b.quantity == DbcQuantity::kWheelAngle && b.counts_per_rev > 0;
-        const auto unit = bus::ConvertUnit(sig->unit, counts ? PhysicalQuantity::kDimensionless : *q);
+        const auto unit =
+            bus::ConvertUnit(sig->unit, counts ? PhysicalQuantity::kDimensionless : *q);
         if (!unit) {
           Fail(b.field,
                fmt::format("{}'s unit '{}' is not a unit of {} ({}){}", b.signal, sig->unit,
@@ -197,20 +223,141 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
     }
     if (!found) {
       Fail(b.field, b.message.empty()
-                        ? fmt::format("no message node {} sends cyclically has a signal '{}'",
-                                      node, b.signal)
+                        ? fmt::format("no message node {} sends cyclically has a signal '{}'", node,
+                                      b.signal)
                         : fmt::format("'{}' is not a cyclic message of node {} with a signal '{}'",
                                       b.message, node, b.signal));
     }
   }
+  if (config_.setpoint_timeout_s < 0) {
+    Fail(config_.field + ".setpoint_timeout_ms", "must be >= 0");
+  }
+  for (const Channel& c : channels_) {
+    if (!c.commanded_bound) {
+      Fail(config_.field + ".signals",
+           fmt::format("wheel {} has a drive_enable but no wheel_speed_setpoint", c.wheel));
+    }
+  }
   std::int64_t fastest = messages_.front().period_ns;
   for (const Message& m : messages_) fastest = std::min(fastest, m.period_ns);
-  imu_ = std::make_unique<SixAxisImu>(name_, config_.gyro, config_.accel, config_.R_BS,
-                                      config_.r_BS_B, 1e9 / static_cast<double>(fastest),
-                                      config_.seed);
+  imu_ =
+      std::make_unique<SixAxisImu>(name_, config_.gyro, config_.accel, config_.R_BS, config_.r_BS_B,
+                                   1e9 / static_cast<double>(fastest), config_.seed);
 }
 
 DbcDevice::~DbcDevice() = default;
+
+DbcDevice::Channel& DbcDevice::ChannelOf(std::size_t wheel) {
+  for (Channel& c : channels_) {
+    if (c.wheel == wheel) return c;
+  }
+  channels_.push_back(Channel{});
+  channels_.back().wheel = wheel;
+  return channels_.back();
+}
+
+void DbcDevice::BindReceived(const DbcSignalBinding& b) {
+  const std::string& node = config_.node;
+  for (const bus::DbcMessage& m : dbc_->messages()) {
+    if (m.sender == node || (!b.message.empty() && m.name != b.message)) continue;
+    const bus::DbcSignal* sig = m.FindSignal(b.signal);
+    if (sig == nullptr) continue;
+    if (m.length > 8) {
+      Fail(b.field, fmt::format("{} is {} bytes: only classic CAN frames (<= 8) are modelled",
+                                m.name, m.length));
+    }
+    auto it = std::find_if(received_.begin(), received_.end(),
+                           [&](const Received& r) { return r.msg == &m; });
+    if (it == received_.end()) {
+      received_.push_back(Received{&m, {}});
+      it = received_.end() - 1;
+    }
+    for (const Bound& x : it->values) {
+      if (x.signal == sig) Fail(b.field, fmt::format("{}.{} is bound twice", m.name, b.signal));
+    }
+    Bound bound{&b, sig, {}, 0, 0};
+    if (b.quantity == DbcQuantity::kWheelSpeedSetpoint) {
+      const auto unit = bus::ConvertUnit(sig->unit, PhysicalQuantity::kAngularRate);
+      if (!unit) {
+        Fail(b.field, fmt::format("{}'s unit '{}' is not a unit of angular rate ({})", b.signal,
+                                  sig->unit, bus::AcceptedUnits(PhysicalQuantity::kAngularRate)));
+      }
+      bound.unit = *unit;
+    }
+    Channel& c = ChannelOf(b.wheel_index);
+    if (b.quantity == DbcQuantity::kWheelSpeedSetpoint) {
+      if (c.commanded_bound) {
+        Fail(b.field, fmt::format("wheel {} has two wheel_speed_setpoint signals", b.wheel_index));
+      }
+      c.commanded_bound = true;
+      c.torque_limit_nm = b.motor_torque_limit_nm;
+    } else {
+      c.enable_bound = true;
+    }
+    it->values.push_back(bound);
+    return;
+  }
+  Fail(b.field, b.message.empty()
+                    ? fmt::format("no message node {} receives (sent by another node) has a "
+                                  "signal '{}'",
+                                  node, b.signal)
+                    : fmt::format("'{}' is not a message another node sends with a signal '{}'",
+                                  b.message, b.signal));
+}
+
+void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) {
+  for (Received& r : received_) {
+    if (frame.id != r.msg->id || frame.extended != r.msg->extended || frame.rtr) continue;
+    if (frame.len != r.msg->length) {
+      if (++rejected_frames_ <= kRejectedFrameEvents) {
+        port.Event(nlohmann::json{{"t_s", port.MotionSeconds(t_ns)},
+                                  {"event", "rejected_frame"},
+                                  {"device", name_},
+                                  {"message", r.msg->name},
+                                  {"id", frame.id},
+                                  {"why", fmt::format("{} bytes, the DBC's {} has {}", frame.len,
+                                                      r.msg->name, r.msg->length)}});
+      }
+      return;
+    }
+    const std::span<const std::uint8_t> payload(frame.data.data(), frame.len);
+    for (const Bound& b : r.values) {
+      const double v = bus::DecodeSignal(*b.signal, payload);
+      if (!std::isfinite(v)) continue;
+      Channel& c = ChannelOf(b.binding->wheel_index);
+      if (b.binding->quantity == DbcQuantity::kWheelSpeedSetpoint) {
+        c.omega_rad_s = b.binding->gain * b.unit.ToSi(v);
+        c.commanded = true;
+      } else {
+        c.enabled = v != 0.0;
+      }
+    }
+    ++setpoint_frames_;
+    last_setpoint_ns_ = t_ns;
+    setpoint_timed_out_ = false;
+    return;
+  }
+}
+
+void DbcDevice::EndStep(std::int64_t t_ns) {
+  Device::EndStep(t_ns);
+  if (config_.setpoint_timeout_s > 0 && setpoint_frames_ > 0 &&
+      static_cast<double>(t_ns - last_setpoint_ns_) * 1e-9 > config_.setpoint_timeout_s) {
+    setpoint_timed_out_ = true;
+  }
+}
+
+std::vector<WheelDrive> DbcDevice::wheel_drives() const {
+  std::vector<WheelDrive> out;
+  for (const Channel& c : channels_) {
+    WheelDrive d;
+    d.wheel = c.wheel;
+    const bool on = c.commanded && !setpoint_timed_out_ && (!c.enable_bound || c.enabled);
+    if (on) d.command = WheelDriveCommand{c.omega_rad_s, c.torque_limit_nm};
+    out.push_back(d);
+  }
+  return out;
+}
 
 std::int64_t DbcDevice::NextEventNs() const {
   std::int64_t next = std::numeric_limits<std::int64_t>::max();
@@ -253,6 +400,12 @@ void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bu
         break;
       case DbcQuantity::kWheelSpeed:
         si = (*world.wheels)[cfg.wheel_index].omega_rad_s;
+        break;
+      case DbcQuantity::kMotorCurrent:
+        si = (*world.wheels)[cfg.wheel_index].motor_current_a;
+        break;
+      case DbcQuantity::kMotorTorque:
+        si = (*world.wheels)[cfg.wheel_index].motor_torque_nm;
         break;
       case DbcQuantity::kTemperature:
         si = config_.temperature_k;

@@ -20,7 +20,17 @@
 /// Sensors: three gyro axes and a three-axis accelerometer along the sensor axes, which are the
 /// body axes rotated by the mounting's roll, pitch and yaw (R_BS = Rz(yaw) Ry(pitch) Rx(roll)),
 /// at the mounting point r_BS_B. Sensor faults address "<name>.rate_x" .. "<name>.accel_z";
-/// device faults the device's name. Virtual time only; never blocks; thread-compatible.
+/// device faults the device's name.
+///
+/// Motor controller: signals of messages the node receives (sent by the firmware) can bind a
+/// driven wheel's speed set point (`wheel_speed_setpoint`, an angular rate at the wheel in the
+/// signal's unit, times the gain) and an enable flag (`drive_enable`: non-zero = power stage
+/// on; without one the stage is on from the first set point); sent signals can report the
+/// wheel's motor current and torque (`motor_current`, `motor_torque`) besides its angle and
+/// speed. The wheel then follows the set point through the platform's motor model, with the
+/// motor's torque limit; it coasts before the first set point, while disabled, and when no set
+/// point frame came for setpoint_timeout_s. A received frame of the wrong length is refused
+/// (counted; an event names it). Virtual time only; never blocks; thread-compatible.
 
 #include <array>
 #include <cstdint>
@@ -40,9 +50,27 @@
 namespace wheelhil::emulator {
 
 enum class DbcQuantity : std::uint8_t {
-  kRateX, kRateY, kRateZ, kAccelX, kAccelY, kAccelZ,  // sensor axes
-  kWheelAngle, kWheelSpeed, kTemperature, kConstant, kCounter, kChecksum,
+  kRateX,
+  kRateY,
+  kRateZ,
+  kAccelX,
+  kAccelY,
+  kAccelZ,  // sensor axes
+  kWheelAngle,
+  kWheelSpeed,
+  kTemperature,
+  kConstant,
+  kCounter,
+  kChecksum,
+  kWheelSpeedSetpoint,
+  kDriveEnable,  // received (motor controller)
+  kMotorCurrent,
+  kMotorTorque,  // sent, of a driven wheel
 };
+/// Quantities read from received frames (the others are sent).
+constexpr bool IsReceivedQuantity(DbcQuantity q) {
+  return q == DbcQuantity::kWheelSpeedSetpoint || q == DbcQuantity::kDriveEnable;
+}
 /// "rate_x" ... "accel_z", "wheel_angle", "wheel_speed", "temperature", "constant", "counter",
 /// "checksum"; nullopt otherwise.
 std::optional<DbcQuantity> ParseDbcQuantity(std::string_view name) noexcept;
@@ -56,9 +84,11 @@ struct DbcSignalBinding {
   std::string signal;
   DbcQuantity quantity = DbcQuantity::kConstant;
   double gain = 1.0;
-  std::size_t wheel_index = 0;  ///< kWheelAngle, kWheelSpeed (vehicle wheel order).
-  double counts_per_rev = 0;    ///< kWheelAngle in a dimensionless unit ("counts").
-  double value = 0;             ///< kConstant: the physical value, in the signal's unit.
+  std::size_t wheel_index = 0;  ///< Wheel quantities (vehicle wheel order).
+  /// kWheelSpeedSetpoint: the wheel motor's own torque limit (wheel side, the platform's).
+  double motor_torque_limit_nm = 0;
+  double counts_per_rev = 0;  ///< kWheelAngle in a dimensionless unit ("counts").
+  double value = 0;           ///< kConstant: the physical value, in the signal's unit.
   std::int64_t counter_step = 1;
   std::optional<std::uint64_t> counter_modulo;  ///< Default 2^bits.
   bool counter_shared = false;  ///< Counts the device's send instants, not the message's frames.
@@ -76,18 +106,20 @@ struct DbcMessageTiming {
 };
 
 struct DbcDeviceConfig {
-  std::string name = "dbc";  ///< Its node name on the run's record and in faults.
+  std::string name = "dbc";   ///< Its node name on the run's record and in faults.
   std::string field = "dbc";  ///< Its configuration's field, for messages ("devices[0]").
-  std::string node;          ///< The DBC node (BU_) whose messages it sends.
+  std::string node;           ///< The DBC node (BU_) whose messages it sends.
   std::vector<DbcSignalBinding> signals;
   std::vector<DbcMessageTiming> timing;
-  Eigen::Vector3d r_BS_B = Eigen::Vector3d::Zero();  ///< Mounting point [m].
+  Eigen::Vector3d r_BS_B = Eigen::Vector3d::Zero();    ///< Mounting point [m].
   Eigen::Matrix3d R_BS = Eigen::Matrix3d::Identity();  ///< Sensor axes in the body frame.
-  GyroParams gyro;             ///< Per axis (axis, rate and seed are set by the device).
-  AccelerometerParams accel;   ///< Three axes (axes, point, rate and seed set by the device).
+  GyroParams gyro;            ///< Per axis (axis, rate and seed are set by the device).
+  AccelerometerParams accel;  ///< Three axes (axes, point, rate and seed set by the device).
   double temperature_k = 298.15;
   std::uint64_t seed = 0;
   std::int64_t start_ns = 0;  ///< When the device starts sending (its power-on).
+  /// Motor controller: no set point frame for this long turns the power stages off; 0 = never.
+  double setpoint_timeout_s = 0;
 };
 
 /// R_BS from roll, pitch, yaw in degrees (z-y'-x'' intrinsic, as ROS and URDF write them).
@@ -107,6 +139,12 @@ class DbcDevice final : public Device {
   std::vector<std::string> sensor_channels() const override;
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
+  void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) override;
+  void EndStep(std::int64_t t_ns) override;
+  std::vector<WheelDrive> wheel_drives() const override;
+  /// Motor controller: set-point frames taken, and refused (wrong length).
+  std::uint64_t setpoint_frames() const { return setpoint_frames_; }
+  std::uint64_t rejected_frames() const { return rejected_frames_; }
 
   /// The messages it sends, in DBC order, and their periods.
   std::size_t message_count() const { return messages_.size(); }
@@ -137,7 +175,24 @@ class DbcDevice final : public Device {
   struct Sample {
     std::array<double, 6> imu{};  // rate x y z, accel x y z, sensor axes
   };
+  /// A message the node receives with set-point bindings.
+  struct Received {
+    const bus::DbcMessage* msg = nullptr;
+    std::vector<Bound> values;
+  };
+  /// One driven wheel the node commands.
+  struct Channel {
+    std::size_t wheel = 0;
+    double torque_limit_nm = 0;
+    double omega_rad_s = 0;
+    bool commanded_bound = false;  // a wheel_speed_setpoint signal exists for this wheel
+    bool commanded = false;        // a set point came
+    bool enable_bound = false;     // a drive_enable signal exists for this wheel
+    bool enabled = false;
+  };
   void Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out);
+  Channel& ChannelOf(std::size_t wheel);
+  void BindReceived(const DbcSignalBinding& b);
 
   std::string name_;
   std::shared_ptr<const bus::DbcDatabase> dbc_;
@@ -147,6 +202,12 @@ class DbcDevice final : public Device {
   std::unique_ptr<SixAxisImu> imu_;
   std::uint64_t frames_sent_ = 0;
   std::uint64_t clamped_ = 0;
+  std::vector<Received> received_;
+  std::vector<Channel> channels_;
+  std::int64_t last_setpoint_ns_ = 0;
+  bool setpoint_timed_out_ = false;
+  std::uint64_t setpoint_frames_ = 0;
+  std::uint64_t rejected_frames_ = 0;
 };
 
 }  // namespace wheelhil::emulator

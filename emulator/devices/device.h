@@ -96,9 +96,9 @@ class Device {
   virtual std::optional<SyncAnswer> sync_answer() const { return std::nullopt; }
   /// Ready for the motion phase (a CANopen node: started by the master).
   virtual bool Ready() const { return true; }
-  /// A drive: the wheel it powers and what its power stage applies now (before the next
-  /// physics step). Other devices: none.
-  virtual std::optional<WheelDrive> wheel_drive() const { return std::nullopt; }
+  /// A drive: the wheels it powers (a CiA 402 drive one, a DBC motor controller maybe several)
+  /// and what its power stages apply now (before the next physics step). Other devices: none.
+  virtual std::vector<WheelDrive> wheel_drives() const { return {}; }
 
   /// Scenario faults on the device as a whole: it stops sending while silent ...
   virtual void SetSilent(bool silent) { silent_ = silent; }

@@ -146,7 +146,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
 void Run::CommandDrives() {
   drives_.clear();
   for (const auto& d : devices_) {
-    if (const auto drive = d->wheel_drive()) drives_.push_back(*drive);
+    for (const WheelDrive& w : d->wheel_drives()) drives_.push_back(w);
   }
   physics_->SetDrives(drives_);
 }

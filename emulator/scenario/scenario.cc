@@ -19,10 +19,10 @@ namespace wheelhil::emulator::scenario {
 namespace {
 
 namespace fs = std::filesystem;
+using internal::Reader;
 using internal::ReadFaults;
 using internal::ReadFriction;
 using internal::ReadSensors;
-using internal::Reader;
 
 std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& parent,
                                          const std::string& key, const std::string& prefix) {
@@ -257,7 +257,6 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
   return out;
 }
 
-
 std::optional<FirmwareMotionSpec> ReadFirmwareMotion(const Reader& r, const YAML::Node& root) {
   const YAML::Node n = Reader::Get(root, "motion");
   if (!n.IsMap()) return std::nullopt;
@@ -270,10 +269,10 @@ std::optional<FirmwareMotionSpec> ReadFirmwareMotion(const Reader& r, const YAML
   FirmwareMotionSpec m;
   if (const YAML::Node g = Reader::Get(n, "goal"); Reader::Present(g)) {
     r.CheckKeys(g, "motion.goal", {"x_m", "y_m", "theta_deg"});
-    m.goal = Eigen::Vector3d(r.Number(g, "x_m", "motion.goal", -1e5, 1e5, std::nullopt),
-                             r.Number(g, "y_m", "motion.goal", -1e5, 1e5, std::nullopt),
-                             r.Number(g, "theta_deg", "motion.goal", -1e6, 1e6, 0.0) *
-                                 std::numbers::pi / 180.0);
+    m.goal = Eigen::Vector3d(
+        r.Number(g, "x_m", "motion.goal", -1e5, 1e5, std::nullopt),
+        r.Number(g, "y_m", "motion.goal", -1e5, 1e5, std::nullopt),
+        r.Number(g, "theta_deg", "motion.goal", -1e6, 1e6, 0.0) * std::numbers::pi / 180.0);
     m.goal_has_heading = Reader::Present(Reader::Get(g, "theta_deg"));
   }
   return m;
@@ -282,17 +281,23 @@ std::optional<FirmwareMotionSpec> ReadFirmwareMotion(const Reader& r, const YAML
 // Closed loop: every driven wheel has exactly one drive, and drives only come with it.
 void CheckDrives(const Reader& r, const YAML::Node& root, const Scenario& s) {
   std::vector<int> drives_of(s.platform.vehicle.wheels.size(), 0);
-  for (const DeviceSpec& d : s.devices) {
-    if (d.kind != DeviceSpec::Kind::kCanopenCia402) continue;
+  auto count = [&](const std::string& device, std::size_t wheel) {
+    const std::string& name = s.platform.vehicle.wheels[wheel].name;
     if (!s.firmware_motion) {
       r.FailKey(root, "motion", "motion",
                 fmt::format("device '{}' drives wheel '{}': a scenario with drives takes its "
                             "motion from the firmware (motion: {{source: firmware}})",
-                            d.drive.name, d.drive.wheel_name));
+                            device, name));
     }
-    if (++drives_of[d.drive.wheel_index] > 1) {
-      r.FailKey(root, "devices", "devices",
-                fmt::format("wheel '{}' has two drives", d.drive.wheel_name));
+    if (++drives_of[wheel] > 1) {
+      r.FailKey(root, "devices", "devices", fmt::format("wheel '{}' has two drives", name));
+    }
+  };
+  for (const DeviceSpec& d : s.devices) {
+    if (d.kind == DeviceSpec::Kind::kCanopenCia402) count(d.drive.name, d.drive.wheel_index);
+    if (d.kind != DeviceSpec::Kind::kDbc) continue;
+    for (const DbcSignalBinding& b : d.dbc_device.signals) {
+      if (b.quantity == DbcQuantity::kWheelSpeedSetpoint) count(d.dbc_device.name, b.wheel_index);
     }
   }
   if (!s.firmware_motion) return;
@@ -301,7 +306,9 @@ void CheckDrives(const Reader& r, const YAML::Node& root, const Scenario& s) {
     if (wheel.driven && drives_of[w] == 0) {
       r.FailKey(root, "devices", "devices",
                 fmt::format("motion.source firmware: driven wheel '{}' has no drive (add a "
-                            "device of kind canopen_cia402 on it)", wheel.name));
+                            "device of kind canopen_cia402 on it, or a dbc device with a "
+                            "wheel_speed_setpoint signal for it)",
+                            wheel.name));
     }
   }
   if (!Reader::Present(Reader::Get(Reader::Get(root, "timing"), "duration_s"))) {
@@ -340,8 +347,9 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   TimingSpec t;
   t.duration_s = motion_s;
   if (!n.IsDefined()) return t;
-  r.CheckKeys(n, "timing", {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s",
-                            "clock", "sync_producer"});
+  r.CheckKeys(n, "timing",
+              {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s", "clock",
+               "sync_producer"});
   const std::string mode = r.String(n, "mode", "timing", std::string("lockstep"));
   if (mode == "lockstep") {
     t.lockstep = true;

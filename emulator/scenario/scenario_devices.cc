@@ -64,9 +64,13 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
     r.Fail(q, b.field, fmt::format("'{}' is not one of {}", qs, DbcQuantityNames()));
   }
   b.quantity = *quantity;
+  const bool wheel_quantity =
+      b.quantity == DbcQuantity::kWheelAngle || b.quantity == DbcQuantity::kWheelSpeed ||
+      b.quantity == DbcQuantity::kWheelSpeedSetpoint || b.quantity == DbcQuantity::kDriveEnable ||
+      b.quantity == DbcQuantity::kMotorCurrent || b.quantity == DbcQuantity::kMotorTorque;
   if (!v.IsMap()) {
-    if (b.quantity == DbcQuantity::kWheelAngle || b.quantity == DbcQuantity::kWheelSpeed ||
-        b.quantity == DbcQuantity::kConstant || b.quantity == DbcQuantity::kChecksum) {
+    if (wheel_quantity || b.quantity == DbcQuantity::kConstant ||
+        b.quantity == DbcQuantity::kChecksum) {
       r.Fail(v, b.field,
              fmt::format("{} needs a mapping ({{quantity: {}, {}}})", qs, qs,
                          b.quantity == DbcQuantity::kConstant   ? "value: V"
@@ -81,7 +85,13 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
       keys.insert({"wheel", "counts_per_rev"});
       break;
     case DbcQuantity::kWheelSpeed:
+    case DbcQuantity::kWheelSpeedSetpoint:
+    case DbcQuantity::kMotorCurrent:
+    case DbcQuantity::kMotorTorque:
       keys.insert("wheel");
+      break;
+    case DbcQuantity::kDriveEnable:
+      keys = {"quantity", "wheel"};
       break;
     case DbcQuantity::kConstant:
       keys = {"quantity", "value"};
@@ -98,7 +108,7 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
   }
   r.CheckKeys(v, b.field, keys);
   b.gain = r.Number(v, "gain", b.field, -1e9, 1e9, 1.0);
-  if (b.quantity == DbcQuantity::kWheelAngle || b.quantity == DbcQuantity::kWheelSpeed) {
+  if (wheel_quantity) {
     const std::string wheel = r.String(v, "wheel", b.field, std::nullopt);
     try {
       b.wheel_index = platform.wheel_index(wheel);
@@ -107,6 +117,19 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
              fmt::format("platform {} has no wheel '{}'", platform.name, wheel));
     }
     b.counts_per_rev = r.Number(v, "counts_per_rev", b.field, 1, 1e9, 0.0);
+    const physics::WheelSpec& w = platform.vehicle.wheels[b.wheel_index];
+    const bool needs_motor =
+        b.quantity != DbcQuantity::kWheelAngle && b.quantity != DbcQuantity::kWheelSpeed;
+    if (needs_motor && !w.driven) {
+      r.Fail(v["wheel"], b.field + ".wheel",
+             fmt::format("wheel '{}' of platform {} has no motor ({} is a driven wheel's)", wheel,
+                         platform.name, qs));
+    }
+    if (w.driven) {
+      const physics::MotorSpec& m = w.motor;
+      b.motor_torque_limit_nm =
+          std::min(m.max_torque_nm, m.torque_constant_nm_a * m.gear_ratio * m.max_current_a);
+    }
   }
   if (b.quantity == DbcQuantity::kConstant) b.value = r.Number(v, "value", b.field, -1e15, 1e15);
   if (b.quantity == DbcQuantity::kCounter) {
@@ -151,8 +174,9 @@ DeviceSpec ReadMm5Device(const Reader& r, const YAML::Node& n, const std::string
 
 DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string& f,
                          const platforms::Platform& platform) {
-  r.CheckKeys(n, f, {"kind", "name", "dbc", "node", "mount", "signals", "messages", "gyro", "accel",
-                     "temperature_c"});
+  r.CheckKeys(n, f,
+              {"kind", "name", "dbc", "node", "mount", "signals", "messages", "gyro", "accel",
+               "temperature_c", "setpoint_timeout_ms"});
   DeviceSpec d;
   d.kind = DeviceSpec::Kind::kDbc;
   DbcDeviceConfig& c = d.dbc_device;
@@ -173,6 +197,7 @@ DeviceSpec ReadDbcDevice(const Reader& r, const YAML::Node& n, const std::string
   ReadSensorModels(r, n, f, c);
   for (const DbcMessageTiming& t : c.timing) where[t.field] = n["messages"];
   c.temperature_k = r.Number(n, "temperature_c", f, -100, 300, 25.0) + 273.15;
+  c.setpoint_timeout_s = r.Number(n, "setpoint_timeout_ms", f, 0, 1e6, 0.0) * 1e-3;
   // The bindings against the DBC, now: an error names the entry's line.
   const auto db = LoadDbcAt(r, n, "dbc", f + ".dbc", d.dbc);
   try {
@@ -210,8 +235,9 @@ void ReadSensorModels(const Reader& r, const YAML::Node& n, const std::string& f
   }
   if (const YAML::Node g = Reader::Get(n, "gyro"); Reader::Present(g)) {
     const std::string gf = f + ".gyro";
-    r.CheckKeys(g, gf, {"noise_density_rad_s_sqrt_hz", "bias_rad_s",
-                        "bias_random_walk_rad_s_sqrt_s", "scale_factor_error"});
+    r.CheckKeys(g, gf,
+                {"noise_density_rad_s_sqrt_hz", "bias_rad_s", "bias_random_walk_rad_s_sqrt_s",
+                 "scale_factor_error"});
     c.gyro.noise_density_rad_s_sqrt_hz = r.Number(g, "noise_density_rad_s_sqrt_hz", gf, 0, 1, 0.0);
     c.gyro.bias_rad_s = r.Number(g, "bias_rad_s", gf, -10, 10, 0.0);
     c.gyro.bias_random_walk_rad_s_sqrt_s =
@@ -233,7 +259,8 @@ void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f,
                  const std::function<void(std::uint16_t, std::uint8_t, std::uint32_t)>& set) {
   const YAML::Node objs = Reader::Get(n, "objects");
   if (!Reader::Present(objs)) return;
-  if (!objs.IsMap()) r.Fail(objs, f + ".objects", "must map \"0xINDEX\" or \"0xINDEXsubN\" to values");
+  if (!objs.IsMap())
+    r.Fail(objs, f + ".objects", "must map \"0xINDEX\" or \"0xINDEXsubN\" to values");
   for (auto it = objs.begin(); it != objs.end(); ++it) {
     const std::string key = r.ToString(it->first, f + ".objects");
     const std::string kf = f + ".objects." + key;
@@ -263,8 +290,9 @@ void ReadObjects(const Reader& r, const YAML::Node& n, const std::string& f,
 
 DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::string& f,
                             const platforms::Platform& platform) {
-  r.CheckKeys(n, f, {"kind", "wheel", "node_id", "direction", "lines_per_rev", "quadrature_x4",
-                     "eds", "objects"});
+  r.CheckKeys(n, f,
+              {"kind", "wheel", "node_id", "direction", "lines_per_rev", "quadrature_x4", "eds",
+               "objects"});
   DeviceSpec d;
   d.kind = DeviceSpec::Kind::kCanopenCia406;
   d.encoder.wheel = r.String(n, "wheel", f, std::nullopt);
@@ -308,18 +336,21 @@ DeviceSpec ReadCia406Device(const Reader& r, const YAML::Node& n, const std::str
   if (eds_counts && *eds_counts % per_line != 0) {
     r.FailKey(n, "eds", f + ".eds",
               fmt::format("0x6001 = {} counts per revolution is not a whole number of {}-count "
-                          "lines (quadrature_x4: {})", *eds_counts, per_line, d.quadrature_x4));
+                          "lines (quadrature_x4: {})",
+                          *eds_counts, per_line, d.quadrature_x4));
   }
-  d.lines_per_rev = eds_counts ? static_cast<int>(*eds_counts / per_line)
-                               : static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
+  d.lines_per_rev = eds_counts
+                        ? static_cast<int>(*eds_counts / per_line)
+                        : static_cast<int>(r.Integer(n, "lines_per_rev", f, 1, 10'000'000, 500));
   return d;
 }
 
 // A CiA 402 drive on a driven wheel; its units and limits default to the wheel's motor.
 DeviceSpec ReadCia402Device(const Reader& r, const YAML::Node& n, const std::string& f,
                             const platforms::Platform& platform) {
-  r.CheckKeys(n, f, {"kind", "name", "wheel", "node_id", "eds", "objects", "velocity_unit",
-                     "counts_per_rev", "gear_ratio", "trip_current_a", "trip_time_s"});
+  r.CheckKeys(n, f,
+              {"kind", "name", "wheel", "node_id", "eds", "objects", "velocity_unit",
+               "counts_per_rev", "gear_ratio", "trip_current_a", "trip_time_s"});
   DeviceSpec d;
   d.kind = DeviceSpec::Kind::kCanopenCia402;
   Cia402DriveDeviceConfig& c = d.drive;
@@ -341,9 +372,10 @@ DeviceSpec ReadCia402Device(const Reader& r, const YAML::Node& n, const std::str
       std::min(m.max_torque_nm, m.torque_constant_nm_a * m.gear_ratio * m.max_current_a);
   Cia402DriveConfig& node = c.node;
   node.gear_ratio = r.Number(n, "gear_ratio", f, 1e-3, 1e4, m.gear_ratio);
-  node.rated_torque_mnm =
-      static_cast<std::uint32_t>(std::max(1.0, std::round(c.motor_torque_limit_nm / node.gear_ratio * 1e3)));
-  node.rated_current_ma = static_cast<std::uint32_t>(std::max(1.0, std::round(m.max_current_a * 1e3)));
+  node.rated_torque_mnm = static_cast<std::uint32_t>(
+      std::max(1.0, std::round(c.motor_torque_limit_nm / node.gear_ratio * 1e3)));
+  node.rated_current_ma =
+      static_cast<std::uint32_t>(std::max(1.0, std::round(m.max_current_a * 1e3)));
   const std::string unit = r.String(n, "velocity_unit", f, std::string("rpm"));
   if (unit != "rpm" && unit != "counts_per_s") {
     r.Fail(n["velocity_unit"], f + ".velocity_unit",
@@ -424,9 +456,9 @@ std::vector<DeviceSpec> ReadDevices(const Reader& r, const YAML::Node& n,
                fmt::format("'{}' is taken: give each device its own name", d.drive.name));
       }
     } else {
-      r.FailKey(n[i], "kind", f + ".kind",
-                fmt::format("'{}' is not one of dbc, mm5_10, canopen_cia406, canopen_cia402",
-                            kind));
+      r.FailKey(
+          n[i], "kind", f + ".kind",
+          fmt::format("'{}' is not one of dbc, mm5_10, canopen_cia406, canopen_cia402", kind));
     }
     d.where = r.Where(n[i]);
     out.push_back(std::move(d));

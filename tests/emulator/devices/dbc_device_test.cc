@@ -71,9 +71,9 @@ DbcDeviceConfig Config() {
   DbcDeviceConfig c;
   c.name = "box";
   c.node = "Box";
-  c.signals = {Bind("Yaw", DbcQuantity::kRateZ), Bind("Ax", DbcQuantity::kAccelX),
+  c.signals = {Bind("Yaw", DbcQuantity::kRateZ),        Bind("Ax", DbcQuantity::kAccelX),
                Bind("Temp", DbcQuantity::kTemperature), Bind("Cnt", DbcQuantity::kCounter),
-               Bind("Crc", DbcQuantity::kChecksum), Bind("Angle", DbcQuantity::kWheelAngle),
+               Bind("Crc", DbcQuantity::kChecksum),     Bind("Angle", DbcQuantity::kWheelAngle),
                Bind("Speed", DbcQuantity::kWheelSpeed), Bind("Level", DbcQuantity::kConstant)};
   c.signals[4].checksum.kind = ChecksumKind::kCrc8H2F;
   c.signals[5].counts_per_rev = 4096;
@@ -103,10 +103,10 @@ TEST(DbcDevice, SendsEveryCyclicMessageOfItsNodeInTheDbcUnits) {
   // BOX_Rates at 0, 10, .., 40 ms; BOX_Wheel at 5 (GenMsgStartDelayTime), 25 ms.
   std::vector<std::pair<std::uint32_t, std::int64_t>> order;
   for (const auto& f : port.sent) order.emplace_back(f.frame.id, f.due_ns / 1'000'000);
-  EXPECT_THAT(order, ::testing::ElementsAre(std::pair{256u, 0}, std::pair{257u, 5},
-                                            std::pair{256u, 10}, std::pair{256u, 20},
-                                            std::pair{257u, 25}, std::pair{256u, 30},
-                                            std::pair{256u, 40}));
+  EXPECT_THAT(order,
+              ::testing::ElementsAre(std::pair{256u, 0}, std::pair{257u, 5}, std::pair{256u, 10},
+                                     std::pair{256u, 20}, std::pair{257u, 25}, std::pair{256u, 30},
+                                     std::pair{256u, 40}));
   const auto db = Db();
   const auto rates = bus::DecodeMessage(*db->FindMessage("BOX_Rates"), port.sent[3].frame);
   EXPECT_NEAR(rates.at("Yaw"), -0.5 * 180 / std::numbers::pi, 0.005 + 1e-9);
@@ -116,8 +116,8 @@ TEST(DbcDevice, SendsEveryCyclicMessageOfItsNodeInTheDbcUnits) {
   EXPECT_DOUBLE_EQ(rates.at("Cnt"), 2);    // its third frame
   EXPECT_DOUBLE_EQ(rates.at("Spare"), 9);  // GenSigStartValue
   const std::span<const std::uint8_t> p(port.sent[3].frame.data.data(), 8);
-  EXPECT_EQ(rates.at("Crc"),
-            ComputeChecksum(ChecksumKind::kCrc8H2F, *db->FindMessage("BOX_Rates")->FindSignal("Crc"), p));
+  EXPECT_EQ(rates.at("Crc"), ComputeChecksum(ChecksumKind::kCrc8H2F,
+                                             *db->FindMessage("BOX_Rates")->FindSignal("Crc"), p));
   const auto wheel = bus::DecodeMessage(*db->FindMessage("BOX_Wheel"), port.sent[4].frame);
   EXPECT_DOUBLE_EQ(wheel.at("Angle"), 3072);  // 3/4 of 4096 counts
   EXPECT_NEAR(wheel.at("Speed"), 10 * 60 / (2 * std::numbers::pi), 0.05 + 1e-9);
@@ -196,6 +196,126 @@ TEST(DbcDevice, ConfigurationsTheDbcCannotCarryAreRefusedNamingTheField) {
   t.field = "dbc.messages.OTHER_Msg";
   c.timing = {t};
   throws(c, "dbc.messages.OTHER_Msg: 'OTHER_Msg' is not a message node Box sends");
+}
+
+// A two-channel motor controller described by its DBC: the firmware's MC_Command (received)
+// sets each wheel's speed and the enable; MC_Feedback (sent every 10 ms) reports speed, current,
+// torque and position of the left wheel.
+constexpr const char* kMotorDbc = R"(VERSION ""
+BU_: Fw Mc
+BO_ 512 MC_Command: 5 Fw
+ SG_ SpeedLeft : 0|16@1- (0.1,0) [-3000|3000] "rpm" Mc
+ SG_ SpeedRight : 16|16@1- (0.1,0) [-3000|3000] "rpm" Mc
+ SG_ Enable : 32|1@1+ (1,0) [0|1] "" Mc
+BO_ 513 MC_Feedback: 8 Mc
+ SG_ FbSpeedLeft : 0|16@1- (0.1,0) [-3000|3000] "rpm" Fw
+ SG_ FbCurrentLeft : 16|16@1- (0.01,0) [-100|100] "A" Fw
+ SG_ FbTorqueLeft : 32|16@1- (0.001,0) [-30|30] "Nm" Fw
+ SG_ FbPosLeft : 48|16@1+ (1,0) [0|65535] "counts" Fw
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_ "GenMsgCycleTime" BO_ 513 10;
+)";
+
+DbcDeviceConfig MotorConfig() {
+  DbcDeviceConfig c;
+  c.name = "mc";
+  c.node = "Mc";
+  c.setpoint_timeout_s = 0.1;
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint),
+               Bind("Enable", DbcQuantity::kDriveEnable),
+               Bind("FbSpeedLeft", DbcQuantity::kWheelSpeed),
+               Bind("FbCurrentLeft", DbcQuantity::kMotorCurrent),
+               Bind("FbTorqueLeft", DbcQuantity::kMotorTorque),
+               Bind("FbPosLeft", DbcQuantity::kWheelAngle)};
+  c.signals[0].wheel_index = 0;
+  c.signals[0].motor_torque_limit_nm = 4.8;
+  c.signals[1].wheel_index = 1;
+  c.signals[1].motor_torque_limit_nm = 4.8;
+  c.signals[1].gain = -1;  // the right motor is mounted mirrored
+  c.signals[2].wheel_index = 1;
+  c.signals[6].counts_per_rev = 1000;
+  return c;
+}
+
+bus::CanFrame Command(double left_rpm, double right_rpm, int enable) {
+  const auto db = bus::DbcDatabase::Parse(kMotorDbc, "mc.dbc");
+  return bus::EncodeMessage(
+      *db.FindMessage("MC_Command"),
+      {{"SpeedLeft", left_rpm}, {"SpeedRight", right_rpm}, {"Enable", enable}});
+}
+
+TEST(DbcMotorController, SetPointsDriveTheWheelsAndFeedbackReportsThem) {
+  const auto db =
+      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kMotorDbc, "mc.dbc"));
+  DbcDevice d(db, MotorConfig());
+  RecordingPort port;
+  auto drives = [&] { return d.wheel_drives(); };
+  ASSERT_EQ(drives().size(), 2u);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 0.0);  // Before any set point: coasting.
+  d.OnFrame(Command(30, 60, 1), 1'000'000, port);
+  const double rpm = 2 * std::numbers::pi / 60;
+  EXPECT_EQ(drives()[0].wheel, 0u);
+  EXPECT_NEAR(drives()[0].command.omega_rad_s, 30 * rpm, 1e-12);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 4.8);  // No enable bound for the left wheel.
+  EXPECT_NEAR(drives()[1].command.omega_rad_s, -60 * rpm, 1e-12);
+  EXPECT_EQ(drives()[1].command.torque_limit_nm, 4.8);
+  d.OnFrame(Command(30, 60, 0), 2'000'000, port);  // Right disabled: it coasts.
+  EXPECT_EQ(drives()[1].command.torque_limit_nm, 0.0);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 4.8);
+  // No set point for more than 0.1 s: every power stage off.
+  d.EndStep(102'000'000);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 4.8);
+  d.EndStep(102'000'001);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 0.0);
+  d.OnFrame(Command(30, 60, 1), 103'000'000, port);
+  EXPECT_EQ(drives()[0].command.torque_limit_nm, 4.8);
+  // A short frame is refused and named; the set points stay.
+  bus::CanFrame bad = Command(90, 90, 1);
+  bad.len = 3;
+  d.OnFrame(bad, 104'000'000, port);
+  EXPECT_EQ(d.rejected_frames(), 1u);
+  EXPECT_EQ(d.setpoint_frames(), 3u);
+  ASSERT_EQ(port.events.size(), 1u);
+  EXPECT_EQ(port.events[0]["message"], "MC_Command");
+  EXPECT_THAT(port.events[0]["why"].get<std::string>(), HasSubstr("3 bytes"));
+  EXPECT_NEAR(drives()[0].command.omega_rad_s, 30 * rpm, 1e-12);
+
+  physics::BodyTruth body;
+  std::vector<physics::WheelTruth> wheels(2);
+  wheels[0].omega_rad_s = 3.0;
+  wheels[0].motor_current_a = 2.5;
+  wheels[0].motor_torque_nm = 1.25;
+  wheels[0].angle_rad = std::numbers::pi;
+  DeviceWorld world{&body, &wheels, {}};
+  d.Poll(0, world, port);
+  ASSERT_EQ(port.sent.size(), 1u);
+  const auto fb = bus::DecodeMessage(*db->FindMessage("MC_Feedback"), port.sent[0].frame);
+  EXPECT_NEAR(fb.at("FbSpeedLeft"), 3.0 / rpm, 0.05 + 1e-9);
+  EXPECT_NEAR(fb.at("FbCurrentLeft"), 2.5, 0.005 + 1e-9);
+  EXPECT_NEAR(fb.at("FbTorqueLeft"), 1.25, 0.0005 + 1e-9);
+  EXPECT_DOUBLE_EQ(fb.at("FbPosLeft"), 500);
+}
+
+TEST(DbcMotorController, BindingsTheDbcCannotCarryAreRefusedNamingTheField) {
+  const auto db =
+      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kMotorDbc, "mc.dbc"));
+  DbcDeviceConfig sent = MotorConfig();
+  sent.signals[0] = Bind("FbSpeedLeft", DbcQuantity::kWheelSpeedSetpoint);  // Mc sends it
+  EXPECT_THAT([&] { DbcDevice d(db, sent); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("dbc.signals.FbSpeedLeft: no message node Mc receives")));
+  DbcDeviceConfig unit = MotorConfig();
+  unit.signals[0] = Bind("Enable", DbcQuantity::kWheelSpeedSetpoint);
+  unit.signals[2] = Bind("SpeedLeft", DbcQuantity::kDriveEnable);
+  EXPECT_THAT([&] { DbcDevice d(db, unit); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("Enable's unit '' is not a unit of angular rate")));
+  DbcDeviceConfig current = MotorConfig();
+  current.signals[4] = Bind("FbSpeedLeft", DbcQuantity::kMotorCurrent);
+  current.signals.erase(current.signals.begin() + 3);  // FbSpeedLeft's own binding
+  EXPECT_THAT([&] { DbcDevice d(db, current); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("'rpm' is not a unit of current")));
 }
 
 }  // namespace

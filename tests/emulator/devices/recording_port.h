@@ -17,10 +17,11 @@ class RecordingPort final : public DevicePort {
     for (auto& f : frames) sent.push_back(f);
   }
   void CountSilenced(std::size_t) override {}
-  void Event(nlohmann::json) override {}
+  void Event(nlohmann::json e) override { events.push_back(std::move(e)); }
   double MotionSeconds(std::int64_t t_ns) const override { return 1e-9 * static_cast<double>(t_ns); }
   void Fail(std::string) override {}
   std::vector<NodeFrame> sent;
+  std::vector<nlohmann::json> events;
 };
 
 }  // namespace wheelhil::emulator::testing

@@ -45,9 +45,9 @@ TEST(ScenarioLoader, MinimalLoadsWithDefaults) {
 }
 
 TEST(ScenarioLoader, ScoringSelectsMetricComponentsGenericByDefault) {
-  EXPECT_EQ(ParseScenario(Minimal(), kFile).metric_components,
-            (std::vector<std::string>{"pose", "velocity", "truth", "contact", "frames",
-                                      "closed_loop"}));
+  EXPECT_EQ(
+      ParseScenario(Minimal(), kFile).metric_components,
+      (std::vector<std::string>{"pose", "velocity", "truth", "contact", "frames", "closed_loop"}));
   const Scenario s =
       ParseScenario(Minimal("scoring: {metrics: [pose, correction_ratio]}\n"), kFile);
   EXPECT_EQ(s.metric_components, (std::vector<std::string>{"pose", "correction_ratio"}));
@@ -525,11 +525,56 @@ TEST(ScenarioLoader, DrivesMakeAClosedLoop) {
   EXPECT_EQ(d.name, "drive12");
   EXPECT_EQ(d.node.default_mode, 9);
   EXPECT_EQ(d.node.rpdo[0].event_ms, 100);
-  EXPECT_DOUBLE_EQ(d.node.gear_ratio, 20);  // the platform motor's
+  EXPECT_DOUBLE_EQ(d.node.gear_ratio, 20);           // the platform motor's
   EXPECT_NEAR(d.motor_torque_limit_nm, 4.8, 1e-12);  // kt x gear x max current < 5 N*m
   ASSERT_EQ(s.faults.size(), 3u);
   EXPECT_EQ(s.faults[1].drive.kind, DriveFault::Kind::kTorqueLimit);
   EXPECT_DOUBLE_EQ(s.faults[1].drive.torque_limit_nm, 0.5);
+}
+
+const char* kMotorController = R"(  - kind: dbc
+    name: motors
+    dbc: own_hardware/dual_motor_controller.dbc
+    node: MotorCtrl
+    setpoint_timeout_ms: 100
+    signals:
+      MC_SpeedLeft: {quantity: wheel_speed_setpoint, wheel: left}
+      MC_SpeedRight: {quantity: wheel_speed_setpoint, wheel: right}
+      MC_Enable: {quantity: drive_enable, wheel: right}
+      MC_FbSpeedLeft: {quantity: wheel_speed, wheel: left}
+      MC_FbSpeedRight: {quantity: wheel_speed, wheel: right}
+      MC_FbCurrentLeft: {quantity: motor_current, wheel: left}
+      MC_FbCurrentRight: {quantity: motor_current, wheel: right}
+      MC_PosLeft: {quantity: wheel_angle, wheel: left, counts_per_rev: 4096}
+      MC_PosRight: {quantity: wheel_angle, wheel: right, counts_per_rev: 4096}
+)";
+
+TEST(ScenarioLoader, ADbcMotorControllerDrivesTheWheels) {
+  const Scenario s = ParseScenario(ClosedLoop(kMotorController), kFile);
+  ASSERT_EQ(s.devices.size(), 1u);
+  const DbcDeviceConfig& c = s.devices[0].dbc_device;
+  EXPECT_DOUBLE_EQ(c.setpoint_timeout_s, 0.1);
+  ASSERT_EQ(c.signals[0].quantity, DbcQuantity::kWheelSpeedSetpoint);
+  EXPECT_NEAR(c.signals[0].motor_torque_limit_nm, 4.8, 1e-12);  // the platform motor's
+  // A wheel with a CiA 402 drive and the controller's set point has two drives; a set point
+  // for a caster, none to drive; without the right wheel's set point it has no drive.
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(ClosedLoop(std::string(kMotorController) +
+                                       "  - {kind: canopen_cia402, wheel: left, node_id: 11}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("wheel 'left' has two drives")));
+  std::string caster = kMotorController;
+  caster.replace(caster.find("wheel: left}"), 12, "wheel: caster_front}");
+  EXPECT_THAT([&] { (void)ParseScenario(ClosedLoop(caster), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "wheel 'caster_front' of platform diff2 has no motor (wheel_speed_setpoint")));
+  std::string one = kMotorController;
+  one.erase(one.find("      MC_SpeedRight"),
+            one.find("      MC_Enable") - one.find("      MC_SpeedRight"));
+  EXPECT_THAT([&] { (void)ParseScenario(ClosedLoop(one), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("wheel 1 has a drive_enable but no")));
 }
 
 TEST(ScenarioLoader, ClosedLoopMistakesAreNamed) {
