@@ -116,7 +116,8 @@ std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
   const auto pose = LastPayload(log, id);
   EXPECT_EQ(pose.size(), 8u) << id;
   if (pose.size() == 8u) {
-    EXPECT_NEAR(I32(pose, 0) * 1e-4, LastEstimateX(dir / "a", "pose"), 1.5e-6);  // estimate.csv: 1 um
+    EXPECT_NEAR(I32(pose, 0) * 1e-4, LastEstimateX(dir / "a", "pose"),
+                1.5e-6);  // estimate.csv: 1 um
     EXPECT_NEAR(I32(pose, 0) * 1e-4, FinalTruthX(dir / "a"), 0.005);
     EXPECT_NEAR(I32(pose, 4) * 1e-4, 0.0, 0.005);
   }
@@ -141,6 +142,24 @@ TEST_F(VirtualTimeRun, CustomerPythonCanFirmwareIsByteIdentical) {
   ExpectCustomerRun(dir_, "python_can_odometry.yaml", "3C0");
 }
 
+// Closed loop through a motor controller that is not CANopen: a `dbc` device of the
+// controller's own DBC takes the firmware's speed set points and reports wheel positions; the
+// firmware stops after 1 m of wheel travel. Same bytes run to run.
+TEST_F(VirtualTimeRun, CustomerFirmwareDrivesADbcMotorControllerClosedLoop) {
+  const Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                      "/tests/data/customer_firmware/python_can_motor_drive.yaml");
+  const auto [a, log] = RunTwiceSameBytes(s, dir_);
+  ASSERT_EQ(a.failure, "");
+  EXPECT_EQ(a.report["verdict"], "pass") << a.report["expectations"].dump(1);
+  const nlohmann::json& cl = a.report["metrics"]["closed_loop"];
+  EXPECT_LT(cl["goal_error_m"].get<double>(), 0.02);
+  EXPECT_NEAR(cl["final_x_m"].get<double>(), 1.0, 0.02);
+  // Its set points (0x310, enable set) and the controller's feedback (0x311, 0x312) on the bus.
+  EXPECT_THAT(log, HasSubstr(" 310#"));
+  EXPECT_THAT(log, HasSubstr(" 312#"));
+  EXPECT_EQ(LastPayload(log, "310"), (std::vector<std::uint8_t>{0, 0, 0, 0, 1}));  // stopped
+}
+
 // The work in a forked child, the parent only waiting for it: the child is on the clock from
 // its first instruction, the parent (asleep in waitpid) is blocked.
 TEST_F(VirtualTimeRun, AForkedChildRunsOnTheSameClock) {
@@ -149,8 +168,8 @@ TEST_F(VirtualTimeRun, AForkedChildRunsOnTheSameClock) {
   const auto [a, log] = RunTwiceSameBytes(s, dir_);
   ASSERT_EQ(a.failure, "");
   // The same bytes as the firmware without the fork.
-  const RunResult c = RunScenario(LoadScenarioFile(kCustomerC),
-                                  testing::BuildTreeRunOptions(dir_ / "c"));
+  const RunResult c =
+      RunScenario(LoadScenarioFile(kCustomerC), testing::BuildTreeRunOptions(dir_ / "c"));
   ASSERT_EQ(c.failure, "");
   EXPECT_EQ(log, Slurp(dir_ / "c" / "can.log"));
 }
@@ -204,7 +223,8 @@ TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
   EXPECT_GT(syncs, 100);
   EXPECT_LT(syncs, 260);
   std::size_t in_log = 0;
-  for (std::size_t at = log.find(" 080#"); at != std::string::npos; at = log.find(" 080#", at + 1)) {
+  for (std::size_t at = log.find(" 080#"); at != std::string::npos;
+       at = log.find(" 080#", at + 1)) {
     ++in_log;
   }
   EXPECT_NEAR(static_cast<double>(in_log), syncs, 1.0);  // the last may still be on the wire
