@@ -265,11 +265,12 @@ void ReadDrives(const Section& s, DriveSettings& d) {
   }
   for (std::size_t i = 0; i < list.size(); ++i) {
     const Section n(s.reader(), list[i], fmt::format("{}[{}]", s.Field("nodes"), i));
-    n.Allow({"node_id", "x_m", "y_m", "roller_angle_deg", "sign"});
+    n.Allow({"node_id", "x_m", "y_m", "heading_deg", "roller_angle_deg", "sign"});
     DriveNodeSettings dn;
     dn.node_id = static_cast<int>(n.Integer("node_id", 0, true, 1, 127));
     dn.x_m = n.Number("x_m", 0.0, true, false);
     dn.y_m = n.Number("y_m", 0.0, true, false);
+    dn.heading_rad = n.Number("heading_deg", 0.0, false, false) * kDegToRad;
     if (n.Has("roller_angle_deg")) {
       dn.has_rollers = true;
       dn.roller_angle_rad = n.Number("roller_angle_deg", 0.0, true, false) * kDegToRad;

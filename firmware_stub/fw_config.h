@@ -115,7 +115,8 @@ struct DriveNodeSettings {
   double x_m = 0.0, y_m = 0.0;  ///< Wheel contact in the body frame (x forward, y left).
   bool has_rollers = false;     ///< Mecanum / omni: rollers at roller_angle to the axle.
   double roller_angle_rad = 0.0;
-  int sign = 1;  ///< -1: the drive turns the wheel backwards for a positive set point.
+  int sign = 1;              ///< -1: the drive turns the wheel backwards for a positive set point.
+  double heading_rad = 0.0;  ///< Rolling direction from the body x axis, CCW.
 };
 
 /// The drives the firmware masters (CiA 402, bus/dbc/cia402_drive.dbc) and how their set

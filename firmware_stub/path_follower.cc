@@ -94,10 +94,17 @@ void WheelSpeedsFor(const DriveSettings& d, const BodyVelocity& v, double* out) 
   double peak = 0.0;
   for (std::size_t i = 0; i < d.nodes.size(); ++i) {
     const DriveNodeSettings& n = d.nodes[i];
+    // Contact point velocity, then its component the wheel cannot slide along: the rolling
+    // direction f for a conventional wheel, the normal to the roller axis u for rollers.
     const double vx = v.vx_m_s - v.omega_rad_s * n.y_m;
     const double vy = v.vy_m_s + v.omega_rad_s * n.x_m;
-    double w = vx;
-    if (n.has_rollers) w += vy * std::cos(n.roller_angle_rad) / std::sin(n.roller_angle_rad);
+    const double fx = std::cos(n.heading_rad), fy = std::sin(n.heading_rad);
+    double w = vx * fx + vy * fy;
+    if (n.has_rollers) {
+      const double ca = std::cos(n.roller_angle_rad), sa = std::sin(n.roller_angle_rad);
+      const double ux = -ca * fy + sa * fx, uy = ca * fx + sa * fy;
+      w = (vx * ux + vy * uy) / sa;
+    }
     out[i] = n.sign * w / d.wheel_radius_m;
     peak = std::max(peak, std::abs(out[i]));
   }

@@ -50,9 +50,10 @@ class PathFollower {
   double held_heading_rad_ = 0.0;  // Heading of the leg's start (the last theta reached).
 };
 
-/// Wheel speeds [rad/s] of the drives' wheels for a body velocity: a conventional wheel rolls
-/// along x (omega = (vx - w y) / R); a wheel with rollers at angle a to its axle turns at
-/// (vx - w y + (vy + w x) cot a) / R. Times each drive's sign.
+/// Wheel speeds [rad/s] of the drives' wheels for a body velocity: with the contact point's
+/// velocity c = (vx - w y, vy + w x), a conventional wheel rolling along f (its heading) turns at
+/// c.f / R; a wheel with rollers at angle a to its axle at c.u / (R sin a), u = the roller
+/// normal (heading 0: (vx - w y + (vy + w x) cot a) / R). Times each drive's sign.
 void WheelSpeedsFor(const DriveSettings& drives, const BodyVelocity& v, double* out_rad_s);
 
 }  // namespace wheelhil::fw

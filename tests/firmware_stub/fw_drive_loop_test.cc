@@ -279,5 +279,40 @@ TEST(FwDriveKinematics, MatchesTheEmulatorsInverseKinematicsOnTheMecanumPlatform
   }
 }
 
+// Every shipped platform, its drive wheels described to the firmware as a customer would
+// (contact point, heading, roller angle): the same wheel speeds as the emulator's kinematics.
+TEST(FwDriveKinematics, MatchesTheEmulatorOnEveryShippedPlatform) {
+  for (const char* name : {"diff2", "mecanum4_omni3", "ortho3"}) {
+    SCOPED_TRACE(name);
+    const emulator::platforms::Platform p = emulator::platforms::LoadPlatformFile(
+        std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/platforms/" + name + ".yaml");
+    ASSERT_FALSE(p.drive_wheels.empty());
+    DriveSettings d;
+    d.wheel_radius_m = p.vehicle.wheels[p.drive_wheels[0]].radius_m;
+    for (std::size_t i : p.drive_wheels) {
+      const auto& w = p.vehicle.wheels[i];
+      ASSERT_EQ(w.radius_m, d.wheel_radius_m);
+      DriveNodeSettings n;
+      n.x_m = w.mount_B.x();
+      n.y_m = w.mount_B.y();
+      n.heading_rad = w.heading_rad;
+      n.has_rollers = w.kind != emulator::physics::WheelKind::kConventional;
+      n.roller_angle_rad = w.roller_angle_rad;
+      d.nodes.push_back(n);
+    }
+    for (const BodyVelocity v : {BodyVelocity{0.3, 0, 0}, BodyVelocity{0.1, 0.25, -0.4}}) {
+      std::vector<double> w(d.nodes.size());
+      BodyVelocity cmd = v;
+      if (std::string(name) == "diff2") cmd.vy_m_s = 0;  // not holonomic
+      WheelSpeedsFor(d, cmd, w.data());
+      const auto expected = emulator::platforms::InverseKinematics(
+          p, emulator::platforms::BodyTwist{cmd.vx_m_s, cmd.vy_m_s, cmd.omega_rad_s});
+      for (std::size_t i = 0; i < w.size(); ++i) {
+        EXPECT_NEAR(w[i], expected[p.drive_wheels[i]], 1e-9) << i;
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace wheelhil::fw
