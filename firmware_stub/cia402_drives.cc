@@ -25,14 +25,21 @@ const char* DriveStopReasonName(DriveStopReason r) noexcept {
       return "emcy";
     case DriveStopReason::kNodeLost:
       return "node_lost";
+    case DriveStopReason::kTrackingError:
+      return "tracking_error";
     case DriveStopReason::kRequested:
       return "requested";
   }
   return "?";
 }
 
-Cia402Drives::Cia402Drives(const DriveSettings& settings, const DriveProtocol& protocol)
+Cia402Drives::Cia402Drives(const DriveSettings& settings, const DriveProtocol& protocol,
+                           double cycle_s)
     : settings_(settings), protocol_(protocol) {
+  if (settings_.tracking_error_rad_s > 0 && cycle_s > 0) {
+    tracking_limit_cycles_ =
+        std::max(1, static_cast<int>(std::ceil(settings_.tracking_error_time_s / cycle_s - 1e-9)));
+  }
   for (const auto& n : settings_.nodes) {
     Drive d;
     d.node_id = static_cast<std::uint8_t>(n.node_id);
@@ -115,8 +122,23 @@ void Cia402Drives::Cycle(const std::vector<double>& wheel_rad_s,
                          const std::vector<bool>& node_operational,
                          std::vector<bus::CanFrame>& out) {
   for (std::size_t i = 0; i < drives_.size(); ++i) {
-    const Drive& d = drives_[i];
+    Drive& d = drives_[i];
     if (!d.seen) continue;  // No statusword yet: nothing to base a command on.
+    // Tracking: the velocity actual against the set points of the last two cycles (the
+    // statusword and velocity may be a cycle old); inside their span is following.
+    if (tracking_limit_cycles_ > 0 && !stopped() && d.target_sent &&
+        d.state == State::kOperationEnabled) {
+      const double window =
+          std::abs(static_cast<double>(ToDriveUnits(i, settings_.tracking_error_rad_s)));
+      const double lo = std::min(d.last_target, d.previous_target);
+      const double hi = std::max(d.last_target, d.previous_target);
+      const double v = d.velocity_actual;
+      const double error = v < lo ? lo - v : (v > hi ? v - hi : 0.0);
+      d.tracking_cycles = error > window ? d.tracking_cycles + 1 : 0;
+      if (d.tracking_cycles >= tracking_limit_cycles_) {
+        Stop(DriveStopReason::kTrackingError, d.node_id);
+      }
+    }
     // A stop goes to every drive, also one the master lost: a drive that fell silent may
     // still listen, and would otherwise run on at its last set point.
     const bool operational = i < node_operational.size() && node_operational[i];
@@ -124,6 +146,9 @@ void Cia402Drives::Cycle(const std::vector<double>& wheel_rad_s,
     const std::uint16_t word = Controlword(d);
     const bool moving = !stopped() && d.state == State::kOperationEnabled && i < wheel_rad_s.size();
     const std::int32_t target = moving ? ToDriveUnits(i, wheel_rad_s[i]) : 0;
+    d.previous_target = d.target_sent ? d.last_target : target;
+    d.last_target = target;
+    d.target_sent = moving;
     bus::CanFrame f;
     if (protocol_.EncodeRpdo1(d.node_id, word, target, f)) out.push_back(f);
   }

@@ -4,7 +4,9 @@
 /// -shutdown-> Ready to switch on -switch on-> Switched on -enable operation-> Operation
 /// enabled), sends one RPDO1 (controlword, target velocity) per drive and control cycle, and
 /// stops the robot safely: on a drive in Fault / Fault reaction active, a drive that leaves
-/// Operation enabled unasked, or a stop request (EMCY, lost node, from the app), every drive
+/// Operation enabled unasked, a drive that does not follow its set point (velocity actual
+/// further than tracking_error_rad_s outside the span of the last two cycles' set points, for
+/// tracking_error_time_s), or a stop request (EMCY, lost node, from the app), every drive
 /// gets quick stop (controlword 0x02, target 0) from then on; the stop is latched (a robot that
 /// lost a drive mid-path does not resume by itself). Units: wheel speeds in rad/s in, drive
 /// units out (rpm or increments/s of the motor, through gear ratio and sign). Pure (no clock,
@@ -24,11 +26,12 @@ namespace wheelhil::fw {
 
 enum class DriveStopReason : std::uint8_t {
   kNone,
-  kDriveFault,   ///< A drive reported Fault or Fault reaction active.
-  kLeftEnabled,  ///< A drive left Operation enabled without being told to.
-  kEmcy,         ///< A drive sent an EMCY with a non-zero code.
-  kNodeLost,     ///< A drive's heartbeat stopped or it never booted.
-  kRequested,    ///< The app asked (e.g. its estimator failed).
+  kDriveFault,     ///< A drive reported Fault or Fault reaction active.
+  kLeftEnabled,    ///< A drive left Operation enabled without being told to.
+  kEmcy,           ///< A drive sent an EMCY with a non-zero code.
+  kNodeLost,       ///< A drive's heartbeat stopped or it never booted.
+  kTrackingError,  ///< A drive did not follow its set point.
+  kRequested,      ///< The app asked (e.g. its estimator failed).
 };
 const char* DriveStopReasonName(DriveStopReason r) noexcept;
 
@@ -43,9 +46,14 @@ class Cia402Drives {
     std::int32_t position_actual = 0;  ///< Increments.
     std::int16_t torque_actual = 0;    ///< Per mille.
     bool was_enabled = false;          ///< Reached Operation enabled since the start.
+    std::int32_t last_target = 0;      ///< Set point sent in the last cycle (drive units).
+    std::int32_t previous_target = 0;  ///< ... and in the cycle before.
+    bool target_sent = false;          ///< last_target went out while enabled.
+    int tracking_cycles = 0;           ///< Cycles in a row outside the tracking window.
   };
 
-  Cia402Drives(const DriveSettings& settings, const DriveProtocol& protocol);
+  /// `cycle_s`: the control cycle (Cycle is called once per cycle), for the tracking time.
+  Cia402Drives(const DriveSettings& settings, const DriveProtocol& protocol, double cycle_s);
 
   /// A TPDO1/TPDO2 of one of the drives: true when consumed; `bad` set when it did not decode.
   bool OnFrame(const bus::CanFrame& f, bool& bad);
@@ -73,6 +81,7 @@ class Cia402Drives {
   DriveSettings settings_;
   const DriveProtocol& protocol_;
   std::vector<Drive> drives_;
+  int tracking_limit_cycles_ = 0;  // 0: no tracking supervision
   DriveStopReason stop_ = DriveStopReason::kNone;
   std::uint8_t stop_node_ = 0;
 };

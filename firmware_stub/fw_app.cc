@@ -171,7 +171,7 @@ FwApp::FwApp(const FwConfig& config, const FwProtocol& protocol, const DriveProt
           "period ({} s: master_heartbeat_s rounded up to whole sync periods)",
           config.source_path, DriveHeartbeatTimeoutS(config), hb_s));
     }
-    drives_.emplace(config.drives, *drives);
+    drives_.emplace(config.drives, *drives, config.sync.period_s);
     heartbeat_every_cycles_ = MasterHeartbeatCycles(config);
     if (config.path.enabled) {
       bool holonomic = false;

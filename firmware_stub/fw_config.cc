@@ -230,7 +230,8 @@ void ReadPaper002(const Section& s, Paper002Settings& p) {
 void ReadDrives(const Section& s, DriveSettings& d) {
   s.Allow({"velocity_unit", "gear_ratio", "counts_per_rev", "wheel_radius_m",
            "max_wheel_speed_rad_s", "mode", "abort_connection_option", "quick_stop_option",
-           "master_node_id", "master_heartbeat_s", "drive_heartbeat_timeout_s", "nodes"});
+           "master_node_id", "tracking_error_rad_s", "tracking_error_time_s", "master_heartbeat_s",
+           "drive_heartbeat_timeout_s", "nodes"});
   d.enabled = true;
   if (s.Has("velocity_unit")) {
     const std::string u = s.reader().ToString(s.Node("velocity_unit"), s.Field("velocity_unit"));
@@ -253,6 +254,9 @@ void ReadDrives(const Section& s, DriveSettings& d) {
   d.quick_stop_option =
       static_cast<int>(s.Integer("quick_stop_option", d.quick_stop_option, false, 0, 8));
   d.master_node_id = static_cast<int>(s.Integer("master_node_id", d.master_node_id, false, 1, 127));
+  d.tracking_error_rad_s =
+      s.Number("tracking_error_rad_s", d.tracking_error_rad_s, false, false, true);
+  d.tracking_error_time_s = s.Number("tracking_error_time_s", d.tracking_error_time_s, false, true);
   d.master_heartbeat_s = s.Number("master_heartbeat_s", d.master_heartbeat_s, false, false, true);
   d.drive_heartbeat_timeout_s = s.Number("drive_heartbeat_timeout_s", 0.0, false, false, true);
   if (d.drive_heartbeat_timeout_s > 65.535) {

@@ -135,6 +135,10 @@ struct DriveSettings {
   int quick_stop_option = 6;
   int master_node_id = 127;         ///< The firmware's own heartbeat id (0x700 + id).
   double master_heartbeat_s = 0.1;  ///< Heartbeat period (sent with the cycles); 0 = none.
+  /// Tracking supervision: a drive whose velocity actual stays further than this from the set
+  /// point it was sent (wheel side) for tracking_error_time_s stops the robot; 0 = off.
+  double tracking_error_rad_s = 1.0;
+  double tracking_error_time_s = 0.5;
   /// Written to each drive's 0x1016:1 (consumer time); 0 = 3x the effective heartbeat period.
   double drive_heartbeat_timeout_s = 0.0;
   std::vector<DriveNodeSettings> nodes;

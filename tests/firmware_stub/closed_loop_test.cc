@@ -98,7 +98,7 @@ BO_ 395 Drive_TPDO1: 6 Drive
 
 TEST(Cia402Drives, WalksEachDriveToOperationEnabledFromItsStatusword) {
   const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
-  Cia402Drives drives(TwoDrives(), p);
+  Cia402Drives drives(TwoDrives(), p, 0.01);
   std::vector<bus::CanFrame> out;
   const std::vector<double> speed = {2.0, 2.0};  // rad/s at the wheel
   drives.Cycle(speed, {true, true}, out);
@@ -132,7 +132,7 @@ TEST(Cia402Drives, WalksEachDriveToOperationEnabledFromItsStatusword) {
 
 TEST(Cia402Drives, AFaultStopsEveryDriveAndTheStopIsLatched) {
   const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
-  Cia402Drives drives(TwoDrives(), p);
+  Cia402Drives drives(TwoDrives(), p, 0.01);
   bool bad = false;
   for (std::uint8_t n : {11, 12}) drives.OnFrame(Tpdo1(n, c402::State::kOperationEnabled), bad);
   drives.OnFrame(Tpdo1(11, c402::State::kFault), bad);
@@ -152,7 +152,7 @@ TEST(Cia402Drives, AFaultStopsEveryDriveAndTheStopIsLatched) {
 
 TEST(Cia402Drives, ADriveLeavingOperationEnabledUnaskedStopsTheRobot) {
   const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
-  Cia402Drives drives(TwoDrives(), p);
+  Cia402Drives drives(TwoDrives(), p, 0.01);
   bool bad = false;
   for (std::uint8_t n : {11, 12}) drives.OnFrame(Tpdo1(n, c402::State::kOperationEnabled), bad);
   ASSERT_FALSE(drives.stopped());
@@ -165,12 +165,43 @@ TEST(Cia402Drives, ADriveLeavingOperationEnabledUnaskedStopsTheRobot) {
   EXPECT_FALSE(drives.OnFrame(Tpdo1(1, c402::State::kOperationEnabled), bad));
 }
 
+TEST(Cia402Drives, ADriveThatDoesNotFollowItsSetPointStopsTheRobot) {
+  const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
+  DriveSettings s = TwoDrives();
+  s.tracking_error_rad_s = 1.0;  // 1 rad/s at the wheel = 191 rpm of the motor
+  s.tracking_error_time_s = 0.03;
+  Cia402Drives drives(s, p, 0.01);  // 3 cycles
+  bool bad = false;
+  std::vector<bus::CanFrame> out;
+  auto cycle = [&](std::int32_t v11, std::int32_t v12, double set_rad_s) {
+    drives.OnFrame(Tpdo1(11, c402::State::kOperationEnabled, v11), bad);
+    drives.OnFrame(Tpdo1(12, c402::State::kOperationEnabled, v12), bad);
+    out.clear();
+    drives.Cycle({set_rad_s, set_rad_s}, {true, true}, out);
+  };
+  // Ramping 0 -> 2 -> 4 rad/s (0, 382, 764 rpm): a velocity between the last two set points,
+  // or within the window of them, is following.
+  cycle(0, 0, 2.0);
+  cycle(200, 150, 4.0);
+  cycle(764, 600, 4.0);
+  cycle(764, 764, 4.0);
+  EXPECT_FALSE(drives.stopped());
+  // Drive 12 freezes at 382 rpm: 2 rad/s short, three cycles in a row.
+  cycle(764, 382, 4.0);
+  cycle(764, 382, 4.0);
+  EXPECT_FALSE(drives.stopped());
+  cycle(764, 382, 4.0);
+  EXPECT_TRUE(drives.stopped());
+  EXPECT_EQ(drives.stop_reason(), DriveStopReason::kTrackingError);
+  EXPECT_EQ(drives.stop_node(), 12);
+}
+
 TEST(Cia402Drives, CountsPerSecondUnitUsesTheMotorEncoder) {
   DriveSettings s = TwoDrives();
   s.velocity_rpm = false;
   s.counts_per_rev = 4096;
   const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
-  const Cia402Drives drives(s, p);
+  const Cia402Drives drives(s, p, 0.01);
   // 1 rad/s at the wheel = 20/(2 pi) motor rev/s = 13038 increments/s.
   EXPECT_EQ(drives.ToDriveUnits(0, 1.0), std::lround(20.0 / (2 * kPi) * 4096));
 }

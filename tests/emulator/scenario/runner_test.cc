@@ -486,6 +486,18 @@ TEST_F(ScenarioRun, ClosedLoopDriveFaultsShowTheFirmwaresReaction) {
   EXPECT_GT(silent_s, 0.35);
   EXPECT_LE(silent_s, 0.76);
   EXPECT_THAT(Slurp(dir_ / "trip" / "can.log"), HasSubstr("08B#1023"));  // EMCY 0x2310
+
+  // A drive stuck at its cruise set point shows only when the set point changes: the firmware's
+  // tracking supervision catches it as the path decelerates (~43 s), not at 12 s.
+  const RunResult stuck = RunScenario(
+      ShippedWith("paper000_closed_loop.yaml",
+                  "faults:\n  - {type: drive, kind: stuck, drive: drive_right, start_s: 12}\n"),
+      Options(dir_ / "stuck"));
+  ASSERT_EQ(stuck.failure, "");
+  const nlohmann::json& st = stuck.report["metrics"]["closed_loop"];
+  ASSERT_TRUE(st["fault_detected"].get<bool>()) << st.dump();
+  EXPECT_GT(st["fault_time_to_detect_s"].get<double>(), 25.0);
+  EXPECT_LT(st["fault_time_to_detect_s"].get<double>(), 34.0);
 }
 
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {
