@@ -420,7 +420,7 @@ double GoalError(const RunResult& r) {
 
 // Paper 000 closed loop: the firmware steers the robot from its own estimate, so the slip
 // correction decides where the robot ends. Seeds 1-5 (docs/closed-loop.md): corrected
-// 0.10-0.13 m from the goal, raw odometry 0.73-0.99 m.
+// 0.07-0.13 m from the goal, raw odometry 0.74-0.99 m.
 TEST_F(ScenarioRun, ClosedLoopTheSlipCorrectionChangesWhereTheRobotEnds) {
   const RunResult corrected =
       RunScenario(ShippedWith("paper000_closed_loop.yaml", ""), Options(dir_ / "corrected"));
