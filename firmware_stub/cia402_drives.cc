@@ -39,6 +39,8 @@ Cia402Drives::Cia402Drives(const DriveSettings& settings, const DriveProtocol& p
   if (settings_.tracking_error_rad_s > 0 && cycle_s > 0) {
     tracking_limit_cycles_ =
         std::max(1, static_cast<int>(std::ceil(settings_.tracking_error_time_s / cycle_s - 1e-9)));
+    tracking_window_units_ =
+        std::abs(static_cast<double>(ToDriveUnits(settings_.tracking_error_rad_s)));
   }
   for (const auto& n : settings_.nodes) {
     Drive d;
@@ -107,8 +109,7 @@ std::uint16_t Cia402Drives::Controlword(const Drive& d) const {
   return cw::kQuickStop;
 }
 
-std::int32_t Cia402Drives::ToDriveUnits(std::size_t i, double wheel_rad_s) const {
-  (void)i;  // One unit for all drives; kept per drive for mixed fleets.
+std::int32_t Cia402Drives::ToDriveUnits(double wheel_rad_s) const {
   const double motor_rev_s = wheel_rad_s * settings_.gear_ratio / (2.0 * kPi);
   const double v =
       settings_.velocity_rpm ? motor_rev_s * 60.0 : motor_rev_s * settings_.counts_per_rev;
@@ -128,13 +129,11 @@ void Cia402Drives::Cycle(const std::vector<double>& wheel_rad_s,
     // statusword and velocity may be a cycle old); inside their span is following.
     if (tracking_limit_cycles_ > 0 && !stopped() && d.target_sent &&
         d.state == State::kOperationEnabled) {
-      const double window =
-          std::abs(static_cast<double>(ToDriveUnits(i, settings_.tracking_error_rad_s)));
       const double lo = std::min(d.last_target, d.previous_target);
       const double hi = std::max(d.last_target, d.previous_target);
       const double v = d.velocity_actual;
       const double error = v < lo ? lo - v : (v > hi ? v - hi : 0.0);
-      d.tracking_cycles = error > window ? d.tracking_cycles + 1 : 0;
+      d.tracking_cycles = error > tracking_window_units_ ? d.tracking_cycles + 1 : 0;
       if (d.tracking_cycles >= tracking_limit_cycles_) {
         Stop(DriveStopReason::kTrackingError, d.node_id);
       }
@@ -145,7 +144,7 @@ void Cia402Drives::Cycle(const std::vector<double>& wheel_rad_s,
     if (!operational && !stopped()) continue;
     const std::uint16_t word = Controlword(d);
     const bool moving = !stopped() && d.state == State::kOperationEnabled && i < wheel_rad_s.size();
-    const std::int32_t target = moving ? ToDriveUnits(i, wheel_rad_s[i]) : 0;
+    const std::int32_t target = moving ? ToDriveUnits(wheel_rad_s[i]) : 0;
     d.previous_target = d.target_sent ? d.last_target : target;
     d.last_target = target;
     d.target_sent = moving;

@@ -72,8 +72,8 @@ class Cia402Drives {
   std::uint8_t stop_node() const { return stop_node_; }
   const std::vector<Drive>& drives() const { return drives_; }
 
-  /// A wheel speed [rad/s] of drive i in its 0x60FF unit (rounded, saturated to int32).
-  std::int32_t ToDriveUnits(std::size_t i, double wheel_rad_s) const;
+  /// A wheel speed [rad/s] in the drives' 0x60FF unit (rounded, saturated to int32).
+  std::int32_t ToDriveUnits(double wheel_rad_s) const;
 
  private:
   std::uint16_t Controlword(const Drive& d) const;
@@ -81,7 +81,8 @@ class Cia402Drives {
   DriveSettings settings_;
   const DriveProtocol& protocol_;
   std::vector<Drive> drives_;
-  int tracking_limit_cycles_ = 0;  // 0: no tracking supervision
+  int tracking_limit_cycles_ = 0;     // 0: no tracking supervision
+  double tracking_window_units_ = 0;  // tracking_error_rad_s in drive units
   DriveStopReason stop_ = DriveStopReason::kNone;
   std::uint8_t stop_node_ = 0;
 };

@@ -527,7 +527,7 @@ Pose2 FwApp::SteeringPose() const {
 void FwApp::CommandDrives(std::uint64_t cycle, std::vector<bus::CanFrame>& out) {
   // Supervision first: a drive or encoder that is gone stops the robot before it is commanded.
   const auto& master_nodes = master_.nodes();
-  const std::size_t first_drive = nodes_.size();
+  const std::size_t first_drive = nodes_.size();  // MasterConfigFrom: encoders, then drives
   std::vector<bool> operational(config_.drives.nodes.size(), false);
   for (std::size_t j = 0; j < master_nodes.size(); ++j) {
     const CanopenMaster::NodeStatus& n = master_nodes[j];

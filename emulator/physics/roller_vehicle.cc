@@ -509,7 +509,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
       }
       st.omega_cmd_slewed = cmd;
       const double kt = m.torque_constant_nm_a * m.gear_ratio;  // wheel torque per amp
-      double hi = std::min(m.max_torque_nm, kt * m.max_current_a);
+      double hi = m.TorqueLimitNm();
       double lo = -hi;
       if (m.winding_resistance_ohm > 0) {
         const double emf = kt * omega[i];  // volts (k_e = k_t in SI)

@@ -4,6 +4,7 @@
 /// chassis centre of mass. Filled by the platform loader (emulator/platforms/platform.h) or by
 /// hand in tests. Value type, thread-compatible.
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -54,6 +55,12 @@ struct MotorSpec {
   double max_accel_rad_s2 = 0.0;        ///< slew limit of the command at the wheel, 0 = none
   double speed_gain_nm_s_rad = 30.0;    ///< proportional gain, wheel side
   double integral_gain_nm_rad = 300.0;  ///< integral gain, wheel side
+
+  /// The wheel-side torque it can give at all: the torque limit or the current limit's torque,
+  /// whichever is lower (the supply voltage narrows it further with speed).
+  double TorqueLimitNm() const {
+    return std::min(max_torque_nm, torque_constant_nm_a * gear_ratio * max_current_a);
+  }
 };
 
 /// One wheel (or caster, or orthogonal-wheel assembly).

@@ -125,11 +125,7 @@ DbcSignalBinding ReadSignal(const Reader& r, const YAML::Node& key, const YAML::
              fmt::format("wheel '{}' of platform {} has no motor ({} is a driven wheel's)", wheel,
                          platform.name, qs));
     }
-    if (w.driven) {
-      const physics::MotorSpec& m = w.motor;
-      b.motor_torque_limit_nm =
-          std::min(m.max_torque_nm, m.torque_constant_nm_a * m.gear_ratio * m.max_current_a);
-    }
+    if (w.driven) b.motor_torque_limit_nm = w.motor.TorqueLimitNm();
   }
   if (b.quantity == DbcQuantity::kConstant) b.value = r.Number(v, "value", b.field, -1e15, 1e15);
   if (b.quantity == DbcQuantity::kCounter) {
@@ -368,8 +364,7 @@ DeviceSpec ReadCia402Device(const Reader& r, const YAML::Node& n, const std::str
                        c.wheel_name, platform.name));
   }
   const physics::MotorSpec& m = wheel.motor;
-  c.motor_torque_limit_nm =
-      std::min(m.max_torque_nm, m.torque_constant_nm_a * m.gear_ratio * m.max_current_a);
+  c.motor_torque_limit_nm = m.TorqueLimitNm();
   Cia402DriveConfig& node = c.node;
   node.gear_ratio = r.Number(n, "gear_ratio", f, 1e-3, 1e4, m.gear_ratio);
   node.rated_torque_mnm = static_cast<std::uint32_t>(

@@ -127,7 +127,7 @@ TEST(Cia402Drives, WalksEachDriveToOperationEnabledFromItsStatusword) {
   out.clear();
   drives.Cycle(speed, {true, false}, out);
   EXPECT_THAT(Strings(out), ElementsAre("20B#0F007E010000"));
-  EXPECT_EQ(drives.ToDriveUnits(0, -2.0), -382);
+  EXPECT_EQ(drives.ToDriveUnits(-2.0), -382);
 }
 
 TEST(Cia402Drives, AFaultStopsEveryDriveAndTheStopIsLatched) {
@@ -203,7 +203,7 @@ TEST(Cia402Drives, CountsPerSecondUnitUsesTheMotorEncoder) {
   const DriveProtocol p = DriveProtocol::LoadDir(testing::DbcDir(), {11, 12});
   const Cia402Drives drives(s, p, 0.01);
   // 1 rad/s at the wheel = 20/(2 pi) motor rev/s = 13038 increments/s.
-  EXPECT_EQ(drives.ToDriveUnits(0, 1.0), std::lround(20.0 / (2 * kPi) * 4096));
+  EXPECT_EQ(drives.ToDriveUnits(1.0), std::lround(20.0 / (2 * kPi) * 4096));
 }
 
 TEST(WheelSpeeds, DifferentialAndMecanumKinematics) {
