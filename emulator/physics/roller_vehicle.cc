@@ -46,6 +46,8 @@ struct Row {
   // No default initialisers: a step's rows are filled completely where they are added.
   double jw;    // coefficient on the wheel spin rate
   double jw_i;  // jw / wheel inertia
+  double jr;    // coefficient on the spin of the wheel's roller in contact
+  double jr_i;  // jr / roller inertia
   int wheel;
   double inv_k;          // 1 / (effective inverse mass + cfm)
   double cfm;            // softness: row velocity error per unit impulse (0 = rigid)
@@ -106,6 +108,19 @@ void ValidateVehicleSpec(const VehicleSpec& s, const std::string& where) {
         w.kind == WheelKind::kOrthogonal) {
       Require(std::abs(std::sin(w.roller_angle_rad)) > 0.1, where, f + "roller_angle_deg",
               w.roller_angle_rad * 180 / kPi, "must not be near 0 (a roller parallel to the axle)");
+    }
+    if (w.rollers.count != 0) {
+      Require(w.kind == WheelKind::kMecanum || w.kind == WheelKind::kOmni, where, f + "rollers",
+              w.rollers.count, "discrete rollers are for mecanum and omni wheels");
+      (void)MakeRollerGeometry(w, where + ": " + f.substr(0, f.size() - 1));
+      const RollerSpec& rs = w.rollers;
+      Require(std::isfinite(rs.inertia_kg_m2) && rs.inertia_kg_m2 >= 0, where,
+              f + "rollers.inertia_kg_m2", rs.inertia_kg_m2, "must be finite and >= 0");
+      Require(std::isfinite(rs.bearing_friction_nm) && rs.bearing_friction_nm >= 0, where,
+              f + "rollers.bearing_friction_nm", rs.bearing_friction_nm, "must be finite and >= 0");
+      Require(std::isfinite(rs.bearing_viscous_nm_s) && rs.bearing_viscous_nm_s >= 0, where,
+              f + "rollers.bearing_viscous_nm_s", rs.bearing_viscous_nm_s,
+              "must be finite and >= 0");
     }
     if (w.kind == WheelKind::kOrthogonal) {
       Require(w.handover_dip_m >= 0 && w.handover_dip_m < 0.5 * w.radius_m, where,
@@ -194,13 +209,23 @@ RollerVehicle::RollerVehicle(const VehicleSpec& spec, const Terrain* terrain,
     st.axle_B = Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
     st.roller_cos = std::cos(w.roller_angle_rad);
     st.roller_sin = std::sin(w.roller_angle_rad);
+    if (w.rollers.count > 0) {
+      st.rollers = MakeRollerGeometry(w, spec_.name);
+      if (w.rollers.inertia_kg_m2 > 0) {
+        st.roller_inv_inertia = 1.0 / w.rollers.inertia_kg_m2;
+        st.roller_omega.assign(static_cast<std::size_t>(w.rollers.count * w.rollers.rows), 0.0);
+      }
+    }
     // Start with the hub on the floor (or hanging).
     st.length_m = w.suspension.max_length_m;
-    double offset = 0;
-    const double r = EffectiveRadius(w, 0.0, &offset);
+    const ContactGeometry geo = WheelGeometry(i, 0.0);
+    const double r = geo.radius_m;
     const Vector3d dir = -R.col(2);
     const Vector3d axle = R * Vector3d(-std::sin(w.heading_rad), std::cos(w.heading_rad), 0);
-    const Vector3d from = X_WB * w.mount_B + axle * offset;
+    Vector3d from = X_WB * w.mount_B + axle * geo.lateral_m;
+    if (geo.forward_m != 0) {
+      from += R * Vector3d(std::cos(w.heading_rad), std::sin(w.heading_rad), 0) * geo.forward_m;
+    }
     SurfaceHit hit;
     if (terrain_ != nullptr &&
         terrain_->Raycast(from, dir, w.suspension.max_length_m + r + kRayMargin_m, &hit)) {
@@ -270,10 +295,29 @@ Eigen::Isometry3d RollerVehicle::pose() const noexcept {
   return X;
 }
 
-double RollerVehicle::EffectiveRadius(const WheelSpec& w, double angle,
-                                      double* lateral_offset) const noexcept {
-  *lateral_offset = 0;
-  if (w.kind != WheelKind::kOrthogonal) return w.radius_m;
+RollerVehicle::ContactGeometry RollerVehicle::WheelGeometry(std::size_t i,
+                                                            double angle) const noexcept {
+  const WheelSpec& w = spec_.wheels[i];
+  const WheelState& st = state_[i];
+  ContactGeometry g{w.radius_m, 0.0, 0.0, st.roller_cos, st.roller_sin, -1, 0.0};
+  if (st.rollers) {
+    const RollerContact c = LowestRollerContact(*st.rollers, angle);
+    g.radius_m = c.rolling_radius_m;
+    g.lateral_m = c.lateral_offset_m;
+    g.forward_m = c.forward_offset_m;
+    g.roller_cos = std::cos(c.roller_angle_rad);
+    g.roller_sin = std::sin(c.roller_angle_rad);
+    g.roller = c.roller;
+    g.roller_radius_m = c.roller_radius_m;
+    return g;
+  }
+  if (w.kind != WheelKind::kOrthogonal) return g;
+  g.radius_m = OrthogonalRadius(w, angle, &g.lateral_m);
+  return g;
+}
+
+double RollerVehicle::OrthogonalRadius(const WheelSpec& w, double angle,
+                                       double* lateral_offset) noexcept {
   const double seg = std::floor((angle + kPi / 4) / (kPi / 2));
   const double phi = angle - seg * (kPi / 2);  // [-pi/4, pi/4)
   const long long iseg = static_cast<long long>(seg);
@@ -289,6 +333,25 @@ double RollerVehicle::EffectiveRadius(const WheelSpec& w, double angle,
   if (psi >= half_zone) return w.radius_m;
   const double u = 1 - psi / half_zone;
   return w.radius_m - w.handover_dip_m * u * u;
+}
+
+void RollerVehicle::UpdateRollerSpins(std::size_t i, double contact_omega, double dt) noexcept {
+  const RollerSpec& rs = spec_.wheels[i].rollers;
+  WheelState& st = state_[i];
+  WheelTruth& tr = truth_[i];
+  const double viscous = 1.0 / (1.0 + dt * rs.bearing_viscous_nm_s * st.roller_inv_inertia);
+  const double coulomb = rs.bearing_friction_nm * dt * st.roller_inv_inertia;
+  for (std::size_t k = 0; k < st.roller_omega.size(); ++k) {
+    double& wr = st.roller_omega[k];
+    if (static_cast<int>(k) == tr.roller) {
+      wr = contact_omega;  // its bearing decay is part of this step's solve
+      if (tr.in_contact) continue;
+    } else {
+      wr *= viscous;
+    }
+    wr = wr > 0 ? std::max(0.0, wr - coulomb) : std::min(0.0, wr + coulomb);
+  }
+  tr.roller_omega_rad_s = tr.roller >= 0 ? st.roller_omega[static_cast<std::size_t>(tr.roller)] : 0;
 }
 
 void RollerVehicle::PreStep(double dt) noexcept {
@@ -315,10 +378,11 @@ void RollerVehicle::PreStep(double dt) noexcept {
 
   const std::size_t n = spec_.wheels.size();
   // Rows live on the stack for small vehicles; no allocation in the step.
-  constexpr std::size_t kMaxRows = 3 * kMaxWheels;
+  constexpr std::size_t kMaxRows = 4 * kMaxWheels;
   Row rows_buf[kMaxRows];
   std::size_t nrows = 0;
   double omega[kMaxWheels];
+  double roller_omega[kMaxWheels];  // spin of each wheel's roller in contact (0: no spin state)
   const std::size_t nw = std::min<std::size_t>(n, kMaxWheels);
 
   // Geometry cache for the post-solve truth.
@@ -337,12 +401,22 @@ void RollerVehicle::PreStep(double dt) noexcept {
     if (ws.kind != WheelKind::kCaster && ws.bearing_viscous_nm_s > 0) {
       omega[i] /= 1.0 + dt * ws.bearing_viscous_nm_s * st.inv_inertia;
     }
-    double offset = 0;
-    const double r_eff = EffectiveRadius(ws, tr.angle_rad, &offset);
+    const ContactGeometry geo = WheelGeometry(i, tr.angle_rad);
+    const double r_eff = geo.radius_m;
     tr.effective_radius_m = r_eff;
     const Vector3d axle = R * st.axle_B;
     const Vector3d mount = p + R * ws.mount_B;
-    const Vector3d from = mount + axle * offset;
+    Vector3d from = mount + axle * geo.lateral_m;
+    if (geo.forward_m != 0) from += R * Vector3d(st.axle_B.y(), -st.axle_B.x(), 0) * geo.forward_m;
+    roller_omega[i] = 0;
+    const bool roller_state = geo.roller >= 0 && st.roller_inv_inertia > 0;
+    if (roller_state) {
+      double& wr = st.roller_omega[static_cast<std::size_t>(geo.roller)];
+      wr /= 1.0 + dt * ws.rollers.bearing_viscous_nm_s * st.roller_inv_inertia;
+      roller_omega[i] = wr;
+    }
+    tr.roller = geo.roller;
+    tr.roller_angle_rad = geo.roller >= 0 ? std::atan2(geo.roller_sin, geo.roller_cos) : 0.0;
     const SuspensionSpec& q = ws.suspension;
 
     SurfaceHit hit;
@@ -412,7 +486,12 @@ void RollerVehicle::PreStep(double dt) noexcept {
       const double n_load = n_axis / c;
       tr.normal_load_n = n_load;
       const Vector3d hub = from + dir * st.length_m;
-      const Vector3d cp = hub - nrm * r_eff;
+      // A discrete roller rolls on its loaded radius (axle to floor): its compliance is contact
+      // deformation, which shortens the lever the rim speed comes from.
+      const double r_roll = geo.roller >= 0
+                                ? std::clamp((hit.distance_m - st.length_m) * c, 0.5 * r_eff, r_eff)
+                                : r_eff;
+      const Vector3d cp = hub - nrm * r_roll;
       tr.contact_point_W = cp;
       const Vector3d r_c = cp - p;
       // Lateral part of the normal force (sloped floor): goes to the chassis directly.
@@ -434,7 +513,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
       const double rr = ws.rolling_resistance * n_load * dt;
       Vector3d u = f;
       auto add_row = [&](const Vector3d& lin, double jw, double target, double lo, double hi,
-                         double* lambda) -> Row* {
+                         double* lambda, double jr = 0.0) -> Row* {
         if (nrows >= kMaxRows) return nullptr;
         Row& row = rows_buf[nrows++];
         row.lin = lin;
@@ -443,8 +522,11 @@ void RollerVehicle::PreStep(double dt) noexcept {
         row.lin_m = lin * inv_m;
         row.jw = jw;
         row.jw_i = ws.kind == WheelKind::kCaster ? 0.0 : jw * st.inv_inertia;
+        row.jr = jr;
+        row.jr_i = jr * st.roller_inv_inertia;
         row.wheel = static_cast<int>(i);
-        const double k = inv_m * lin.squaredNorm() + row.ang.dot(row.iang) + jw * row.jw_i;
+        const double k =
+            inv_m * lin.squaredNorm() + row.ang.dot(row.iang) + jw * row.jw_i + jr * row.jr_i;
         row.inv_k = k > 1e-12 ? 1.0 / k : 0.0;
         row.cfm = 0;
         row.target = target;
@@ -472,10 +554,25 @@ void RollerVehicle::PreStep(double dt) noexcept {
         case WheelKind::kMecanum:
         case WheelKind::kOmni:
         case WheelKind::kOrthogonal: {
-          u = st.roller_cos * l + st.roller_sin * f;
+          u = geo.roller_cos * l + geo.roller_sin * f;
           const Vector3d free_dir = nrm.cross(u);
-          add_row(u, -r_eff * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim, &st.lambda_a);
-          add_row(free_dir, -r_eff * f.dot(free_dir), 0.0, -rr, rr, &st.lambda_b);
+          add_row(u, -r_roll * f.dot(u), -kAnchorGain * st.anchor_a_m / dt, -lim, lim,
+                  &st.lambda_a);
+          if (roller_state) {
+            // The roller in contact rolls along free_dir on its own spin (inertia, bearing):
+            // no slip there up to the friction bound; its bearing row below resists the spin.
+            add_row(free_dir, -r_roll * f.dot(free_dir), 0.0, -lim, lim, &st.lambda_b,
+                    geo.roller_radius_m);
+            const double tau = ws.rollers.bearing_friction_nm +
+                               ws.rolling_resistance * n_load * geo.roller_radius_m;
+            add_row(Vector3d::Zero(), 0.0, 0.0, -tau * dt, tau * dt, &st.lambda_roller, 1.0);
+          } else {
+            // Free rollers: rolling resistance, plus the bearing friction seen at the contact.
+            const double rb = geo.roller >= 0 && geo.roller_radius_m > 0
+                                  ? rr + ws.rollers.bearing_friction_nm / geo.roller_radius_m * dt
+                                  : rr;
+            add_row(free_dir, -r_roll * f.dot(free_dir), 0.0, -rb, rb, &st.lambda_b);
+          }
           break;
         }
         case WheelKind::kCaster: {
@@ -494,7 +591,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
           break;
         }
       }
-      contact[i] = Contact{f, l, u, r_c, r_eff};
+      contact[i] = Contact{f, l, u, r_c, r_roll};
     }
     // Spin rows: motor (driven) or bearing friction (passive), no chassis coupling.
     if (ws.kind == WheelKind::kCaster) continue;
@@ -534,6 +631,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
       row.iang.setZero();
       row.jw = 1;
       row.jw_i = st.inv_inertia;
+      row.jr = 0;
+      row.jr_i = 0;
       row.wheel = static_cast<int>(i);
       row.cfm = 1.0 / (m.speed_gain_nm_s_rad * dt);
       row.inv_k = 1.0 / (st.inv_inertia + row.cfm);
@@ -556,6 +655,8 @@ void RollerVehicle::PreStep(double dt) noexcept {
       row.iang.setZero();
       row.jw = 1;
       row.jw_i = st.inv_inertia;
+      row.jr = 0;
+      row.jr_i = 0;
       row.wheel = static_cast<int>(i);
       row.inv_k = 1.0 / st.inv_inertia;
       row.cfm = 0;
@@ -570,9 +671,11 @@ void RollerVehicle::PreStep(double dt) noexcept {
     v += row.lin_m * d;
     w += row.iang * d;
     omega[row.wheel] += row.jw_i * d;
+    roller_omega[row.wheel] += row.jr_i * d;
   };
   auto row_velocity = [&](const Row& row) {
-    return row.lin.dot(v) + row.ang.dot(w) + row.jw * omega[row.wheel];
+    return row.lin.dot(v) + row.ang.dot(w) + row.jw * omega[row.wheel] +
+           row.jr * roller_omega[row.wheel];
   };
   // Warm start with last step's impulses, clamped to this step's bounds.
   for (std::size_t k = 0; k < nrows; ++k) {
@@ -634,6 +737,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
     WheelState& st = state_[i];
     WheelTruth& tr = truth_[i];
     if (ws.kind == WheelKind::kCaster) omega[i] = 0;
+    if (!st.roller_omega.empty()) UpdateRollerSpins(i, roller_omega[i], dt);
     tr.omega_rad_s = omega[i];
     tr.angle_rad += omega[i] * dt;
     const Contact& ct = contact[i];

@@ -27,6 +27,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "emulator/physics/roller_geometry.h"
 #include "emulator/physics/terrain.h"
 #include "emulator/physics/vehicle_spec.h"
 
@@ -54,6 +55,10 @@ struct WheelTruth {
   double motor_current_a = 0;
   Eigen::Vector3d contact_point_W = Eigen::Vector3d::Zero();
   double mu = 0;  ///< friction limit used in the step
+  // Discrete rollers only (WheelSpec::rollers.count > 0):
+  int roller = -1;                ///< the roller in contact (row * count + k), -1: none
+  double roller_angle_rad = 0;    ///< its effective angle from the axle (floor plane)
+  double roller_omega_rad_s = 0;  ///< its spin about its own axis (0 without roller inertia)
 };
 
 /// Body ground truth after a step.
@@ -137,8 +142,26 @@ class RollerVehicle : public btActionInterface {
     std::optional<Friction> friction_override;  // fault hook: replaces the floor's friction
     double disturbance_nm = 0;                  // fault hook: external spin torque
     double drive_limit_nm = 1e300;              // the drive's torque limit (0: power stage off)
+    std::optional<RollerGeometry> rollers;      // discrete rollers
+    std::vector<double> roller_omega;           // every roller's spin (with roller inertia)
+    double roller_inv_inertia = 0;              // 0: rollers turn freely (no spin state)
+    double lambda_roller = 0;                   // warm start of the roller bearing row
   };
-  double EffectiveRadius(const WheelSpec& w, double angle, double* lateral_offset) const noexcept;
+  // Where wheel i touches the floor at spin angle `angle`.
+  struct ContactGeometry {
+    double radius_m;
+    double lateral_m;  // along the axle
+    double forward_m;  // along the rolling direction
+    double roller_cos, roller_sin;
+    int roller;              // -1: no discrete rollers
+    double roller_radius_m;  // contact to the roller's axis
+  };
+  ContactGeometry WheelGeometry(std::size_t i, double angle) const noexcept;
+  // After the solve: the roller in contact takes its solved spin, the others coast down on
+  // their bearings.
+  void UpdateRollerSpins(std::size_t i, double contact_omega, double dt) noexcept;
+  // Orthogonal wheel: rolling radius and the active half's offset along the axle.
+  static double OrthogonalRadius(const WheelSpec& w, double angle, double* lateral_offset) noexcept;
 
   VehicleSpec spec_;
   const Terrain* terrain_;

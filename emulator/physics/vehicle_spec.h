@@ -63,6 +63,20 @@ struct MotorSpec {
   }
 };
 
+/// Discrete rollers of a Mecanum or omni wheel (emulator/physics/roller_geometry.h has the
+/// geometry). count 0 is the continuous limit: the contact stays below the hub at the wheel's
+/// radius and the nominal roller angle, and the rollers turn freely.
+struct RollerSpec {
+  int count = 0;             ///< rollers per row; 0 = continuous
+  double length_m = 0;       ///< along the roller's axis
+  double radius_m = 0;       ///< largest radius; 0 = the envelope matches the wheel's radius
+  int rows = 1;              ///< 2: two rows, the second staggered by half a pitch ("double" wheel)
+  double row_offset_m = 0;   ///< rows sit at +-this along the axle (rows: 2)
+  double inertia_kg_m2 = 0;  ///< one roller about its axis; 0 = no spin state (turns freely)
+  double bearing_friction_nm = 0;   ///< Coulomb torque on a roller's spin
+  double bearing_viscous_nm_s = 0;  ///< viscous torque per rad/s of a roller's spin
+};
+
 /// One wheel (or caster, or orthogonal-wheel assembly).
 struct WheelSpec {
   std::string name;
@@ -85,6 +99,7 @@ struct WheelSpec {
   double handover_dip_m = 0.0;
   double handover_zone_rad = 1.5707963267948966;
   double half_offset_m = 0.0;
+  RollerSpec rollers;  ///< Mecanum and omni only
   bool driven = false;
   MotorSpec motor;
   SuspensionSpec suspension;

@@ -11,6 +11,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "bus/yaml_fields.h"
+#include "emulator/physics/roller_geometry.h"
 
 namespace wheelhil::emulator::platforms {
 
@@ -82,6 +83,7 @@ const std::set<std::string> kWheelKeys = {"name",
                                           "handover_dip_m",
                                           "handover_zone_deg",
                                           "half_offset_m",
+                                          "rollers",
                                           "encoder",
                                           "suspension",
                                           "motor"};
@@ -89,10 +91,78 @@ const std::set<std::string> kSuspensionKeys = {
     "free_length_m", "min_length_m",       "max_length_m",
     "stiffness_n_m", "damping_n_s_m",      "bump_stiffness_n_m",
     "hub_mass_kg",   "tire_stiffness_n_m", "tire_damping_n_s_m"};
+const std::set<std::string> kRollerKeys = {"count",
+                                           "length_m",
+                                           "radius_m",
+                                           "rows",
+                                           "row_offset_m",
+                                           "inertia_kg_m2",
+                                           "bearing_friction_nm",
+                                           "bearing_viscous_nm_s"};
 const std::set<std::string> kMotorKeys = {
     "gear_ratio",          "torque_constant_nm_a", "max_current_a",          "max_torque_nm",
     "rotor_inertia_kg_m2", "supply_voltage_v",     "winding_resistance_ohm", "max_accel_rad_s2",
     "speed_gain_nm_s_rad", "integral_gain_nm_rad"};
+
+// `rollers: continuous` (the default) or a mapping of discrete rollers; keys missing from the
+// wheel's mapping come from wheel_defaults.rollers. Defaults apply only to roller wheels.
+void ParseRollers(const Reader& rd, const YAML::Node& n, const YAML::Node& defaults,
+                  const std::string& prefix, WheelSpec* w) {
+  const bool roller_wheel = w->kind == WheelKind::kMecanum || w->kind == WheelKind::kOmni;
+  const YAML::Node own = Reader::Get(n, "rollers");
+  const std::string field = prefix + "rollers";
+  if (own.IsDefined() && !roller_wheel) {
+    rd.Fail(own, field, "only mecanum and omni wheels have rollers");
+  }
+  if (!roller_wheel) return;
+  const YAML::Node dflt = Reader::Get(defaults, "rollers");
+  auto continuous = [&](const YAML::Node& node) {
+    if (!node.IsDefined()) return false;
+    if (node.IsScalar()) {
+      if (node.Scalar() != "continuous") {
+        rd.Fail(node, field, "must be 'continuous' or a mapping {count, length_m, ...}");
+      }
+      return true;
+    }
+    if (!node.IsMap())
+      rd.Fail(node, field, "must be 'continuous' or a mapping {count, length_m, ...}");
+    rd.CheckKeys(node, field, kRollerKeys);
+    return false;
+  };
+  if (continuous(own)) return;
+  if (!own.IsDefined() && (!dflt.IsDefined() || continuous(dflt))) return;
+  const YAML::Node dmap = dflt.IsDefined() && dflt.IsMap() ? dflt : YAML::Node();
+  const YAML::Node map = own.IsDefined() ? own : dmap;
+  const YAML::Node fallback = own.IsDefined() ? dmap : YAML::Node();
+  const std::string rp = field + ".";
+  physics::RollerSpec& r = w->rollers;
+  const double count = rd.Value(map, fallback, "count", rp, 3, 64);
+  if (count != std::floor(count))
+    rd.Fail(Reader::Lookup(map, fallback, "count"), rp + "count", "must be an integer");
+  r.count = static_cast<int>(count);
+  r.length_m = rd.Value(map, fallback, "length_m", rp, 1e-4, 1);
+  r.radius_m = rd.ValueOr(map, fallback, "radius_m", rp, 1e-5, 1, 0.0);
+  const double rows = rd.ValueOr(map, fallback, "rows", rp, 1, 2, 1);
+  if (rows != 1 && rows != 2)
+    rd.Fail(Reader::Lookup(map, fallback, "rows"), rp + "rows", "must be 1 or 2");
+  r.rows = static_cast<int>(rows);
+  r.row_offset_m = rd.ValueOr(map, fallback, "row_offset_m", rp, 0, 0.5, 0.0);
+  if (r.rows == 2 && !Reader::Lookup(map, fallback, "row_offset_m").IsDefined()) {
+    rd.Fail(map, rp + "row_offset_m", "is required with rows: 2");
+  }
+  r.inertia_kg_m2 = rd.ValueOr(map, fallback, "inertia_kg_m2", rp, 0, 1, 0.0);
+  r.bearing_friction_nm = rd.ValueOr(map, fallback, "bearing_friction_nm", rp, 0, 10, 0.0);
+  r.bearing_viscous_nm_s = rd.ValueOr(map, fallback, "bearing_viscous_nm_s", rp, 0, 10, 0.0);
+  try {
+    (void)physics::MakeRollerGeometry(*w, "");
+  } catch (const std::invalid_argument& e) {
+    // "{where}: rollers.field (value) rule": point at the rollers block.
+    std::string what = e.what();
+    const std::string lead = ": rollers.";
+    if (what.rfind(lead, 0) == 0) what = what.substr(lead.size());
+    rd.Fail(map, field, what);
+  }
+}
 
 WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& defaults,
                      const std::string& prefix, bool* encoder) {
@@ -137,6 +207,7 @@ WheelSpec ParseWheel(const Reader& rd, const YAML::Node& n, const YAML::Node& de
   const double zone_deg = rd.ValueOr(n, defaults, "handover_zone_deg", prefix, 0.1, 90, 90.0);
   w.handover_zone_rad = zone_deg == 90.0 ? 0.5 * std::numbers::pi : zone_deg * kDeg;
   w.half_offset_m = rd.ValueOr(n, defaults, "half_offset_m", prefix, 0, 0.2, 0.0);
+  ParseRollers(rd, n, defaults, prefix, &w);
   const YAML::Node enc = rd.Lookup(n, defaults, "encoder");
   *encoder = false;
   if (enc.IsDefined()) {

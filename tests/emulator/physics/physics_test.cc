@@ -345,5 +345,88 @@ TEST(PhysicsOrtho3, HandoverDisturbsBodyPeriodically) {
   EXPECT_GT(d.fwd, 0.25);
 }
 
+// Discrete rollers (platform mecanum4_mujoco_peer: 10 ellipsoid rollers per wheel).
+struct PeerRig {
+  explicit PeerRig(const char* overrides = "{}")
+      : platform(platforms::LoadPlatformFile(
+            SourcePath("scenarios/platforms/mecanum4_mujoco_peer.yaml"), YAML::Load(overrides))) {
+    world.terrain().AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.8});
+    vehicle = &world.AddVehicle(platform.vehicle, 0, 0, 0);
+    world.StepFor(0.5);
+  }
+  void Wheels(double fl, double fr, double rl, double rr) {
+    const double w[4] = {fl, fr, rl, rr};
+    for (std::size_t k = 0; k < 4; ++k) (void)vehicle->SetWheelSpeedCommand(k, w[k]);
+  }
+  physics::PhysicsWorld world;
+  platforms::Platform platform;
+  physics::RollerVehicle* vehicle = nullptr;
+};
+
+TEST(PhysicsDiscreteRollers, ContactHandsOverOncePerRollerPitch) {
+  PeerRig rig;
+  rig.Wheels(6, 6, 6, 6);
+  rig.world.StepFor(1.0);
+  int handovers = 0;
+  int last = rig.vehicle->wheel_truth()[0].roller;
+  const double a0 = rig.vehicle->wheel_truth()[0].angle_rad;
+  double zmin = 1e9, zmax = -1e9;
+  for (int k = 0; k < 3000; ++k) {
+    rig.world.Step();
+    const WheelTruth& t = rig.vehicle->wheel_truth()[0];
+    if (t.roller != last) ++handovers;
+    last = t.roller;
+    zmin = std::min(zmin, rig.vehicle->body_truth().p_WB.z());
+    zmax = std::max(zmax, rig.vehicle->body_truth().p_WB.z());
+  }
+  // One hand-over per 36 deg of wheel angle.
+  const double turned = rig.vehicle->wheel_truth()[0].angle_rad - a0;
+  EXPECT_NEAR(handovers, turned / (2 * std::numbers::pi / 10), 1.0);
+  // The body rides the rolling radius: 0.258 mm deep at the hand-over (RollerGeometry test).
+  EXPECT_GT(zmax - zmin, 0.15e-3);
+  EXPECT_LT(zmax - zmin, 0.40e-3);
+}
+
+TEST(PhysicsDiscreteRollers, SidewaysTurnsTheRollerInContactAtTheKinematicRate) {
+  // Sideways at omega: the roller in contact spins at omega h / (rho cos(alpha_eff)); at the
+  // roller's centre h = R (loaded), rho = 8 mm, alpha_eff = 45 deg: 53 rad/s at 6 rad/s.
+  PeerRig rig;
+  rig.Wheels(6, -6, -6, 6);
+  rig.world.StepFor(1.5);
+  int checked = 0;
+  for (int k = 0; k < 2000; ++k) {
+    rig.world.Step();
+    const WheelTruth& t = rig.vehicle->wheel_truth()[0];
+    const double pitch = 2 * std::numbers::pi / 10;
+    const double phase = std::remainder(t.angle_rad - t.roller * pitch, 2 * std::numbers::pi);
+    if (std::abs(phase) > 0.02) continue;
+    ++checked;
+    const double expected =
+        std::abs(t.omega_rad_s) * t.effective_radius_m / (0.008 * std::cos(std::numbers::pi / 4));
+    EXPECT_NEAR(std::abs(t.roller_omega_rad_s), expected, 0.03 * expected) << k;
+    EXPECT_NEAR(std::abs(t.roller_angle_rad), std::numbers::pi / 4, 0.001);
+  }
+  EXPECT_GT(checked, 20);
+}
+
+TEST(PhysicsDiscreteRollers, RollerBearingFrictionCostsSidewaysSpeedNotForward) {
+  auto run = [](const char* over, double fl, double fr) {
+    PeerRig rig(over);
+    rig.Wheels(fl, fr, fr, fl);
+    rig.world.StepFor(1.0);
+    const BodyTruth a = rig.vehicle->body_truth();
+    rig.world.StepFor(3.0);
+    return Displacement(a, rig.vehicle->body_truth());
+  };
+  const char* stiff = "{wheel_defaults: {rollers: {bearing_friction_nm: 0.05}}}";
+  const Planar side_free = run("{}", 6, -6), side_stiff = run(stiff, 6, -6);
+  const Planar fwd_free = run("{}", 6, 6), fwd_stiff = run(stiff, 6, 6);
+  // Forward the rollers do not turn: their bearings do not matter.
+  EXPECT_NEAR(fwd_stiff.fwd, fwd_free.fwd, 1e-4);
+  // Sideways every roller in contact is driven against its bearing: the robot lags.
+  EXPECT_LT(-side_stiff.left, -side_free.left - 0.003);
+  EXPECT_GT(-side_stiff.left, 0.5 * -side_free.left);
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator

@@ -126,12 +126,54 @@ TEST(PlatformFile, BadFieldNamesFileLineAndField) {
 }
 
 TEST(PlatformFile, DamagedShippedPlatformsGiveOnlyLocatedInputErrors) {
-  for (const char* name : {"diff2", "mecanum4_omni3", "ortho3"}) {
+  for (const char* name : {"diff2", "mecanum4_omni3", "ortho3", "mecanum4_mujoco_peer"}) {
     SCOPED_TRACE(name);
     const std::string file = std::string(name) + ".yaml";
     yaml_mutation::ExpectOnlyLocatedInputErrors(
         Shipped(name), file, [&](const std::string& text) { (void)LoadPlatformYaml(text, file); });
   }
+}
+
+TEST(PlatformFile, DiscreteRollersMergeFromTheDefaultsAndFailWithTheField) {
+  const Platform peer = LoadShipped("mecanum4_mujoco_peer");
+  for (const physics::WheelSpec& w : peer.vehicle.wheels) {
+    EXPECT_EQ(w.rollers.count, 10);
+    EXPECT_DOUBLE_EQ(w.rollers.length_m, 0.054259);
+    EXPECT_DOUBLE_EQ(w.rollers.inertia_kg_m2, 1.256e-6);
+    EXPECT_EQ(w.rollers.rows, 1);
+  }
+  // A wheel's own rollers block takes the defaults' missing keys; `continuous` switches off.
+  const Platform mixed = LoadPlatformFile(
+      SourcePath("scenarios/platforms/mecanum4_mujoco_peer.yaml"),
+      YAML::Load("wheels: {front_left: {rollers: {count: 12}}, rear_*: {rollers: continuous}}"));
+  EXPECT_EQ(mixed.vehicle.wheels[0].rollers.count, 12);
+  EXPECT_DOUBLE_EQ(mixed.vehicle.wheels[0].rollers.length_m, 0.054259);
+  EXPECT_EQ(mixed.vehicle.wheels[1].rollers.count, 10);
+  EXPECT_EQ(mixed.vehicle.wheels[2].rollers.count, 0);
+  EXPECT_EQ(mixed.vehicle.wheels[3].rollers.count, 0);
+  // The shipped paper platforms keep the continuous limit.
+  for (const physics::WheelSpec& w : LoadShipped("mecanum4_omni3").vehicle.wheels) {
+    EXPECT_EQ(w.rollers.count, 0) << w.name;
+  }
+  const std::string path = SourcePath("scenarios/platforms/mecanum4_mujoco_peer.yaml");
+  auto load = [&](const char* over) { (void)LoadPlatformFile(path, YAML::Load(over)); };
+  EXPECT_THAT([&] { load("wheel_defaults: {rollers: {count: 10.5}}"); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("wheels[0].rollers.count: must be an integer")));
+  EXPECT_THAT([&] { load("wheel_defaults: {rollers: {spokes: 3}}"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("spokes")));
+  EXPECT_THAT([&] { load("wheel_defaults: {rollers: discrete}"); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("rollers: must be 'continuous' or a mapping")));
+  EXPECT_THAT([&] { load("wheel_defaults: {rollers: {length_m: 0.15}}"); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("mecanum4_mujoco_peer.yaml:"),
+                        HasSubstr("wheels[0].rollers: length_m (0.15) is too long"))));
+  EXPECT_THAT([&] { load("wheel_defaults: {rollers: {rows: 2}}"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("row_offset_m: is required")));
+  EXPECT_THAT(
+      [&] { load("wheels: {front_left: {kind: conventional, rollers: {count: 8}}}"); },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("only mecanum and omni wheels have rollers")));
 }
 
 TEST(PlatformFile, LineNumberPointsAtTheBadValue) {
