@@ -141,6 +141,10 @@ std::vector<std::string> DocumentedMetricKeys() {
     keys.push_back(fmt::format("physics.{}.mesh_rtf", p));
   }
   for (int n : {1, 4, 16}) keys.push_back(fmt::format("physics.platforms_{}.rtf", n));
+  for (const char* k : {"peers.mecanum_wheelhil_steps_per_s", "peers.mecanum_mujoco_steps_per_s",
+                        "peers.mecanum_wheelhil_vs_mujoco"}) {
+    keys.emplace_back(k);
+  }
   for (const auto& s : BenchScenarios()) {
     keys.push_back(fmt::format("lockstep.{}.rtf", s));
     keys.push_back(fmt::format("lockstep.{}.vcan_rtf", s));

@@ -472,6 +472,7 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
 nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
   const double case_s = o.quick ? 0.15 : 1.5;
   if (name == "physics") return RunPhysicsWorkload(o.source_dir, case_s);
+  if (name == "peers") return RunPeersWorkload(o.source_dir, o.quick ? 1 : 3);
   if (name == "bus-ucan") return RunBusWorkload("ucan", o.quick ? 0.3 : 2.0);
   if (name == "bus-vcan") return RunBusWorkload("vcan", o.quick ? 0.3 : 2.0);
   if (name == "realtime" || name == "realtime-loaded") {
@@ -550,6 +551,7 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
   };
 
   SetPath(report, "rss.physics_mib", run("physics", false, DocumentedKeysUnder("physics.")));
+  run("peers", false, DocumentedKeysUnder("peers."));
   SetPath(report, "rss.bus_mib",
           run("bus-ucan", true, {"bus.ucan_frames_per_s", "bus.ucan_fanout4_frames_per_s"}));
 

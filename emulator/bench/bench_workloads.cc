@@ -26,6 +26,10 @@
 #include "emulator/bench/bench_report.h"
 #include "emulator/bench/fan_out_readers.h"
 #include "emulator/bench/paper002_device_set.h"
+#include "emulator/peers/mecanum_peer.h"
+#ifdef WHEELHIL_HAVE_MUJOCO
+#include "emulator/peers/mujoco_mecanum.h"
+#endif
 #include "emulator/physics/physics_world.h"
 #include "emulator/platforms/platform.h"
 #include "emulator/realtime/realtime_pacer.h"
@@ -179,6 +183,45 @@ nlohmann::json RunPhysicsWorkload(const std::string& source_dir, double wall_s_p
     } catch (const std::exception& e) {
       SetPath(report, key, Unavailable(e.what()));
     }
+  }
+  return report;
+}
+
+nlohmann::json RunPeersWorkload(const std::string& source_dir, int repeats) {
+  nlohmann::json report = nlohmann::json::object();
+  const char* kW = "peers.mecanum_wheelhil_steps_per_s";
+  const char* kM = "peers.mecanum_mujoco_steps_per_s";
+  const char* kRatio = "peers.mecanum_wheelhil_vs_mujoco";
+  try {
+    const platforms::Platform platform =
+        platforms::LoadPlatformFile(source_dir + "/scenarios/platforms/mecanum4_mujoco_peer.yaml");
+#ifndef WHEELHIL_HAVE_MUJOCO
+    (void)repeats;
+    SetPath(report, kW, peers::MeasureWheelhil(platform, peers::PeerMotions()[0], 0.8).steps_per_s);
+    throw std::runtime_error("libmujoco-dev was not installed when wheelhil was built");
+#else
+    // Interleaved: each motion alternates the engines, so a change in the machine's load
+    // touches both; the figures are medians over motions and repeats.
+    std::vector<double> w, m;
+    for (int r = 0; r < repeats; ++r) {
+      for (const peers::PeerMotion& motion : peers::PeerMotions()) {
+        w.push_back(peers::MeasureWheelhil(platform, motion, 0.8).steps_per_s);
+        m.push_back(peers::MeasureMujoco(motion, peers::MujocoPeerOptions{}).steps_per_s);
+      }
+    }
+    auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      const std::size_t n = v.size();
+      return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    };
+    SetPath(report, kW, median(w));
+    SetPath(report, kM, median(m));
+    SetPath(report, kRatio, median(w) / median(m));
+#endif
+  } catch (const std::exception& e) {
+    if (!GetPath(report, kW)) SetPath(report, kW, Unavailable(e.what()));
+    SetPath(report, kM, Unavailable(e.what()));
+    SetPath(report, kRatio, Unavailable(e.what()));
   }
   return report;
 }

@@ -16,6 +16,13 @@ namespace wheelhil::emulator::bench {
 /// per-chunk simulated seconds per wall second. wall_s_per_case: measuring time per case.
 nlohmann::json RunPhysicsWorkload(const std::string& source_dir, double wall_s_per_case);
 
+/// The Mecanum cross-engine platform (emulator/peers, 10 discrete rollers per wheel, 1 ms) in
+/// wheelhil's physics and in MuJoCo, interleaved motion by motion, `repeats` rounds of the four
+/// motions. Sets peers.mecanum_wheelhil_steps_per_s, peers.mecanum_mujoco_steps_per_s (medians)
+/// and peers.mecanum_wheelhil_vs_mujoco (their ratio); MuJoCo's figures are unavailable in a
+/// build without libmujoco-dev.
+nlohmann::json RunPeersWorkload(const std::string& source_dir, int repeats);
+
 /// Frames per second 1 writer -> 1 reader and 1 -> 4 readers of 8-byte classic frames through
 /// the plain SocketCAN API on `iface` (flow-controlled: at most a window of frames in flight to
 /// the slowest reader; frames the bus dropped are reported, not counted as delivered).

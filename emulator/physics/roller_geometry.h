@@ -38,6 +38,7 @@ struct RollerGeometry {
   double half_length_m = 0;    ///< b
   double centre_radius_m = 0;  ///< distance of a roller centre from the axle
   double row_offset_m = 0;
+  bool nearest_is_lowest = true;  ///< h falls with |phase| over 1.5 pitches: one roller per row
 };
 
 /// The contact of a wheel at one spin angle.
@@ -47,8 +48,10 @@ struct RollerContact {
   double rolling_radius_m = 0;
   double lateral_offset_m = 0;  ///< along the axle (left of the rolling direction)
   double forward_offset_m = 0;  ///< along the rolling direction
-  double roller_angle_rad = 0;  ///< effective, measured from the axle like WheelSpec's
-  double roller_radius_m = 0;   ///< contact point to the roller's axis
+  double roller_cos = 0;       ///< cosine and sine of the effective roller angle, measured from the
+  double roller_sin = 1;       ///< axle like WheelSpec::roller_angle_rad
+  double roller_radius_m = 0;  ///< contact point to the roller's axis
+  [[nodiscard]] double roller_angle_rad() const noexcept;
 };
 
 /// Geometry of wheel w's rollers (w.rollers.count > 0). Throws std::invalid_argument naming

@@ -305,8 +305,8 @@ RollerVehicle::ContactGeometry RollerVehicle::WheelGeometry(std::size_t i,
     g.radius_m = c.rolling_radius_m;
     g.lateral_m = c.lateral_offset_m;
     g.forward_m = c.forward_offset_m;
-    g.roller_cos = std::cos(c.roller_angle_rad);
-    g.roller_sin = std::sin(c.roller_angle_rad);
+    g.roller_cos = c.roller_cos;
+    g.roller_sin = c.roller_sin;
     g.roller = c.roller;
     g.roller_radius_m = c.roller_radius_m;
     return g;
@@ -414,6 +414,15 @@ void RollerVehicle::PreStep(double dt) noexcept {
       double& wr = st.roller_omega[static_cast<std::size_t>(geo.roller)];
       wr /= 1.0 + dt * ws.rollers.bearing_viscous_nm_s * st.roller_inv_inertia;
       roller_omega[i] = wr;
+    }
+    if (geo.roller >= 0) {
+      // The contact geometry moves every step: warm start from the impulses' linear trend.
+      for (int r = 0; r < 3; ++r) {
+        double* lam = r == 0 ? &st.lambda_a : r == 1 ? &st.lambda_b : &st.lambda_motor;
+        const double now = *lam;
+        *lam = 2 * now - st.lambda_prev[r];
+        st.lambda_prev[r] = now;
+      }
     }
     tr.roller = geo.roller;
     tr.roller_angle_rad = geo.roller >= 0 ? std::atan2(geo.roller_sin, geo.roller_cos) : 0.0;

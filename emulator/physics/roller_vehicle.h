@@ -146,6 +146,7 @@ class RollerVehicle : public btActionInterface {
     std::vector<double> roller_omega;           // every roller's spin (with roller inertia)
     double roller_inv_inertia = 0;              // 0: rollers turn freely (no spin state)
     double lambda_roller = 0;                   // warm start of the roller bearing row
+    double lambda_prev[3] = {0, 0, 0};          // last step's lambda_a, lambda_b, lambda_motor
   };
   // Where wheel i touches the floor at spin angle `angle`.
   struct ContactGeometry {

@@ -103,9 +103,9 @@ TEST(RollerGeometry, ContactIsTheLowestPointOfTheRollerSurface) {
       const Eigen::Vector3d rel = s.point - s.centre;
       EXPECT_NEAR(c.roller_radius_m, (rel - rel.dot(s.axis) * s.axis).norm(), 2e-6);
       // Effective angle: the roller axis projected on the floor, from the axle (y).
-      EXPECT_NEAR(c.roller_angle_rad, std::atan2(s.axis.x(), s.axis.y()), 1e-12);
+      EXPECT_NEAR(c.roller_angle_rad(), std::atan2(s.axis.x(), s.axis.y()), 1e-12);
       if (alpha_deg != 90.0) {
-        EXPECT_NEAR(std::tan(c.roller_angle_rad), std::tan(alpha_deg * kPi / 180) * std::cos(phi),
+        EXPECT_NEAR(std::tan(c.roller_angle_rad()), std::tan(alpha_deg * kPi / 180) * std::cos(phi),
                     1e-12);
       }
     }
@@ -123,7 +123,7 @@ TEST(RollerGeometry, ContactRunsAlongTheRollerAndJumpsToTheNext) {
   EXPECT_NEAR(before.rolling_radius_m, after.rolling_radius_m, 1e-8);   // no step in height
   EXPECT_NEAR(before.lateral_offset_m, -after.lateral_offset_m, 1e-8);  // the lateral jump
   EXPECT_GT(std::abs(before.lateral_offset_m), 0.008);
-  EXPECT_NEAR(before.roller_angle_rad, after.roller_angle_rad, 1e-8);
+  EXPECT_NEAR(before.roller_angle_rad(), after.roller_angle_rad(), 1e-8);
   // Monotone run along the roller: the lateral offset grows with the phase.
   double last = -1;
   for (int k = -9; k <= 9; ++k) {
@@ -147,7 +147,7 @@ TEST(RollerGeometry, MeanEffectiveRollerTangentIsSincOfHalfThePitch) {
     const int samples = 20000;
     double sum = 0;
     for (int k = 0; k < samples; ++k) {
-      sum += std::tan(LowestRollerContact(g, 2 * kPi * (k + 0.5) / samples).roller_angle_rad);
+      sum += std::tan(LowestRollerContact(g, 2 * kPi * (k + 0.5) / samples).roller_angle_rad());
     }
     EXPECT_NEAR(sum / samples, std::sin(kPi / n) / (kPi / n), 1e-6) << n;
   }
@@ -167,7 +167,7 @@ TEST(RollerGeometry, DoubleOmniRowsAlternateAndStagger) {
     EXPECT_NEAR(c.rolling_radius_m, 0.025, 1e-12);
     EXPECT_NEAR(c.lateral_offset_m, k % 2 == 0 ? 0.006 : -0.006, 1e-12);
     EXPECT_EQ(c.roller, k % 2 == 0 ? k / 2 : 6 + k / 2);
-    EXPECT_NEAR(c.roller_angle_rad, kPi / 2, 1e-12);
+    EXPECT_NEAR(c.roller_angle_rad(), kPi / 2, 1e-12);
   }
   // Half-way between (a quarter pitch): the rows hand over, both reach the same depth.
   const RollerContact mid = LowestRollerContact(g, 0.25 * pitch);
