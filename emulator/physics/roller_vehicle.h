@@ -5,7 +5,10 @@
 ///   conventional: along and across the rolling direction (friction circle/ellipse),
 ///   Mecanum:      only along the roller axis u = cos(a)*axle + sin(a)*rolling (a = +-45 deg),
 ///   omni/orthogonal: only along the rolling direction (a = 90 deg),
-/// free directions carry only rolling resistance c_rr*N.
+/// free directions carry only rolling resistance c_rr*N. A wheel with discrete rollers
+/// (WheelSpec::rollers, geometry in roller_geometry.h) touches with the roller in contact: the
+/// rolling radius, roller angle and contact offsets follow the wheel angle, the roller rolls on
+/// its loaded radius and, with roller inertia, on its own spin against its bearing.
 ///
 /// Contact and motor forces are solved at velocity level once per fixed step, in the world's
 /// pre-tick callback (so they act in the same step): projected Gauss-Seidel over the rows
