@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <random>
 #include <set>
 #include <stdexcept>
 
@@ -325,7 +326,7 @@ void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& 
 Platform ReadPlatform(const Reader& rd, const YAML::Node& root) {
   rd.CheckKeys(root, "",
                {"name", "description", "paper", "chassis", "wheel_defaults", "wheels", "kinematics",
-                "sensors", "solver"});
+                "sensors", "solver", "tolerances"});
   Platform p;
   p.source_file = rd.file();
   p.name = rd.Text(root, "name", "name");
@@ -422,6 +423,21 @@ Platform ReadPlatform(const Reader& rd, const YAML::Node& root) {
       p.sensors.push_back(s);
     }
   }
+  if (const YAML::Node t = root["tolerances"]; t.IsDefined()) {
+    rd.CheckKeys(t, "tolerances", {"radius_m", "mount_m", "heading_deg", "roller_angle_deg"});
+    auto& tol = p.tolerances;
+    tol.radius_m = rd.ValueOr(t, none, "radius_m", "tolerances.", 0, 0.01, 0);
+    tol.mount_m = rd.ValueOr(t, none, "mount_m", "tolerances.", 0, 0.05, 0);
+    tol.heading_rad = rd.ValueOr(t, none, "heading_deg", "tolerances.", 0, 5, 0) * kDeg;
+    tol.roller_angle_rad = rd.ValueOr(t, none, "roller_angle_deg", "tolerances.", 0, 5, 0) * kDeg;
+    for (std::size_t i = 0; i < v.wheels.size(); ++i) {
+      if (tol.radius_m >= 0.1 * v.wheels[i].radius_m) {
+        rd.Fail(t["radius_m"], "tolerances.radius_m",
+                fmt::format("must be below a tenth of the smallest wheel radius ({} m, wheel '{}')",
+                            v.wheels[i].radius_m, v.wheels[i].name));
+      }
+    }
+  }
   try {
     physics::ValidateVehicleSpec(v, "vehicle");
   } catch (const std::invalid_argument& e) {
@@ -446,6 +462,44 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
 
 Platform LoadPlatformFile(const std::string& path, const YAML::Node& overrides) {
   return LoadPlatformYaml(Reader(path).ReadFile(), path, overrides);
+}
+
+std::vector<WheelDeviation> DrawWheelDeviations(const Platform& p, std::uint64_t seed) {
+  std::mt19937_64 rng(seed ^ 0x70E2A4CEull);
+  // Uniform in [-limit, limit] from the generator's bits (the standard distributions' algorithms
+  // are the library's own; this is the same everywhere).
+  auto draw = [&](double limit) {
+    const double u = static_cast<double>(rng() >> 11) * 0x1.0p-53;
+    return limit * (2 * u - 1);
+  };
+  const PlatformTolerances& t = p.tolerances;
+  std::vector<WheelDeviation> out(p.vehicle.wheels.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const WheelSpec& w = p.vehicle.wheels[i];
+    WheelDeviation& d = out[i];
+    d.radius_m = draw(t.radius_m);
+    d.mount_x_m = draw(t.mount_m);
+    d.mount_y_m = draw(t.mount_m);
+    d.heading_rad = draw(t.heading_rad);
+    const double roller = draw(t.roller_angle_rad);
+    if (w.kind == WheelKind::kMecanum || w.kind == WheelKind::kOmni) d.roller_angle_rad = roller;
+  }
+  return out;
+}
+
+physics::VehicleSpec AsBuilt(const physics::VehicleSpec& nominal,
+                             const std::vector<WheelDeviation>& deviations) {
+  physics::VehicleSpec v = nominal;
+  for (std::size_t i = 0; i < v.wheels.size() && i < deviations.size(); ++i) {
+    WheelSpec& w = v.wheels[i];
+    const WheelDeviation& d = deviations[i];
+    w.radius_m += d.radius_m;
+    w.mount_B.x() += d.mount_x_m;
+    w.mount_B.y() += d.mount_y_m;
+    w.heading_rad += d.heading_rad;
+    w.roller_angle_rad += d.roller_angle_rad;
+  }
+  return v;
 }
 
 double WheelSpeedForTwist(const WheelSpec& w, const BodyTwist& t) noexcept {

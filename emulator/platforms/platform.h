@@ -6,6 +6,7 @@
 /// Load errors throw std::invalid_argument "file:line:col: field: problem". Body frame B: x
 /// forward, y left, z up, origin at the chassis centre of mass. Value types, thread-compatible.
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,29 @@ struct SensorMount {
   Eigen::Vector3d axis_B = Eigen::Vector3d::UnitZ();     ///< unit sensitive axis
 };
 
+/// Manufacturing and mounting tolerances of a platform file's `tolerances:` block: +- limits
+/// that each run draws uniformly and independently for every wheel (DrawWheelDeviations). They
+/// are the systematic odometry errors of UMBmark (unequal wheel diameters, an uncertain track or
+/// wheelbase) and those of roller wheels (mounting angle, roller angle). 0 = exact.
+struct PlatformTolerances {
+  double radius_m = 0;     ///< every wheel's radius
+  double mount_m = 0;      ///< x and y of every wheel's mount (track, wheelbase, follower radius)
+  double heading_rad = 0;  ///< every wheel's mounting angle
+  double roller_angle_rad = 0;  ///< Mecanum and omni wheels' roller angle
+  [[nodiscard]] bool any() const noexcept {
+    return radius_m > 0 || mount_m > 0 || heading_rad > 0 || roller_angle_rad > 0;
+  }
+};
+
+/// One wheel's drawn deviation from its nominal geometry.
+struct WheelDeviation {
+  double radius_m = 0;
+  double mount_x_m = 0;
+  double mount_y_m = 0;
+  double heading_rad = 0;
+  double roller_angle_rad = 0;
+};
+
 struct Platform {
   std::string name;
   std::string description;
@@ -37,6 +61,7 @@ struct Platform {
   std::vector<std::size_t> drive_wheels;    ///< indices into vehicle.wheels
   std::vector<std::size_t> encoder_wheels;  ///< wheels with an encoder shaft
   std::vector<SensorMount> sensors;
+  PlatformTolerances tolerances;
   /// Named kinematic parameters from the `kinematics:` block (track_m, l1_m, l2_m, d_m, ...).
   std::vector<std::pair<std::string, double>> parameters;
   [[nodiscard]] double parameter(const std::string& key) const;                ///< throws if absent
@@ -61,6 +86,14 @@ Platform LoadPlatformFile(const std::string& path, const YAML::Node& overrides =
 /// Parses platform YAML text; `file` is used in error messages. `overrides` as above.
 Platform LoadPlatformYaml(const std::string& text, const std::string& file,
                           const YAML::Node& overrides = YAML::Node());
+
+/// Draws every wheel's deviation within platform.tolerances from `seed` (uniform, independent,
+/// the same seed gives the same draws on any machine).
+std::vector<WheelDeviation> DrawWheelDeviations(const Platform& platform, std::uint64_t seed);
+/// The vehicle with the deviations applied (one per wheel, in wheel order): the robot as built.
+/// The platform's kinematic parameters stay nominal: they are what the firmware believes.
+physics::VehicleSpec AsBuilt(const physics::VehicleSpec& nominal,
+                             const std::vector<WheelDeviation>& deviations);
 
 /// No-slip spin rate (rad/s) of any wheel for a body twist: the rim speed the contact point's
 /// motion implies along the wheel's constrained direction, divided by the radius. Conventional:

@@ -72,7 +72,25 @@ void PhysicsStage::BuildWorld(std::uint64_t seed) {
     }
   }
   AddBumps(terrain);
-  vehicle_ = &world_->AddVehicle(s_.platform.vehicle, 0.0, 0.0, 0.0);
+  if (s_.sample_tolerances && s_.platform.tolerances.any()) {
+    // The robot as built: every wheel off its nominal geometry within the file's tolerances.
+    const auto deviations = platforms::DrawWheelDeviations(s_.platform, seed);
+    for (std::size_t i = 0; i < deviations.size(); ++i) {
+      const auto& d = deviations[i];
+      run_.events.push_back(json{{"t_s", 0.0},
+                                 {"event", "wheel_as_built"},
+                                 {"wheel", s_.platform.vehicle.wheels[i].name},
+                                 {"radius_dev_m", d.radius_m},
+                                 {"mount_x_dev_m", d.mount_x_m},
+                                 {"mount_y_dev_m", d.mount_y_m},
+                                 {"heading_dev_rad", d.heading_rad},
+                                 {"roller_angle_dev_rad", d.roller_angle_rad}});
+    }
+    vehicle_ =
+        &world_->AddVehicle(platforms::AsBuilt(s_.platform.vehicle, deviations), 0.0, 0.0, 0.0);
+  } else {
+    vehicle_ = &world_->AddVehicle(s_.platform.vehicle, 0.0, 0.0, 0.0);
+  }
   body_ = &vehicle_->body_truth();
   wheels_ = &vehicle_->wheel_truth();
 }

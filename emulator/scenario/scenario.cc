@@ -509,8 +509,13 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
       r.Fail(p, "platform", e.what());
     }
   } else {
-    r.CheckKeys(p, "platform", {"file", "overrides"});
+    r.CheckKeys(p, "platform", {"file", "overrides", "tolerances"});
     const std::string path = r.Path(r.String(p, "file", "platform", std::nullopt));
+    const std::string tol = r.String(p, "tolerances", "platform", std::string("sample"));
+    if (tol != "sample" && tol != "nominal") {
+      r.Fail(p["tolerances"], "platform.tolerances", "must be 'sample' or 'nominal'");
+    }
+    s.sample_tolerances = tol == "sample";
     const YAML::Node overrides = Reader::Get(p, "overrides");
     if (overrides.IsDefined() && !overrides.IsMap()) {
       r.Fail(overrides, "platform.overrides", "must be a mapping");

@@ -233,6 +233,9 @@ struct Scenario {
   std::string description;
   std::uint64_t seed = 1;
   platforms::Platform platform;
+  /// `platform.tolerances: sample` (the default): each run draws the platform file's
+  /// tolerances from the run's seed; `nominal`: the robot is built exactly to the file.
+  bool sample_tolerances = true;
   TerrainSpec terrain;
   std::vector<MotionSegment> motion;  ///< Empty with firmware_motion.
   std::optional<FirmwareMotionSpec> firmware_motion;

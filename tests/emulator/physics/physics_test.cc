@@ -428,5 +428,30 @@ TEST(PhysicsDiscreteRollers, RollerBearingFrictionCostsSidewaysSpeedNotForward) 
   EXPECT_GT(-side_stiff.left, 0.5 * -side_free.left);
 }
 
+TEST(PhysicsTolerances, UnequalWheelDiametersCurveTheStraightRunAsUmbmarkPredicts) {
+  // Borenstein & Feng's E_d: the same wheel speed on radii r + d_l and r + d_r turns the robot
+  // at omega (d_r - d_l) / track.
+  platforms::Platform p = LoadShipped("diff2");
+  std::vector<platforms::WheelDeviation> dev(p.vehicle.wheels.size());
+  dev[0].radius_m = +0.0004;  // left
+  dev[1].radius_m = -0.0004;  // right
+  physics::PhysicsWorld world;
+  world.terrain().AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.8, 0.7});
+  physics::RollerVehicle& v = world.AddVehicle(platforms::AsBuilt(p.vehicle, dev), 0, 0, 0);
+  world.StepFor(1.0);
+  const double r = p.vehicle.wheels[0].radius_m, track = p.parameter("track_m");
+  const double omega = 0.3 / r;
+  (void)v.SetWheelSpeedCommand(0, omega);
+  (void)v.SetWheelSpeedCommand(1, omega);
+  world.StepFor(1.0);
+  const double yaw0 = v.body_truth().yaw_rad;
+  const double a0 = v.wheel_truth()[0].angle_rad;
+  world.StepFor(5.0);
+  const double turned = v.wheel_truth()[0].angle_rad - a0;  // the wheels' angle over the window
+  const double expected = turned * (dev[1].radius_m - dev[0].radius_m) / track;
+  EXPECT_NEAR(v.body_truth().yaw_rad - yaw0, expected, 0.05 * std::abs(expected));
+  EXPECT_LT(v.body_truth().yaw_rad - yaw0, -0.02);  // clockwise: the left wheel is larger
+}
+
 }  // namespace
 }  // namespace wheelhil::emulator

@@ -176,6 +176,43 @@ TEST(PlatformFile, DiscreteRollersMergeFromTheDefaultsAndFailWithTheField) {
       ThrowsMessage<std::invalid_argument>(HasSubstr("only mecanum and omni wheels have rollers")));
 }
 
+TEST(PlatformFile, TolerancesAreDrawnWithinTheirLimitsFromTheSeed) {
+  const std::string path = SourcePath("scenarios/platforms/mecanum4_omni3.yaml");
+  const Platform p = LoadPlatformFile(
+      path, YAML::Load("tolerances: {radius_m: 0.0003, mount_m: 0.001, heading_deg: 0.2, "
+                       "roller_angle_deg: 0.5}"));
+  EXPECT_DOUBLE_EQ(p.tolerances.radius_m, 0.0003);
+  EXPECT_NEAR(p.tolerances.roller_angle_rad, 0.5 * std::numbers::pi / 180, 1e-15);
+  const auto a = DrawWheelDeviations(p, 7), b = DrawWheelDeviations(p, 7),
+             c = DrawWheelDeviations(p, 8);
+  ASSERT_EQ(a.size(), p.vehicle.wheels.size());
+  double spread = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].radius_m, b[i].radius_m);  // same seed, same robot
+    EXPECT_EQ(a[i].mount_y_m, b[i].mount_y_m);
+    EXPECT_NE(a[i].radius_m, c[i].radius_m);
+    EXPECT_LE(std::abs(a[i].radius_m), 0.0003);
+    EXPECT_LE(std::abs(a[i].mount_x_m), 0.001);
+    EXPECT_LE(std::abs(a[i].heading_rad), 0.2 * std::numbers::pi / 180);
+    spread = std::max(spread, std::abs(a[i].radius_m));
+  }
+  EXPECT_GT(spread, 0.0);
+  // The omni followers and the Mecanum wheels get roller-angle errors; the built vehicle
+  // carries every deviation, the platform's kinematics stay nominal.
+  const physics::VehicleSpec built = AsBuilt(p.vehicle, a);
+  EXPECT_DOUBLE_EQ(built.wheels[0].radius_m, p.vehicle.wheels[0].radius_m + a[0].radius_m);
+  EXPECT_DOUBLE_EQ(built.wheels[4].mount_B.y(), p.vehicle.wheels[4].mount_B.y() + a[4].mount_y_m);
+  EXPECT_NE(a[4].roller_angle_rad, 0.0);
+  EXPECT_DOUBLE_EQ(p.parameter("wheel_radius_m"), 0.076);
+  // A platform without the block draws nothing.
+  for (const auto& d : DrawWheelDeviations(LoadShipped("diff2"), 7)) EXPECT_EQ(d.radius_m, 0.0);
+  EXPECT_THAT([&] { (void)LoadPlatformFile(path, YAML::Load("tolerances: {radius_m: 0.004}")); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("tolerances.radius_m: must be below a tenth")));
+  EXPECT_THAT([&] { (void)LoadPlatformFile(path, YAML::Load("tolerances: {track_m: 0.01}")); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("track_m")));
+}
+
 TEST(PlatformFile, LineNumberPointsAtTheBadValue) {
   const std::string text =
       "name: x\nchassis:\n  mass_kg: 1\n  inertia_kg_m2: [1, 1, 1]\n"

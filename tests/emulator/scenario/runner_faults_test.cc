@@ -27,8 +27,10 @@ namespace wheelhil::emulator::scenario {
 namespace {
 
 namespace fs = std::filesystem;
+using ::testing::AllOf;
 using ::testing::HasSubstr;
 using testing::Slurp;
+using ::testing::ThrowsMessage;
 
 RunOptions Options(const fs::path& out) { return testing::BuildTreeRunOptions(out); }
 
@@ -319,6 +321,49 @@ TEST_F(ScenarioFaultsRun, WheelFrictionDropSlipsThatWheelOnly) {
   EXPECT_TRUE(m["slip"].contains("recall"));
   EXPECT_TRUE(m["slip"].contains("precision"));
   EXPECT_THAT(Slurp(dir_ / "mu" / "events.jsonl"), HasSubstr("\"fault\":\"wheel_friction\""));
+}
+
+TEST(ScenarioPlatformTolerances, SampleOrNominalElseALocatedError) {
+  const std::string text = Slurp(kBasePath);
+  const std::string key = "  file: platforms/diff2.yaml\n";
+  ASSERT_NE(text.find(key), std::string::npos);
+  auto with = [&](const std::string& line) {
+    std::string t = text;
+    t.insert(t.find(key) + key.size(), line);
+    return t;
+  };
+  EXPECT_TRUE(ParseScenario(text, kBasePath).sample_tolerances);  // the default
+  EXPECT_FALSE(ParseScenario(with("  tolerances: nominal\n"), kBasePath).sample_tolerances);
+  EXPECT_THAT([&] { (void)ParseScenario(with("  tolerances: random\n"), kBasePath); },
+              ThrowsMessage<std::invalid_argument>(
+                  AllOf(HasSubstr("paper000_slip.yaml:21:"),
+                        HasSubstr("platform.tolerances: must be 'sample' or 'nominal'"))));
+}
+
+TEST_F(ScenarioFaultsRun, PlatformTolerancesBuildEachRunsRobotFromItsSeed) {
+  Scenario s = Short("");
+  s.platform.tolerances.radius_m = 0.0005;
+  s.platform.tolerances.mount_m = 0.002;
+  (void)Run(Short(""), "base");
+  (void)Run(s, "built");
+  const std::string events = Slurp(dir_ / "built" / "events.jsonl");
+  std::size_t n = 0;
+  for (std::size_t at = events.find("\"wheel_as_built\""); at != std::string::npos;
+       at = events.find("\"wheel_as_built\"", at + 1)) {
+    ++n;
+  }
+  EXPECT_EQ(n, s.platform.vehicle.wheels.size());
+  EXPECT_THAT(events, HasSubstr("\"radius_dev_m\""));
+  // The robot as built drives another path than the nominal one, the same for the same seed.
+  EXPECT_NE(Slurp(dir_ / "built" / "truth.csv"), Slurp(dir_ / "base" / "truth.csv"));
+  (void)Run(s, "again");
+  EXPECT_EQ(Slurp(dir_ / "again" / "truth.csv"), Slurp(dir_ / "built" / "truth.csv"));
+  // `platform.tolerances: nominal` builds the file's robot exactly.
+  s.sample_tolerances = false;
+  (void)Run(s, "nominal");
+  EXPECT_EQ(Slurp(dir_ / "nominal" / "truth.csv"), Slurp(dir_ / "base" / "truth.csv"));
+  EXPECT_THAT(Slurp(dir_ / "nominal" / "events.jsonl"),
+              ::testing::Not(HasSubstr("wheel_as_built")));
 }
 
 TEST_F(ScenarioFaultsRun, BrakingTorqueOnTheLeftWheelTurnsLeft) {
