@@ -486,6 +486,7 @@ void RollerVehicle::PreStep(double dt) noexcept {
       tr.normal_load_n = 0;
       tr.mu = 0;
       st.lambda_a = st.lambda_b = st.lambda_spin = 0;
+      st.lambda_prev[0] = st.lambda_prev[1] = 0;  // no trend across a lift-off
       st.anchor_a_m = st.anchor_b_m = 0;
       st.last_slip_m_s = 0;
       contact[i] =

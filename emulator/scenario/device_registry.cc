@@ -1,6 +1,7 @@
 #include "emulator/scenario/device_registry.h"
 
 #include <cmath>
+#include <numbers>
 #include <functional>
 #include <random>
 
@@ -45,6 +46,12 @@ std::unique_ptr<Device> MakeEncoder(const DeviceBuildContext& c,
     // stream so that the encoder's own imperfections keep their draws.
     std::mt19937_64 phase_rng(ep.seed ^ 0xD15C0FFull);
     ep.disc_phase_counts = std::uniform_real_distribution<double>(0.0, 1.0)(phase_rng);
+    if (sensors.encoder_eccentricity_rad > 0) {
+      // Drawn after the disc phase, so that runs without eccentricity keep their draws.
+      ep.eccentricity_rad = sensors.encoder_eccentricity_rad;
+      ep.eccentricity_phase_rad =
+          std::uniform_real_distribution<double>(0.0, 2 * std::numbers::pi)(phase_rng);
+    }
     dc.initial_angle_rad = c.wheels[dc.wheel_index].angle_rad;
     if (from_eds != nullptr) {
       dc.node = *from_eds;

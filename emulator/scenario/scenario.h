@@ -112,6 +112,8 @@ struct SensorsSpec {
   bool encoder_quadrature_x4 = true;
   double encoder_missed_count_prob = 0;
   double encoder_glitch_prob = 0;
+  /// Peak angle error of each encoder's off-centre disc (its phase drawn per encoder), rad.
+  double encoder_eccentricity_rad = 0;
   std::vector<EncoderDeviceSpec> encoders;
   bool gyro = false;  ///< Bosch MM5.10 yaw-rate node present.
   double gyro_rate_hz = 100;

@@ -1,5 +1,6 @@
 // The scenario loader's `sensors:` section (emulator/scenario/scenario.h).
 #include <cmath>
+#include <numbers>
 #include <memory>
 #include <optional>
 #include <set>
@@ -117,13 +118,16 @@ SensorsSpec ReadSensors(const Reader& r, const YAML::Node& root,
   if (!e.IsDefined() && !devices) r.Fail(n, "sensors.encoders", "is required");
   if (e.IsDefined()) {
     r.CheckKeys(e, "sensors.encoders",
-                {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob", "nodes"});
+                {"lines_per_rev", "quadrature_x4", "missed_count_prob", "glitch_prob",
+                 "eccentricity_deg", "nodes"});
   }
   s.encoder_lines_per_rev =
       static_cast<int>(r.Number(e, "lines_per_rev", "sensors.encoders", 1, 1e7, 500.0));
   s.encoder_quadrature_x4 = r.Bool(e, "quadrature_x4", "sensors.encoders", true);
   s.encoder_missed_count_prob = r.Number(e, "missed_count_prob", "sensors.encoders", 0, 1, 0.0);
   s.encoder_glitch_prob = r.Number(e, "glitch_prob", "sensors.encoders", 0, 1, 0.0);
+  s.encoder_eccentricity_rad =
+      r.Number(e, "eccentricity_deg", "sensors.encoders", 0, 5, 0.0) * std::numbers::pi / 180;
   const YAML::Node nodes = Reader::Get(e, "nodes");
   if (e.IsDefined() && (!nodes.IsSequence() || nodes.size() == 0)) {
     r.FailKey(e, "nodes", "sensors.encoders.nodes",

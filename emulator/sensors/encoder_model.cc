@@ -30,6 +30,12 @@ EncoderModel::EncoderModel(const EncoderParams& params) : params_(params), rng_(
   }
   RequireProbability(params.missed_count_prob, "missed_count_prob");
   RequireProbability(params.glitch_prob, "glitch_prob");
+  if (!(params.eccentricity_rad >= 0.0 && params.eccentricity_rad <= 0.1) ||
+      !std::isfinite(params.eccentricity_phase_rad)) {
+    throw std::invalid_argument(
+        fmt::format("encoder.eccentricity_rad ({}) must be in [0, 0.1] with a finite phase",
+                    params.eccentricity_rad));
+  }
   if (!(params.disc_phase_counts >= 0.0 && params.disc_phase_counts < 1.0)) {
     throw std::invalid_argument(
         fmt::format("encoder.disc_phase_counts ({}) must be in [0, 1)", params.disc_phase_counts));
@@ -40,8 +46,13 @@ EncoderModel::EncoderModel(const EncoderParams& params) : params_(params), rng_(
 }
 
 std::int64_t EncoderModel::IdealEdgeIndex(double wheel_angle_rad) const {
+  const double read_angle =
+      params_.eccentricity_rad > 0.0
+          ? wheel_angle_rad + params_.eccentricity_rad *
+                                  std::sin(wheel_angle_rad + params_.eccentricity_phase_rad)
+          : wheel_angle_rad;
   const double counts =
-      params_.direction * wheel_angle_rad * counts_per_rev_ / (2.0 * std::numbers::pi) +
+      params_.direction * read_angle * counts_per_rev_ / (2.0 * std::numbers::pi) +
       params_.disc_phase_counts;
   return static_cast<std::int64_t>(std::floor(counts));
 }

@@ -9,7 +9,10 @@
 ///   - missed counts: each edge is lost independently with probability `missed_count_prob`
 ///     (the lost edges are gone for good: the count drifts, as on real hardware);
 ///   - glitches: on each sample, with probability `glitch_prob`, a spurious +-1 count is added
-///     (noise on the A/B lines).
+///     (noise on the A/B lines);
+///   - eccentricity: a disc mounted off its shaft's centre by e is read at radius rho as the
+///     angle + (e / rho) sin(angle + phase): `eccentricity_rad` is e / rho, a once-per-turn
+///     error that a full turn cancels and a part turn does not.
 /// Randomness comes from a std::mt19937_64 seeded with `seed` and is drawn only when the
 /// corresponding probability is > 0: same seed and inputs -> same counts (with libstdc++).
 /// Thread-compatible.
@@ -30,7 +33,9 @@ struct EncoderParams {
   /// floor(direction * angle * cpr / 2pi + disc_phase_counts). 0 puts an edge exactly at angle 0,
   /// so a wheel that only trembles there flips between two counts.
   double disc_phase_counts = 0.0;
-  std::uint64_t seed = 0;  ///< RNG seed.
+  double eccentricity_rad = 0.0;        ///< Peak angle error of an off-centre disc, [0, 0.1].
+  double eccentricity_phase_rad = 0.0;  ///< Wheel angle at which that error is zero and rising.
+  std::uint64_t seed = 0;               ///< RNG seed.
 };
 
 class EncoderModel {

@@ -34,6 +34,26 @@ TEST(EncoderModel, QuantisesToFloorOfCounts) {
   EXPECT_EQ(enc.unwrapped_count(), 403);
 }
 
+TEST(EncoderModel, EccentricDiscErrsOncePerTurnAndCancelsOverAFullTurn) {
+  EncoderParams p;
+  p.lines_per_rev = 1024;  // 4096 counts per turn
+  p.eccentricity_rad = 0.01;
+  p.eccentricity_phase_rad = 0.0;
+  EncoderModel enc(p);
+  enc.Reset(0.0);
+  // A quarter turn reads 0.01 rad long: 4096 * 0.01 / 2pi = 6.5 counts over the true 1024.
+  enc.Sample(std::numbers::pi / 2);
+  EXPECT_EQ(enc.unwrapped_count(), 1030);
+  enc.Sample(std::numbers::pi + 1e-9);  // half a turn: the error is back to zero
+  EXPECT_EQ(enc.unwrapped_count(), 2048);
+  enc.Sample(1.5 * std::numbers::pi);  // three quarters: as much short
+  EXPECT_EQ(enc.unwrapped_count(), 3072 - 7);
+  enc.Sample(2 * std::numbers::pi + 1e-9);
+  EXPECT_EQ(enc.unwrapped_count(), 4096);
+  p.eccentricity_rad = 0.2;
+  EXPECT_THROW(EncoderModel{p}, std::invalid_argument);
+}
+
 TEST(EncoderModel, X1DecodingAndDirection) {
   EncoderModel x1({.lines_per_rev = 100, .quadrature_x4 = false});
   EXPECT_EQ(x1.counts_per_rev(), 100);
