@@ -10,14 +10,6 @@
 
 namespace wheelhil::emulator::peers {
 
-namespace {
-
-constexpr double kSettle_s = 0.5;
-constexpr double kRun_s = 5.0;
-constexpr double kSteadyFrom_s = 1.0;
-
-}  // namespace
-
 const std::array<PeerMotion, 4>& PeerMotions() {
   constexpr double R = 0.05, k = 0.47, V = 0.3, W = 0.5;
   constexpr double vs = V / R, ws = W * k / R;
@@ -86,12 +78,12 @@ PeerMeasurement MeasureWheelhil(const platforms::Platform& platform, const PeerM
   physics::PhysicsWorld world(options);
   world.terrain().AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{mu, mu});
   physics::RollerVehicle& vehicle = world.AddVehicle(platform.vehicle, 0, 0, 0);
-  world.StepFor(kSettle_s);
+  world.StepFor(kPeerSettle_s);
   for (std::size_t k = 0; k < 4; ++k) {
     (void)vehicle.SetWheelSpeedCommand(platform.drive_wheels[k], motion.wheel_rad_s[k]);
   }
-  const long steps = std::lround(kRun_s / dt_s);
-  const long steady_from = std::lround(kSteadyFrom_s / dt_s);
+  const long steps = std::lround(kPeerRun_s / dt_s);
+  const long steady_from = std::lround(kPeerSteadyFrom_s / dt_s);
   SteadyWindow window(motion, vehicle.body_truth().yaw_rad);
   const auto t0 = std::chrono::steady_clock::now();
   for (long i = 0; i < steps; ++i) {
@@ -104,7 +96,8 @@ PeerMeasurement MeasureWheelhil(const platforms::Platform& platform, const PeerM
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const physics::BodyTruth& b = vehicle.body_truth();
-  PeerMeasurement out = window.Finish(b.p_WB.x(), b.p_WB.y(), b.yaw_rad, kRun_s - kSteadyFrom_s);
+  PeerMeasurement out =
+      window.Finish(b.p_WB.x(), b.p_WB.y(), b.yaw_rad, kPeerRun_s - kPeerSteadyFrom_s);
   out.steps_per_s = wall > 0 ? static_cast<double>(steps) / wall : 0;
   return out;
 }

@@ -17,6 +17,11 @@
 
 namespace wheelhil::emulator::peers {
 
+/// The measuring protocol both engines follow, s.
+inline constexpr double kPeerSettle_s = 0.5;      ///< at zero command before the step
+inline constexpr double kPeerRun_s = 5.0;         ///< after the command step
+inline constexpr double kPeerSteadyFrom_s = 1.0;  ///< the steady window opens here
+
 /// One steady motion: wheel-speed commands FL, FR, RL, RR (rad/s) and the ideal body twist.
 struct PeerMotion {
   const char* name;

@@ -113,8 +113,6 @@ std::string MujocoMecanumModel(const MujocoPeerOptions& o) {
                      o.elliptic_cone ? "elliptic" : "pyramidal");
 }
 
-std::string MujocoVersion() { return mj_versionString(); }
-
 PeerMeasurement MeasureMujoco(const PeerMotion& motion, const MujocoPeerOptions& options) {
   const double dt_s = options.dt_s;
   const char* tmp = std::getenv("TMPDIR");
@@ -134,8 +132,9 @@ PeerMeasurement MeasureMujoco(const PeerMotion& motion, const MujocoPeerOptions&
   }
   std::unique_ptr<mjData, DataDeleter> d(mj_makeData(m.get()));
   mj_forward(m.get(), d.get());
-  const long nsettle = std::lround(0.5 / dt_s), nsteps = std::lround(5.0 / dt_s);
-  const long steady_from = std::lround(1.0 / dt_s);
+  const long nsettle = std::lround(kPeerSettle_s / dt_s);
+  const long nsteps = std::lround(kPeerRun_s / dt_s);
+  const long steady_from = std::lround(kPeerSteadyFrom_s / dt_s);
   for (long i = 0; i < nsettle; ++i) mj_step(m.get(), d.get());
   for (int i = 0; i < 4; ++i) d->ctrl[i] = motion.wheel_rad_s[static_cast<std::size_t>(i)];
   double yaw_prev = YawOf(d->qpos + 3);
@@ -158,7 +157,7 @@ PeerMeasurement MeasureMujoco(const PeerMotion& motion, const MujocoPeerOptions&
       throw std::runtime_error(fmt::format("mujoco peer: {}: state is not finite", motion.name));
     }
   }
-  PeerMeasurement out = window.Finish(d->qpos[0], d->qpos[1], yaw, 4.0);
+  PeerMeasurement out = window.Finish(d->qpos[0], d->qpos[1], yaw, kPeerRun_s - kPeerSteadyFrom_s);
   out.steps_per_s = wall > 0 ? static_cast<double>(nsteps) / wall : 0;
   return out;
 }

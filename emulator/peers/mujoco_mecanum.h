@@ -31,7 +31,4 @@ std::string MujocoMecanumModel(const MujocoPeerOptions& options);
 /// MuJoCo cannot load the model (its message) or the state turns non-finite.
 PeerMeasurement MeasureMujoco(const PeerMotion& motion, const MujocoPeerOptions& options);
 
-/// MuJoCo's version string ("2.2.2").
-std::string MujocoVersion();
-
 }  // namespace wheelhil::emulator::peers

@@ -15,7 +15,7 @@ constexpr double kPi = std::numbers::pi;
 // The contact of roller `roller` at phase phi (wheel angle past its centre's lowest).
 RollerContact ContactAtPhase(const RollerGeometry& g, int roller, double phi) noexcept {
   const int row = roller / g.count;
-  const double s = std::sin(g.roller_angle_rad), c = std::cos(g.roller_angle_rad);
+  const double s = g.sin_angle, c = g.cos_angle;
   const double a = g.roller_radius_m, b = g.half_length_m;
   const double sp = std::sin(phi), cp = std::cos(phi);
   const double uz2 = s * s * sp * sp;  // squared vertical part of the tilted roller axis
@@ -50,6 +50,8 @@ RollerGeometry MakeRollerGeometry(const WheelSpec& w, const std::string& where) 
   g.rows = r.rows;
   g.wheel_radius_m = w.radius_m;
   g.roller_angle_rad = w.roller_angle_rad;
+  g.sin_angle = std::sin(w.roller_angle_rad);
+  g.cos_angle = std::cos(w.roller_angle_rad);
   g.half_length_m = 0.5 * r.length_m;
   g.row_offset_m = r.row_offset_m;
   if (r.count < 3 || r.count > 64) Fail(where, "count", r.count, "must be in [3, 64]");
@@ -60,7 +62,7 @@ RollerGeometry MakeRollerGeometry(const WheelSpec& w, const std::string& where) 
   if (!(std::isfinite(r.row_offset_m) && r.row_offset_m >= 0 && r.row_offset_m < w.radius_m)) {
     Fail(where, "row_offset_m", r.row_offset_m, "must be in [0, wheel radius)");
   }
-  const double s = std::sin(w.roller_angle_rad), c = std::cos(w.roller_angle_rad);
+  const double s = g.sin_angle, c = g.cos_angle;
   const double R = w.radius_m, b = g.half_length_m;
   if (r.radius_m > 0) {
     g.roller_radius_m = r.radius_m;

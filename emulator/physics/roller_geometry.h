@@ -38,6 +38,7 @@ struct RollerGeometry {
   double half_length_m = 0;    ///< b
   double centre_radius_m = 0;  ///< distance of a roller centre from the axle
   double row_offset_m = 0;
+  double sin_angle = 1, cos_angle = 0;  ///< of roller_angle_rad, once rather than per contact
   bool nearest_is_lowest = true;  ///< h falls with |phase| over 1.5 pitches: one roller per row
 };
 
