@@ -151,9 +151,12 @@ TEST(PlatformFile, DiscreteRollersMergeFromTheDefaultsAndFailWithTheField) {
   EXPECT_EQ(mixed.vehicle.wheels[1].rollers.count, 10);
   EXPECT_EQ(mixed.vehicle.wheels[2].rollers.count, 0);
   EXPECT_EQ(mixed.vehicle.wheels[3].rollers.count, 0);
-  // The shipped paper platforms keep the continuous limit.
+  // Paper 001's followers are double omni wheels (2 x 5 rollers); its Mecanum drive wheels keep
+  // the continuous limit.
   for (const physics::WheelSpec& w : LoadShipped("mecanum4_omni3").vehicle.wheels) {
-    EXPECT_EQ(w.rollers.count, 0) << w.name;
+    const bool follower = w.kind == physics::WheelKind::kOmni;
+    EXPECT_EQ(w.rollers.count, follower ? 5 : 0) << w.name;
+    EXPECT_EQ(w.rollers.rows, follower ? 2 : 1) << w.name;
   }
   const std::string path = SourcePath("scenarios/platforms/mecanum4_mujoco_peer.yaml");
   auto load = [&](const char* over) { (void)LoadPlatformFile(path, YAML::Load(over)); };

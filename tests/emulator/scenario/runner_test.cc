@@ -121,14 +121,14 @@ TEST_F(ScenarioRun, AnotherSeedChangesTheFloor) {
   const RunResult r = RunScenario(s, o);
   ASSERT_EQ(r.failure, "");
   EXPECT_EQ(r.report["seed"].get<int>(), 2);
-  // Stratified placement: the two 1 m wet zones lie one in each 4.5 m half of [0.5, 9.5] m.
+  // Stratified placement: the two 0.7 m wet zones lie one in each 4.5 m half of [0.5, 9.5] m.
   std::istringstream events(Slurp(dir_ / "s2" / "events.jsonl"));
   std::vector<double> x;
   for (std::string line; std::getline(events, line);) {
     const auto e = nlohmann::json::parse(line);
     if (e["event"] == "patch") {
       x.push_back(e["x_m"].get<double>());
-      EXPECT_DOUBLE_EQ(e["length_m"].get<double>(), 1.0);
+      EXPECT_DOUBLE_EQ(e["length_m"].get<double>(), 0.7);
     }
   }
   ASSERT_EQ(x.size(), 2u);
