@@ -3,8 +3,9 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
-#include <sstream>
+#include <map>
 #include <stdexcept>
 
 namespace wheelhil::bus::yaml {
@@ -48,19 +49,74 @@ void FieldReader::FailYaml(const YAML::Exception& e) const {
 }
 
 std::string FieldReader::ReadFile() const {
+  std::error_code ec;
+  const auto status = std::filesystem::status(file_, ec);
+  if (ec || !std::filesystem::exists(status)) {
+    Fail(YAML::Mark::null_mark(), "(file)", "cannot be read (no such file)");
+  }
+  if (std::filesystem::is_directory(status)) {
+    Fail(YAML::Mark::null_mark(), "(file)", "is a directory, not a YAML file");
+  }
+  if (!std::filesystem::is_regular_file(status)) {
+    Fail(YAML::Mark::null_mark(), "(file)", "is not a regular file (a device or a pipe?)");
+  }
   std::ifstream in(file_, std::ios::binary);
   if (!in) Fail(YAML::Mark::null_mark(), "(file)", "cannot be read");
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
+  // Counted while read, so a file that grows meanwhile is caught too.
+  std::string text;
+  char chunk[1 << 16];
+  while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
+    text.append(chunk, static_cast<std::size_t>(in.gcount()));
+    if (text.size() > kMaxFileBytes) {
+      Fail(YAML::Mark::null_mark(), "(file)",
+           fmt::format("is larger than {} MiB; a wheelhil input file is a few KiB",
+                       kMaxFileBytes >> 20));
+    }
+  }
+  if (in.bad()) Fail(YAML::Mark::null_mark(), "(file)", "cannot be read");
+  return text;
+}
+
+void FieldReader::CheckNoDuplicateKeys(const YAML::Node& node, const std::string& field,
+                                       int depth, std::size_t& nodes) const {
+  if (depth > kMaxDepth) Fail(node, field.empty() ? "(document)" : field, "nested too deeply");
+  // Aliases share nodes, so a small file can expand to billions of them ("billion laughs").
+  if (++nodes > kMaxNodes) {
+    Fail(node, field.empty() ? "(document)" : field,
+         fmt::format("the document expands to more than {} nodes (aliases?)", kMaxNodes));
+  }
+  if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      CheckNoDuplicateKeys(node[i], fmt::format("{}[{}]", field, i), depth + 1, nodes);
+    }
+  } else if (node.IsMap()) {
+    std::map<std::string, YAML::Mark> seen;
+    for (const auto& kv : node) {
+      if (kv.first.IsScalar()) {
+        const std::string& key = kv.first.Scalar();
+        const auto [it, inserted] = seen.emplace(key, kv.first.Mark());
+        if (!inserted) {
+          Fail(kv.first, Join(field, key),
+               fmt::format("duplicate key (first at line {})", it->second.line + 1));
+        }
+        CheckNoDuplicateKeys(kv.second, Join(field, key), depth + 1, nodes);
+      } else {
+        CheckNoDuplicateKeys(kv.second, field, depth + 1, nodes);
+      }
+    }
+  }
 }
 
 YAML::Node FieldReader::Parse(const std::string& text) const {
+  YAML::Node root;
   try {
-    return YAML::Load(text);
+    root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     Fail(e.mark, "(document)", "YAML syntax error: " + e.msg);
   }
+  std::size_t nodes = 0;
+  CheckNoDuplicateKeys(root, "", 0, nodes);
+  return root;
 }
 
 YAML::Node FieldReader::Get(const YAML::Node& parent, const std::string& key) {
@@ -115,6 +171,13 @@ long long FieldReader::ToInteger(const YAML::Node& node, std::string_view field,
   }
   if (v < min || v > max) Fail(node, field, fmt::format("({}) must be in [{}, {}]", v, min, max));
   return v;
+}
+
+void FieldReader::CheckCount(const YAML::Node& list, std::string_view field,
+                             std::size_t max) const {
+  if (list.IsDefined() && list.size() > max) {
+    Fail(list, field, fmt::format("{} entries; at most {} are supported", list.size(), max));
+  }
 }
 
 bool FieldReader::ToBool(const YAML::Node& node, std::string_view field) const {

@@ -15,6 +15,7 @@
 /// the same std::invalid_argument, so a malformed file is an input error, never an abort.
 /// Thread-compatible.
 
+#include <cstddef>
 #include <optional>
 #include <set>
 #include <string>
@@ -49,10 +50,20 @@ class FieldReader {
   [[noreturn]] void FailKey(const YAML::Node& parent, const std::string& key,
                             std::string_view field, std::string_view problem) const;
 
-  /// The whole text of file(); fails "file:0:0: (file): cannot be read".
+  /// Largest input file read (a scenario is a few KiB; /dev/zero must not fill the memory).
+  static constexpr std::size_t kMaxFileBytes = std::size_t{16} << 20;
+  /// Deepest nesting of mappings and sequences accepted.
+  static constexpr int kMaxDepth = 64;
+  /// Most nodes a document may hold once its aliases are expanded.
+  static constexpr std::size_t kMaxNodes = 1'000'000;
+
+  /// The whole text of file(); fails "file:0:0: (file): ..." when it is missing, a directory, not
+  /// a regular file (/dev/zero, a pipe), unreadable or larger than kMaxFileBytes.
   std::string ReadFile() const;
   /// The document in `text`; a syntax error fails "(document): YAML syntax error: ..." at its
-  /// position.
+  /// position, a mapping that repeats a key fails "field.key: duplicate key (first at line N)"
+  /// at the repetition (yaml-cpp would keep the first silently), nesting deeper than kMaxDepth
+  /// fails "nested too deeply", more than kMaxNodes nodes after alias expansion fails too.
   YAML::Node Parse(const std::string& text) const;
 
   /// Runs `read` and returns what it returns. A yaml-cpp exception escaping it fails at the
@@ -85,6 +96,8 @@ class FieldReader {
   /// An integer (decimal, 0x hexadecimal or 0o octal, as yaml-cpp reads them) in [min, max].
   long long ToInteger(const YAML::Node& node, std::string_view field, long long min,
                       long long max) const;
+  /// Fails "field: N entries; at most `max` are supported" unless `list` has at most `max`.
+  void CheckCount(const YAML::Node& list, std::string_view field, std::size_t max) const;
   /// true/false (and the other spellings yaml-cpp reads as booleans: yes/no, on/off).
   bool ToBool(const YAML::Node& node, std::string_view field) const;
   /// Any scalar, as written.
@@ -104,6 +117,8 @@ class FieldReader {
 
  private:
   [[noreturn]] void FailYaml(const YAML::Exception& e) const;
+  void CheckNoDuplicateKeys(const YAML::Node& node, const std::string& field, int depth,
+                            std::size_t& nodes) const;
   YAML::Node Required(const YAML::Node& parent, const std::string& key,
                       std::string_view field) const;
 

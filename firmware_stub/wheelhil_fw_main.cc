@@ -80,7 +80,12 @@ int main(int argc, char** argv) {
   app.add_option("--clock-rate", g_clock_rate,
                  "Test aid: the firmware's host clock runs this many times faster than real "
                  "time (a slow emulator seen from the firmware; default 1)")
-      ->check(CLI::Range(0.001, 1000.0));
+      ->check(CLI::Range(0.001, 1000.0))
+      // CLI::Range lets NaN through (every comparison with it is false).
+      ->check([](const std::string& v) {
+        return std::isfinite(std::strtod(v.c_str(), nullptr)) ? std::string()
+                                                              : "must be a finite number";
+      });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

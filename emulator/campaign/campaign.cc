@@ -9,6 +9,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "bus/yaml_fields.h"
 #include "emulator/campaign/junit_writer.h"
 #include "emulator/campaign/run_pool.h"
 #include "emulator/campaign/scenario_writer.h"
@@ -52,15 +53,43 @@ void EvaluateRun(const CampaignSpec& spec, RunRecord& r, const RunReport* report
   r.failure = failure;
 }
 
+namespace {
+
+// A mistake in the base scenario or in what the parameters write into it would otherwise
+// fail every run, one child process at a time. A first run that fails is left in out_dir for
+// the error's line to be read.
+void CheckBeforeStart(const CampaignSpec& spec, const std::vector<RunSpec>& all,
+                      const fs::path& out_dir,
+                      const std::function<void(const fs::path&)>& check_scenario) {
+  try {
+    check_scenario(spec.base_scenario);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(fmt::format("{}: base: {}", spec.file, e.what()));
+  }
+  if (all.empty()) return;
+  const fs::path first = out_dir / "first-run-check.yaml";
+  WriteRunScenario(spec, all.front(), first);
+  try {
+    check_scenario(first);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(
+        fmt::format("{}: the first run (parameters {}) is not a valid scenario: {}", spec.file,
+                    all.front().ParamsJson(spec).dump(), e.what()));
+  }
+  fs::remove(first);
+}
+
+}  // namespace
+
 CampaignOutcome RunCampaign(const CampaignSpec& spec, const CampaignOptions& options) {
   CheckParameterPaths(spec);
   const fs::path out_dir =
       fs::absolute(options.out_dir.empty() ? fs::path("campaign-" + spec.name) : options.out_dir);
   const fs::path db = options.db.empty() ? out_dir / "results.sqlite" : options.db;
   fs::create_directories(out_dir);
-  ResultsStore store(db, spec.name, spec.fingerprint);
-
   const auto all = ExpandRuns(spec);
+  if (options.check_scenario) CheckBeforeStart(spec, all, out_dir, options.check_scenario);
+  ResultsStore store(db, spec.name, spec.fingerprint);
   const auto mine = SelectShard(all, options.shard);
   const auto stored = store.StoredKeys();
   CampaignOutcome outcome;
@@ -180,7 +209,8 @@ SmokeOutcome RunSmoke(const SmokeOptions& options) {
     job.prepare = [scenario, firmware](const fs::path& run_dir) -> fs::path {
       if (firmware.empty()) return scenario;
       // The firmware under test replaces the scenario's; relative paths become absolute.
-      YAML::Node root = YAML::LoadFile(scenario.string());
+      const bus::yaml::FieldReader reader(scenario.string());
+      YAML::Node root = reader.Parse(reader.ReadFile());
       std::function<void(YAML::Node)> absolutize = [&](YAML::Node n) {
         if (n.IsMap()) {
           for (auto kv : n) absolutize(kv.second);

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,10 @@ struct CampaignOptions {
   std::filesystem::path junit;  ///< empty: no JUnit file
   bool progress = true;
   bool html = true;
+  /// Loads a scenario file and throws std::invalid_argument ("file:line:col: field: problem")
+  /// when it is not valid. Given, the base scenario and the first expanded run are checked
+  /// before any run starts; unset, each run finds its own errors.
+  std::function<void(const std::filesystem::path&)> check_scenario;
 };
 
 struct CampaignOutcome {

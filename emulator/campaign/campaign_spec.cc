@@ -380,6 +380,20 @@ CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
     spec.parameters.push_back(std::move(ps));
   }
 
+  // The run count, refused before anything is expanded or started.
+  std::size_t points = spec.sampling == CampaignSpec::Sampling::kGrid ? 1 : spec.runs;
+  for (const auto& p : spec.parameters) {
+    if (spec.sampling != CampaignSpec::Sampling::kGrid) break;
+    const std::size_t n = p.kind == ParameterSpec::Kind::kList ? p.values.size() : p.steps;
+    if (points > CampaignSpec::kMaxRuns / n) points = CampaignSpec::kMaxRuns + 1;
+    else points *= n;
+  }
+  if (points > CampaignSpec::kMaxRuns / spec.repeats) {
+    L.Fail(root["repeats"] ? root["repeats"] : params, root["repeats"] ? "repeats" : "parameters",
+           fmt::format("more than {} runs (points x repeats); split the campaign",
+                       CampaignSpec::kMaxRuns));
+  }
+
   if (const auto pass = root["pass"]) {
     L.CheckKeys(pass, "pass", {"verdict", "run", "campaign"});
     if (pass["verdict"]) spec.require_verdict_pass = L.ToBool(pass["verdict"], "pass.verdict");
@@ -476,9 +490,10 @@ std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec) {
       for (const auto& p : spec.parameters) {
         grids.push_back(p.GridValues());
         total *= grids.back().size();
-        if (total > 10'000'000) {
-          throw std::invalid_argument(fmt::format(
-              "{}:{}:{}: parameters: grid of more than 1e7 points", spec.file, p.line, p.column));
+        if (total > CampaignSpec::kMaxRuns) {
+          throw std::invalid_argument(fmt::format("{}:{}:{}: parameters: grid of more than {} points",
+                                                  spec.file, p.line, p.column,
+                                                  CampaignSpec::kMaxRuns));
         }
       }
       // First parameter varies slowest (row-major, like nested loops in file order).

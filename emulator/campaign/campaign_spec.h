@@ -73,6 +73,8 @@ struct Override {
 
 struct CampaignSpec {
   enum class Sampling { kGrid, kRandom, kLatinHypercube };
+  /// Most runs a campaign may expand to (points x repeats), checked when it is loaded.
+  static constexpr std::size_t kMaxRuns = 1'000'000;
   std::string file;                     ///< campaign file path as given
   std::string name;                     ///< `campaign:` (default: file stem)
   std::filesystem::path base_scenario;  ///< absolute

@@ -31,6 +31,7 @@ std::vector<Segment> SplitPath(const std::string& path, const std::string& where
       if (num.empty() || num.find_first_not_of("0123456789") != std::string::npos) {
         fail(fmt::format("index '{}' is not a number", num));
       }
+      if (num.size() > 6) fail(fmt::format("index '{}' is past any list of a scenario", num));
       out.emplace_back(static_cast<std::size_t>(std::stoul(num)));
       i = close + 1;
       if (i < path.size() && path[i] == '.') ++i;

@@ -11,6 +11,7 @@
 
 #include "emulator/bench/bench_report.h"
 #include "emulator/cli/bus_commands.h"
+#include "emulator/cli/finite_number.h"
 
 #ifndef WHEELHIL_SOURCE_DIR
 #define WHEELHIL_SOURCE_DIR "."
@@ -70,6 +71,7 @@ BenchCommand::BenchCommand(CLI::App& app) : app_(&app) {
       ->add_option("--spin-us", options_.spin_us,
                    "Real-time pacer: sleep to the deadline minus this margin, then spin (µs; "
                    "0: clock_nanosleep only)")
+      ->check(FiniteNumber())
       ->check(CLI::Range(0.0, 1000.0));
   bench_->add_option("--fifo-priority", options_.fifo_priority, "SCHED_FIFO priority (1..99)")
       ->check(CLI::Range(1, 99));

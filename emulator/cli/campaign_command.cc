@@ -9,6 +9,8 @@
 
 #include "emulator/campaign/campaign.h"
 #include "emulator/campaign/run_pool.h"
+#include "emulator/cli/finite_number.h"
+#include "emulator/scenario/scenario.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -60,7 +62,9 @@ CampaignCommand::CampaignCommand(CLI::App& app) {
                      "Folder of smoke scenarios or a list file (default scenarios/smoke)");
   smoke_->add_option("--out", smoke_out_, "Output folder for the run artefacts");
   smoke_->add_option("-j,--jobs", smoke_jobs_, "Parallel runs")->check(CLI::Range(1, 1024));
-  smoke_->add_option("--timeout", smoke_timeout_s_, "Wall-clock limit per run, s");
+  smoke_->add_option("--timeout", smoke_timeout_s_, "Wall-clock limit per run, s")
+      ->check(FiniteNumber())
+      ->check(CLI::Range(0.1, 86400.0));
   smoke_->add_option("--runner", smoke_runner_, "Program used instead of this wheelhil's `run`");
 }
 
@@ -87,6 +91,13 @@ int CampaignCommand::RunCampaign() {
     o.junit = junit_;
     o.progress = !quiet_;
     o.html = !no_html_;
+    // Checked with wheelhil's own loader only when wheelhil's `run` is the runner: another
+    // runner may read other keys.
+    if (runner_.empty()) {
+      o.check_scenario = [](const fs::path& file) {
+        (void)scenario::LoadScenarioFile(file.string());
+      };
+    }
     const auto outcome = cmp::RunCampaign(spec, o);
     std::cout << outcome.text << std::flush;
     if (o.shard.n > 1) return outcome.summary.complete ? 0 : 1;

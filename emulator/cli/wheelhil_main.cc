@@ -4,6 +4,11 @@
 
 #include <fmt/format.h>
 #include <CLI/CLI.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include <exception>
+#include <new>
+#include <stdexcept>
 
 #include "emulator/bullet_precision.h"
 #include "emulator/cli/bench_command.h"
@@ -40,9 +45,31 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
   if (version->parsed()) return RunVersion();
-  if (auto code = bus_commands.Run()) return *code;
-  if (auto code = bench_command.Run()) return *code;
-  if (auto code = campaign_command.Run()) return *code;
-  if (auto code = run_command.Run()) return *code;
+  // The commands report their own errors; this is the boundary for what escapes them, so that
+  // no input ends in std::terminate. Input errors (the loaders' std::invalid_argument, which
+  // carry file:line:col, and yaml-cpp's own) exit 2; anything else is a fault of ours.
+  try {
+    if (auto code = bus_commands.Run()) return *code;
+    if (auto code = bench_command.Run()) return *code;
+    if (auto code = campaign_command.Run()) return *code;
+    if (auto code = run_command.Run()) return *code;
+  } catch (const std::invalid_argument& e) {
+    fmt::print(stderr, "wheelhil: {}\n", e.what());
+    return 2;
+  } catch (const YAML::Exception& e) {
+    if (e.mark.is_null()) {
+      fmt::print(stderr, "wheelhil: YAML error: {}\n", e.msg);
+    } else {
+      fmt::print(stderr, "wheelhil: YAML error at line {}, column {}: {}\n", e.mark.line + 1,
+                 e.mark.column + 1, e.msg);
+    }
+    return 2;
+  } catch (const std::bad_alloc&) {
+    fmt::print(stderr, "wheelhil: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "wheelhil: internal error: {}\n", e.what());
+    return 1;
+  }
   return 2;
 }

@@ -6,6 +6,8 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "bus/yaml_fields.h"
+
 namespace wheelhil::emulator::firmware {
 
 namespace {
@@ -28,12 +30,11 @@ void Merge(YAML::Node base, const YAML::Node& over) {
 std::string DerivedWheelhilFwConfig(const std::string& config_path,
                                     const std::string& overrides_yaml,
                                     const WheelhilFwRunSettings& run) {
-  YAML::Node cfg;
-  try {
-    cfg = YAML::LoadFile(config_path);
-    if (!overrides_yaml.empty()) Merge(cfg, YAML::Load(overrides_yaml));
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(fmt::format("{}: firmware config: {}", config_path, e.what()));
+  const bus::yaml::FieldReader reader(config_path);
+  YAML::Node cfg = reader.Parse(reader.ReadFile());
+  if (!overrides_yaml.empty()) {
+    const bus::yaml::FieldReader overrides("firmware.config_overrides");
+    Merge(cfg, overrides.Parse(overrides_yaml));
   }
   if (cfg["dbc_dir"] && cfg["dbc_dir"].IsScalar()) {
     const fs::path p(cfg["dbc_dir"].Scalar());

@@ -94,6 +94,15 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
   if (triangles.empty()) {
     throw std::invalid_argument(fmt::format("{}: mesh: contains no triangles", name));
   }
+  if (triangles.size() > kMaxTriangles) {
+    throw std::invalid_argument(fmt::format("{}: mesh: {} triangles; at most {} are supported",
+                                            name, triangles.size(), kMaxTriangles));
+  }
+  for (std::size_t k = 0; k < vertices_W.size(); ++k) {
+    if (!vertices_W[k].allFinite()) {
+      throw std::invalid_argument(fmt::format("{}: mesh: vertex {} is not finite", name, k));
+    }
+  }
   if (!world_) {
     config_ = std::make_unique<btDefaultCollisionConfiguration>();
     dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
@@ -132,14 +141,10 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
   const double w = std::max(x1 - x0, 1e-6), h = std::max(y1 - y0, 1e-6);
   double cell = std::sqrt(w * h / static_cast<double>(triangles.size()));
   cell = std::max({cell, w / 1024, h / 1024, 1e-4});
-  mesh.cell_m = cell;
-  mesh.grid_x0 = x0;
-  mesh.grid_y0 = y0;
-  mesh.nx = static_cast<int>(std::floor(w / cell)) + 1;
-  mesh.ny = static_cast<int>(std::floor(h / cell)) + 1;
-  const std::size_t ncell = static_cast<std::size_t>(mesh.nx) * static_cast<std::size_t>(mesh.ny);
-  std::vector<std::uint32_t> count(ncell + 1, 0);
-  auto for_cells = [&](const std::array<Eigen::Vector3d, 3>& tri, auto&& fn) {
+  struct CellRange {
+    int i0, i1, j0, j1;
+  };
+  auto cells_of = [&](const std::array<Eigen::Vector3d, 3>& tri) {
     double a0 = 1e300, b0 = 1e300, a1 = -1e300, b1 = -1e300;
     for (const auto& v : tri) {
       a0 = std::min(a0, v.x());
@@ -147,12 +152,34 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
       a1 = std::max(a1, v.x());
       b1 = std::max(b1, v.y());
     }
-    const int i0 = std::clamp(static_cast<int>(std::floor((a0 - x0) / cell)), 0, mesh.nx - 1);
-    const int i1 = std::clamp(static_cast<int>(std::floor((a1 - x0) / cell)), 0, mesh.nx - 1);
-    const int j0 = std::clamp(static_cast<int>(std::floor((b0 - y0) / cell)), 0, mesh.ny - 1);
-    const int j1 = std::clamp(static_cast<int>(std::floor((b1 - y0) / cell)), 0, mesh.ny - 1);
-    for (int j = j0; j <= j1; ++j) {
-      for (int i = i0; i <= i1; ++i) fn(static_cast<std::size_t>(j) * mesh.nx + i);
+    return CellRange{std::clamp(static_cast<int>(std::floor((a0 - x0) / cell)), 0, mesh.nx - 1),
+                     std::clamp(static_cast<int>(std::floor((a1 - x0) / cell)), 0, mesh.nx - 1),
+                     std::clamp(static_cast<int>(std::floor((b0 - y0) / cell)), 0, mesh.ny - 1),
+                     std::clamp(static_cast<int>(std::floor((b1 - y0) / cell)), 0, mesh.ny - 1)};
+  };
+  // Triangles much larger than a cell (a mesh of floor-spanning triangles) would list each one in
+  // millions of cells: coarsen the grid until the lists fit in kMaxGridEntries.
+  for (;;) {
+    mesh.nx = static_cast<int>(std::floor(w / cell)) + 1;
+    mesh.ny = static_cast<int>(std::floor(h / cell)) + 1;
+    std::uint64_t entries = 0;
+    for (const auto& tri : mesh.tris) {
+      const CellRange r = cells_of(tri);
+      entries +=
+          static_cast<std::uint64_t>(r.i1 - r.i0 + 1) * static_cast<std::uint64_t>(r.j1 - r.j0 + 1);
+    }
+    if (entries <= kMaxGridEntries || (mesh.nx == 1 && mesh.ny == 1)) break;
+    cell *= 2;
+  }
+  mesh.cell_m = cell;
+  mesh.grid_x0 = x0;
+  mesh.grid_y0 = y0;
+  const std::size_t ncell = static_cast<std::size_t>(mesh.nx) * static_cast<std::size_t>(mesh.ny);
+  std::vector<std::uint32_t> count(ncell + 1, 0);
+  auto for_cells = [&](const std::array<Eigen::Vector3d, 3>& tri, auto&& fn) {
+    const CellRange r = cells_of(tri);
+    for (int j = r.j0; j <= r.j1; ++j) {
+      for (int i = r.i0; i <= r.i1; ++i) fn(static_cast<std::size_t>(j) * mesh.nx + i);
     }
   };
   for (const auto& tri : mesh.tris) for_cells(tri, [&](std::size_t c) { ++count[c + 1]; });

@@ -8,6 +8,7 @@
 /// Raycast() is const and allocation-free; Terrain is thread-compatible.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -57,6 +58,13 @@ struct FrictionPatch {
 
 class Terrain {
  public:
+  /// Largest mesh accepted (all meshes together are not limited): a 4 M-triangle floor is
+  /// ~400 MB of collision data.
+  static constexpr std::size_t kMaxTriangles = 4'000'000;
+  /// Cap on the vertical-ray grid's triangle lists (4 bytes each); a mesh of triangles far larger
+  /// than its cells gets a coarser grid, not unbounded lists.
+  static constexpr std::uint64_t kMaxGridEntries = std::uint64_t{1} << 25;
+
   Terrain();
   ~Terrain();
   Terrain(const Terrain&) = delete;
@@ -68,7 +76,9 @@ class Terrain {
   /// Loads a mesh with assimp. Throws std::invalid_argument naming the file and the problem
   /// (missing, unreadable, no triangles, bad option).
   void AddMesh(const std::string& path, const MeshOptions& options);
-  /// Adds an already triangulated mesh (vertices in W, triangles as index triples).
+  /// Adds an already triangulated mesh (vertices in W, triangles as index triples). Throws
+  /// std::invalid_argument for no or more than kMaxTriangles triangles, an index out of range or
+  /// a vertex that is not finite.
   void AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
                     const std::vector<std::array<int, 3>>& triangles, const Friction& friction,
                     const std::string& name = "triangles");

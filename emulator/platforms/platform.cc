@@ -394,7 +394,11 @@ Platform ReadPlatform(const Reader& rd, const YAML::Node& root) {
   for (const auto& kv : kin) {
     const std::string key = rd.ToString(kv.first, "kinematics");
     if (key == "type") continue;
-    p.parameters.emplace_back(key, rd.ToNumber(kv.second, "kinematics." + key));
+    // Every length of the layout divides something in the kinematics (a zero track width
+    // turns a heading into inf), so lengths are positive and of robot size.
+    const bool length = key.size() > 2 && key.compare(key.size() - 2, 2, "_m") == 0;
+    p.parameters.emplace_back(key, length ? rd.ToNumber(kv.second, "kinematics." + key, 1e-4, 100.0)
+                                          : rd.ToNumber(kv.second, "kinematics." + key));
   }
   const std::size_t expected_drive = p.kinematics == KinematicsKind::kDiffDrive  ? 2
                                      : p.kinematics == KinematicsKind::kMecanum4 ? 4

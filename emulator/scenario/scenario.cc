@@ -31,6 +31,7 @@ std::vector<Eigen::Vector2d> ReadPolygon(const Reader& r, const YAML::Node& pare
   if (!n.IsSequence() || n.size() < 3) {
     r.FailKey(parent, key, field, "must be a list of >= 3 [x, y] points");
   }
+  r.CheckCount(n, field, ScenarioLimits::kPolygonPoints);
   std::vector<Eigen::Vector2d> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node p = n[i];
@@ -48,6 +49,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
   if (n["friction"]) t.friction = ReadFriction(r, n["friction"], "terrain.friction", Friction{});
   if (const auto m = n["meshes"]) {
     if (!m.IsSequence()) r.Fail(m, "terrain.meshes", "must be a list of files");
+    r.CheckCount(m, "terrain.meshes", ScenarioLimits::kMeshes);
     for (std::size_t i = 0; i < m.size(); ++i) {
       const std::string p = r.Path(r.ToString(m[i], fmt::format("terrain.meshes[{}]", i)));
       if (!fs::exists(p)) r.Fail(m[i], fmt::format("terrain.meshes[{}]", i), p + " not found");
@@ -56,6 +58,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
   }
   if (const auto ps = n["patches"]) {
     if (!ps.IsSequence()) r.Fail(ps, "terrain.patches", "must be a list");
+    r.CheckCount(ps, "terrain.patches", ScenarioLimits::kPatches);
     for (std::size_t i = 0; i < ps.size(); ++i) {
       const std::string f = fmt::format("terrain.patches[{}]", i);
       r.CheckKeys(ps[i], f, {"name", "polygon_m", "mu_peak", "mu_slide"});
@@ -72,7 +75,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
                 {"count", "x_min_m", "x_max_m", "length_min_m", "length_max_m", "width_m",
                  "track_y_m", "mu_peak", "mu_slide", "placement"});
     auto& s = t.random_patches;
-    s.count = static_cast<int>(r.Number(rp, "count", f, 0, 1000, std::nullopt));
+    s.count = static_cast<int>(r.Integer(rp, "count", f, 0, 1000, std::nullopt));
     s.x_min_m = r.Number(rp, "x_min_m", f, -1e4, 1e4, std::nullopt);
     s.x_max_m = r.Number(rp, "x_max_m", f, s.x_min_m, 1e4, std::nullopt);
     s.length_min_m = r.Number(rp, "length_min_m", f, 1e-3, 100, 0.05);
@@ -81,6 +84,7 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     const YAML::Node ty = Reader::Get(rp, "track_y_m");
     if (!ty.IsDefined()) r.Fail(rp, f + ".track_y_m", "is required (a list of y)");
     if (!ty.IsSequence() || ty.size() == 0) r.Fail(ty, f + ".track_y_m", "must be a list of y");
+    r.CheckCount(ty, f + ".track_y_m", ScenarioLimits::kRandomPatchTracks);
     for (std::size_t i = 0; i < ty.size(); ++i) {
       s.track_y_m.push_back(r.ToNumber(ty[i], fmt::format("{}.track_y_m[{}]", f, i)));
     }
@@ -141,6 +145,7 @@ void AppendWaypoints(const Reader& r, const YAML::Node& s, const std::string& f,
   if (!pts.IsSequence() || pts.size() == 0) {
     r.FailKey(s, "points_m", f + ".points_m", "must be a non-empty list of [x, y]");
   }
+  r.CheckCount(pts, f + ".points_m", ScenarioLimits::kWaypoints);
   Eigen::Vector3d pose;
   if (!NominalPoseAfter(out, &pose)) {
     r.Fail(s, f, "cannot follow a `wheels` segment (its path is not known in advance)");
@@ -198,6 +203,7 @@ std::vector<MotionSegment> ReadMotion(const Reader& r, const YAML::Node& root,
     r.FailKey(root, "motion", "motion",
               "must be a non-empty list of segments, or {source: firmware}");
   }
+  r.CheckCount(n, "motion", ScenarioLimits::kMotionSegments);
   std::vector<MotionSegment> out;
   for (std::size_t i = 0; i < n.size(); ++i) {
     const YAML::Node s = n[i];
@@ -326,6 +332,9 @@ FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
   if (!cfg.empty()) {
     fw.config = r.Path(cfg);
     if (!fs::exists(fw.config)) r.Fail(n["config"], "firmware.config", fw.config + " not found");
+    if (!fs::is_regular_file(fw.config)) {
+      r.Fail(n["config"], "firmware.config", fw.config + " is not a regular file");
+    }
   }
   if (const auto o = n["overrides"]) {
     if (!o.IsMap()) r.Fail(o, "firmware.overrides", "must be a mapping");
@@ -393,6 +402,7 @@ std::vector<Expectation> ReadExpectations(const Reader& r, const YAML::Node& n) 
   std::vector<Expectation> out;
   if (!n.IsDefined()) return out;
   if (!n.IsSequence()) r.Fail(n, "expectations", "must be a list");
+  r.CheckCount(n, "expectations", ScenarioLimits::kExpectations);
   for (std::size_t i = 0; i < n.size(); ++i) {
     const std::string f = fmt::format("expectations[{}]", i);
     r.CheckKeys(n[i], f, {"metric", "<", "<=", ">", ">="});
@@ -405,11 +415,12 @@ std::vector<Expectation> ReadExpectations(const Reader& r, const YAML::Node& n) 
       if (!v.IsDefined()) continue;
       ++ops;
       e.op = op;
+      if (!v.IsScalar()) r.Fail(v, Reader::Join(f, op), "must be a number or a metric name");
       double x = 0;
-      try {
-        x = v.as<double>();
+      if (YAML::convert<double>::decode(v, x)) {
+        if (!std::isfinite(x)) r.Fail(v, Reader::Join(f, op), "must be finite");
         e.value = x;
-      } catch (const YAML::Exception&) {
+      } else {
         e.other_metric = v.Scalar();
       }
     }
@@ -497,7 +508,7 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);
   s.description = r.String(root, "description", "", std::string());
-  s.seed = static_cast<std::uint64_t>(r.Number(root, "seed", "", 0, 9e15, 1.0));
+  s.seed = static_cast<std::uint64_t>(r.Integer(root, "seed", "", 0, 9'000'000'000'000'000, 1));
 
   const YAML::Node p = Reader::Get(root, "platform");
   if (!p.IsDefined()) r.Fail(root, "platform", "is required");

@@ -7,6 +7,7 @@
 /// std::invalid_argument reading "file:line:column: field: problem" (unknown keys included, so
 /// typos are caught). Value types; thread-compatible.
 
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -29,6 +30,18 @@
 #include "emulator/scoring/output_binding.h"
 
 namespace wheelhil::emulator::scenario {
+
+/// The most entries each list of a scenario may have. Far above any real scenario; they keep a
+/// generated or corrupted file from running for minutes before it fails.
+struct ScenarioLimits {
+  static constexpr std::size_t kMeshes = 64;
+  static constexpr std::size_t kPatches = 10'000;
+  static constexpr std::size_t kPolygonPoints = 1'000;
+  static constexpr std::size_t kRandomPatchTracks = 64;
+  static constexpr std::size_t kMotionSegments = 100'000;
+  static constexpr std::size_t kWaypoints = 100'000;
+  static constexpr std::size_t kExpectations = 10'000;
+};
 
 /// One piece of the commanded motion, in the body frame B (x forward, y left, z up).
 struct MotionSegment {

@@ -158,12 +158,8 @@ OutputsSpec ReadMapping(const FieldReader& r, const YAML::Node& n, const std::st
     r.FailKey(n, "streams", sf, "must map stream names to {kind, message, ...}");
   }
   for (auto it = streams.begin(); it != streams.end(); ++it) {
+    // A repeated stream name is a duplicate key, refused when the file is parsed.
     o.streams.push_back(ReadStream(r, it->first, it->second, sf));
-    for (std::size_t i = 0; i + 1 < o.streams.size(); ++i) {
-      if (o.streams[i].name == o.streams.back().name) {
-        r.Fail(it->first, o.streams.back().field, "is named twice");
-      }
-    }
   }
   return o;
 }

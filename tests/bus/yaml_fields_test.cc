@@ -6,8 +6,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <stdexcept>
 #include <string>
+
+#include <fmt/format.h>
 
 namespace wheelhil::bus::yaml {
 namespace {
@@ -159,6 +163,59 @@ TEST(FieldReader, ReadFileNamesAFileThatCannotBeRead) {
   EXPECT_THAT([] { FieldReader("/nonexistent/x.yaml").ReadFile(); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("/nonexistent/x.yaml:0:0: (file): cannot be read")));
+}
+
+TEST(FieldReader, ReadFileRefusesWhatIsNotASmallRegularFile) {
+  EXPECT_EQ(MessageOf([] { FieldReader("/dev/zero").ReadFile(); }),
+            "/dev/zero:0:0: (file): is not a regular file (a device or a pipe?)");
+  EXPECT_EQ(MessageOf([] { FieldReader("/tmp").ReadFile(); }),
+            "/tmp:0:0: (file): is a directory, not a YAML file");
+  const std::string big = ::testing::TempDir() + "/yaml_fields_big.yaml";
+  {
+    std::ofstream out(big, std::ios::binary);
+    const std::string line(1023, '#');
+    for (std::size_t i = 0; i <= FieldReader::kMaxFileBytes / 1024; ++i) out << line << '\n';
+  }
+  EXPECT_EQ(MessageOf([&] { FieldReader(big).ReadFile(); }),
+            big + ":0:0: (file): is larger than 16 MiB; a wheelhil input file is a few KiB");
+  std::filesystem::remove(big);
+}
+
+TEST(FieldReader, ParseRefusesDuplicateKeysAtTheRepetition) {
+  const FieldReader r("d.yaml");
+  EXPECT_EQ(MessageOf([&] { r.Parse("a: 1\nb: 2\na: 3\n"); }),
+            "d.yaml:3:1: a: duplicate key (first at line 1)");
+  EXPECT_EQ(MessageOf([&] { r.Parse("s:\n  - {x: 1, y: 2}\n  - {x: 1, x: 2}\n"); }),
+            "d.yaml:3:12: s[1].x: duplicate key (first at line 3)");
+  // The same key in different mappings is not a repetition.
+  EXPECT_NO_THROW(r.Parse("a: {x: 1}\nb: {x: 1}\n"));
+}
+
+TEST(FieldReader, ParseBoundsNestingAndAliasExpansion) {
+  const FieldReader r("n.yaml");
+  std::string deep = "x: " + std::string(FieldReader::kMaxDepth + 1, '[') +
+                     std::string(FieldReader::kMaxDepth + 1, ']') + "\n";
+  EXPECT_THAT(MessageOf([&] { r.Parse(deep); }), HasSubstr("]: nested too deeply"));
+  deep = "x: " + std::string(FieldReader::kMaxDepth - 1, '[') +
+         std::string(FieldReader::kMaxDepth - 1, ']') + "\n";
+  EXPECT_NO_THROW(r.Parse(deep));
+  // Ten lists of ten aliases of the one before: 10^7 nodes from 9 lines.
+  std::string bomb = "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n";
+  for (int i = 1; i < 7; ++i) {
+    bomb += fmt::format("a{0}: &a{0} [", i);
+    for (int k = 0; k < 10; ++k) bomb += fmt::format("{}*a{}", k ? ", " : "", i - 1);
+    bomb += "]\n";
+  }
+  EXPECT_THAT(MessageOf([&] { r.Parse(bomb); }),
+              HasSubstr("the document expands to more than 1000000 nodes (aliases?)"));
+}
+
+TEST(FieldReader, CheckCountNamesTheCountAndTheLimit) {
+  const FieldReader r("c.yaml");
+  const YAML::Node root = r.Parse("l: [1, 2, 3]\n");
+  EXPECT_NO_THROW(r.CheckCount(root["l"], "l", 3));
+  EXPECT_EQ(MessageOf([&] { r.CheckCount(root["l"], "l", 2); }),
+            "c.yaml:1:4: l: 3 entries; at most 2 are supported");
 }
 
 TEST(FieldReader, GuardTurnsYamlCppExceptionsIntoLocatedInputErrors) {

@@ -3,6 +3,7 @@
 
 #include "emulator/physics/terrain.h"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -198,6 +199,46 @@ TEST(TerrainMesh, ErrorsNameFileAndField) {
         t.AddPlane(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero(), Friction{0.5, 0.9});
       },
       ThrowsMessage<std::invalid_argument>(HasSubstr("mu_slide")));
+}
+
+// 70 000 triangles that each span the whole floor would list every triangle in each of ~10^6 grid
+// cells (7 * 10^10 entries, past uint32 counts): the grid coarsens instead, and rays still find
+// the highest of the stacked floors.
+TEST(TerrainMesh, FloorSpanningTrianglesCoarsenTheGrid) {
+  std::vector<Eigen::Vector3d> v;
+  std::vector<std::array<int, 3>> tris;
+  constexpr int kFloors = 35'000;
+  for (int k = 0; k < kFloors; ++k) {
+    const double z = 1e-6 * k;
+    const int b = static_cast<int>(v.size());
+    v.insert(v.end(), {{-5, -5, z}, {5, -5, z}, {5, 5, z}, {-5, 5, z}});
+    tris.push_back({b, b + 1, b + 2});
+    tris.push_back({b, b + 2, b + 3});
+  }
+  Terrain t;
+  t.AddTriangles(v, tris, Friction{});
+  SurfaceHit hit;
+  ASSERT_TRUE(t.Raycast(Eigen::Vector3d(1.3, -2.1, 1), -Eigen::Vector3d::UnitZ(), 2.0, &hit));
+  EXPECT_NEAR(hit.point_W.z(), 1e-6 * (kFloors - 1), 1e-9);
+  EXPECT_EQ(t.triangle_count(), tris.size());
+}
+
+TEST(TerrainMesh, NonFiniteVerticesAndTooManyTrianglesAreRefused) {
+  Terrain t;
+  const std::vector<Eigen::Vector3d> v{{0, 0, 0}, {1, 0, 0}, {0, std::nan(""), 0}};
+  EXPECT_THAT(
+      [&] {
+        t.AddTriangles(v, {{0, 1, 2}}, Friction{}, "floor.obj");
+      },
+      ThrowsMessage<std::invalid_argument>(
+          AllOf(HasSubstr("floor.obj"), HasSubstr("vertex 2 is not finite"))));
+  const std::vector<std::array<int, 3>> many(Terrain::kMaxTriangles + 1, {0, 1, 1});
+  EXPECT_THAT(
+      [&] {
+        t.AddTriangles({{0, 0, 0}, {1, 0, 0}}, many, Friction{}, "big.obj");
+      },
+      ThrowsMessage<std::invalid_argument>(
+          AllOf(HasSubstr("big.obj"), HasSubstr("at most 4000000"))));
 }
 
 }  // namespace

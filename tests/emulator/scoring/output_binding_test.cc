@@ -201,7 +201,7 @@ TEST_F(OutputBindingTest, ErrorsNameFileLineAndField) {
   throws("dbc: nowhere.dbc\nstreams: {}\n", file + ":1:6: firmware.outputs.dbc: ");
   throws(head + "  p: {kind: pose, message: EST_Pose, x: X, y: Y}\n"
                 "  p: {kind: pose, message: EST_Pose, x: X, y: Y}\n",
-         file + ":4:3: firmware.outputs.streams.p: is named twice");
+         file + ":4:3: streams.p: duplicate key (first at line 3)");
 }
 
 TEST_F(OutputBindingTest, ABindingFileIsReadRelativeToTheScenarioAndItsDbcRelativeToItself) {
