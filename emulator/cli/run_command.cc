@@ -12,6 +12,7 @@
 #include "emulator/cli/bus_commands.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
+#include "emulator/sim/run_context.h"
 
 namespace wheelhil::emulator {
 
@@ -144,6 +145,9 @@ std::optional<int> RunCommand::Run() {
   o.bin_dir = ExeDir();
   o.dbc_dir = FindDbcDir();
   o.ucan_child_env = [](const std::string& dir) { return UcanChildEnvironment(dir); };
+  // Ctrl-C, a CI job's timeout (SIGTERM) or a closed terminal end the run as a failure would:
+  // the firmware stopped, its private bus removed, what was recorded written.
+  sim::InstallInterruptHandlers();
   try {
     const auto result = scenario::RunScenario(sc, o);
     if (!quiet_) PrintSummary(result.report);

@@ -9,10 +9,14 @@
 #include <fmt/format.h>
 
 #include "bus/ucan_runtime_dir.h"
+#include "emulator/firmware/stale_run_dirs.h"
 
 namespace wheelhil::emulator::firmware {
 
 namespace {
+
+// A run's private bus directory; a killed run's is removed by the next run (stale_run_dirs.h).
+constexpr char kRunDirPrefix[] = "wheelhil-run-";
 
 using Clock = std::chrono::steady_clock;
 
@@ -42,7 +46,8 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::Run
   bus::CanTransportOptions opt;
   opt.receive_own = false;
   if (can_iface.empty()) {
-    runtime_dir_ = bus::CreateTempUcanRuntimeDir("wheelhil-run-");
+    RemoveStaleRunDirs(kRunDirPrefix);
+    runtime_dir_ = bus::CreateTempUcanRuntimeDir(kRunDirPrefix);
     bus::UcanBrokerOptions bo;
     bo.runtime_dir = runtime_dir_;
     bo.remove_runtime_dir = true;
@@ -63,6 +68,11 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::Run
 }
 
 FirmwareLink::~FirmwareLink() { Close(); }
+
+void FirmwareLink::FailExited(const FirmwareProcess& process) {
+  run_.Fail(fmt::format("the firmware {} during the run (see firmware.log)",
+                        process.ExitDescription()));
+}
 
 void FirmwareLink::Close() {
   if (broker_) {
@@ -91,8 +101,8 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
     while (WallSeconds(t0) < timeout_s &&
            CountKernelCanReceivers(iface_) <= kernel_receivers_before_) {
       if (auto code = process.Exited(); code && *code != 0) {
-        why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
-                          *code, iface_);
+        why = fmt::format("the firmware {} before opening {} (see firmware.log)",
+                          process.ExitDescription(), iface_);
         return false;
       } else if (code) {
         break;
@@ -107,8 +117,8 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
       if (st.name == iface_ && st.clients >= 2) return true;
     }
     if (auto code = process.Exited()) {
-      why = fmt::format("the firmware exited with status {} before opening {} (see firmware.log)",
-                        *code, iface_);
+      why = fmt::format("the firmware {} before opening {} (see firmware.log)",
+                        process.ExitDescription(), iface_);
       return false;
     }
     if (pumped_) {
@@ -181,7 +191,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const auto t0 = Clock::now();
   bool checked_exit = false;
   auto exited = [&] {
-    run_.Fail("the firmware exited during the run (see firmware.log)");
+    FailExited(process);
     return false;
   };
   auto running_threads = [&] {
@@ -273,7 +283,7 @@ bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
       if (process.running() && WallSeconds(last_exit_check_) > 0.02) {
         last_exit_check_ = Clock::now();
         if (process.Exited()) {
-          run_.Fail("the firmware exited during the run (see firmware.log)");
+          FailExited(process);
           return false;
         }
       }
@@ -283,7 +293,7 @@ bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
     if (!ec) {
       on_frame(rx.frame);
     } else if (process.running() && process.Exited()) {
-      run_.Fail("the firmware exited during the run (see firmware.log)");
+      FailExited(process);
       return false;
     }
   }

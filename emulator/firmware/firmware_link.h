@@ -73,6 +73,8 @@ class FirmwareLink {
 
  private:
   void Pump(int timeout_ms);
+  // "the firmware was killed by signal 11 (SIGSEGV) during the run (see firmware.log)".
+  void FailExited(const FirmwareProcess& process);
 
   sim::RunContext& run_;
   std::string iface_;

@@ -2,6 +2,8 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <string.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -11,12 +13,19 @@
 #include <stdexcept>
 #include <thread>
 
+#include <fmt/format.h>
+
 namespace wheelhil::emulator::firmware {
 
 void FirmwareProcess::Start(const std::string& command,
                             const std::vector<std::pair<std::string, std::string>>& env,
                             const std::string& log_path) {
   const int log_fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  ProcessScope::BecomeSubreaper();
+  scope_ = ProcessScope();
+  wait_status_ = -1;
+  const auto [marker_key, marker_value] = scope_.EnvironmentEntry();
+  const pid_t parent = ::getpid();
   pid_ = ::fork();
   if (pid_ < 0) {
     if (log_fd >= 0) ::close(log_fd);
@@ -24,7 +33,10 @@ void FirmwareProcess::Start(const std::string& command,
   }
   if (pid_ == 0) {
     ::setpgid(0, 0);
+    (void)::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(127);  // the run died before the line above
     for (const auto& [k, v] : env) ::setenv(k.c_str(), v.c_str(), 1);
+    ::setenv(marker_key.c_str(), marker_value.c_str(), 1);
     if (log_fd >= 0) {
       ::dup2(log_fd, 1);
       ::dup2(log_fd, 2);
@@ -35,17 +47,35 @@ void FirmwareProcess::Start(const std::string& command,
   }
   // Also here: the group exists before the parent may signal it, whichever runs first.
   (void)::setpgid(pid_, pid_);
+  scope_.set_group(pid_);
   if (log_fd >= 0) ::close(log_fd);
+}
+
+void FirmwareProcess::Reaped(int wait_status) {
+  pid_ = -1;
+  wait_status_ = wait_status;
+  exit_status_ = WIFEXITED(wait_status) ? WEXITSTATUS(wait_status) : 128 + WTERMSIG(wait_status);
+  // Helpers it left behind go with it.
+  scope_.KillAll();
+}
+
+std::string FirmwareProcess::ExitDescription() const {
+  if (wait_status_ < 0) return {};
+  if (WIFSIGNALED(wait_status_)) {
+    const int sig = WTERMSIG(wait_status_);
+    const char* name = ::sigabbrev_np(sig);
+    return fmt::format("was killed by signal {} ({}{}){}", sig, name ? "SIG" : "",
+                       name ? name : "unknown", WCOREDUMP(wait_status_) ? ", core dumped" : "");
+  }
+  return fmt::format("exited with status {}", WEXITSTATUS(wait_status_));
 }
 
 std::optional<int> FirmwareProcess::Exited() {
   if (pid_ <= 0) return std::nullopt;
   int status = 0;
   if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-    // Helpers it left in its group go with it.
     (void)::kill(-pid_, SIGKILL);
-    pid_ = -1;
-    exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    Reaped(status);
     return exit_status_;
   }
   return std::nullopt;
@@ -55,6 +85,7 @@ void FirmwareProcess::Stop(const std::function<void()>& while_waiting) {
   if (pid_ <= 0) return;
   const pid_t group = pid_;
   (void)::kill(-group, SIGTERM);
+  scope_.Signal(SIGTERM);  // also what left the group
   const auto t0 = std::chrono::steady_clock::now();
   while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(2)) {
     if (Exited()) return;
@@ -67,7 +98,7 @@ void FirmwareProcess::Stop(const std::function<void()>& while_waiting) {
   (void)::kill(-group, SIGKILL);
   int status = 0;
   ::waitpid(pid_, &status, 0);
-  pid_ = -1;
+  Reaped(status);
 }
 
 std::string Substitute(std::string s, const std::string& key, const std::string& value) {

@@ -1,9 +1,11 @@
 #pragma once
 /// The firmware under test as a child process: started through `/bin/sh -c "exec COMMAND"` in a
 /// process group of its own, with extra environment variables and its stdout/stderr in a log
-/// file. Stop() ends the whole group (the firmware and any helper it started in it): SIGTERM,
-/// up to 2 s of grace, then SIGKILL; the firmware is reaped. Exited() polls without blocking.
-/// A child that leaves the group (setsid) is not reached. Thread-compatible.
+/// file. Stop() ends every process the firmware started (its ProcessScope: the group, `setsid`
+/// children, orphans): SIGTERM, up to 2 s of grace, then SIGKILL until none is left; the
+/// firmware is reaped. When it exits by itself, what it left is killed as soon as Exited()
+/// sees it. It dies with the thread that started it (PR_SET_PDEATHSIG), so a killed run does
+/// not leave it running. Exited() polls without blocking. Thread-compatible.
 
 #include <sys/types.h>
 
@@ -12,6 +14,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "emulator/firmware/process_scope.h"
 
 namespace wheelhil::emulator::firmware {
 
@@ -28,6 +32,9 @@ class FirmwareProcess {
              const std::string& log_path);
   /// The exit status once it has exited (128 + signal for a signal), else nullopt.
   std::optional<int> Exited();
+  /// How it ended, for a failure reason: "exited with status 3", "was killed by signal 11
+  /// (SIGSEGV)". Empty while it runs.
+  std::string ExitDescription() const;
   /// Ends the process group (see above). Idempotent. `while_waiting` (each call short) runs
   /// in the grace period instead of a sleep: a firmware on the virtual clock needs its time to
   /// go on to see its own shutdown through.
@@ -36,8 +43,12 @@ class FirmwareProcess {
   pid_t pid() const { return pid_; }
 
  private:
+  void Reaped(int wait_status);
+
   pid_t pid_ = -1;
   int exit_status_ = 0;
+  int wait_status_ = -1;  // as waitpid gave it; -1 before the end
+  ProcessScope scope_;
 };
 
 /// Replaces every `key` in `s` by `value` (the command line's ${CAN}, ${CONFIG}, ${BIN}).

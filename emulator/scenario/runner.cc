@@ -518,6 +518,7 @@ RunResult Run::Execute() {
     firmware_.Stop();
   }
   hub_->CloseLog();
+  run_.TakeInterrupt();
   if (run_.failed()) {
     run_.events.push_back(json{
         {"t_s", run_.MotionSeconds(run_.now_ns)}, {"event", "failure"}, {"reason", run_.failure}});

@@ -202,7 +202,7 @@ TEST_F(VirtualTimeRun, AFirmwareThatExitsEndsTheRunAtTheSameInstantEveryTime) {
   // Seen at the first instant after its exit: the same record (and failure) on every run.
   const auto [a, log] = RunTwiceSameBytes(s, dir_);
   EXPECT_EQ(a.exit_code, 1);
-  EXPECT_THAT(a.failure, HasSubstr("the firmware exited during the run"));
+  EXPECT_THAT(a.failure, HasSubstr("the firmware exited with status 3 during the run"));
   EXPECT_EQ(Slurp(dir_ / "a" / "events.jsonl"), Slurp(dir_ / "b" / "events.jsonl"));
 }
 

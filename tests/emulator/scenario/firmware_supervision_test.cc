@@ -1,0 +1,181 @@
+// Firmware supervision (emulator/firmware/firmware_process.h, process_scope.h,
+// stale_run_dirs.h): at the end of a run no process the firmware started is left, whether it
+// forked, ignored SIGTERM, left the process group with setsid or cleared its environment; a
+// crash is reported with its signal; the runtime directories of killed runs are removed.
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <utime.h>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "emulator/firmware/process_scope.h"
+#include "emulator/firmware/stale_run_dirs.h"
+#include "emulator/scenario/runner.h"
+#include "emulator/scenario/scenario.h"
+#include "tests/emulator/scenario/runner_test_support.h"
+
+namespace wheelhil::emulator::scenario {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+Scenario ShortPaper000() {
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");
+  s.timing.duration_s = 2.0;
+  s.timing.timeout_s = 0.5;
+  s.expectations.clear();
+  return s;
+}
+
+// The pids whose command line holds `token`.
+std::vector<pid_t> ProcessesWith(const std::string& token) {
+  std::vector<pid_t> out;
+  for (pid_t pid : firmware::ListPids()) {
+    std::ifstream in("/proc/" + std::to_string(pid) + "/cmdline", std::ios::binary);
+    const std::string cmd((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (cmd.find(token) != std::string::npos && pid != ::getpid()) out.push_back(pid);
+  }
+  return out;
+}
+
+class FirmwareSupervision : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("wheelhil_supervision_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    // A sleep duration no other process on the machine has: how its helpers are found.
+    token_ = "86400." + std::to_string(::getpid());
+  }
+  void TearDown() override {
+    for (pid_t pid : ProcessesWith(token_)) ::kill(pid, SIGKILL);
+    fs::remove_all(dir_);
+  }
+  // Three helpers that ignore SIGTERM: a forked one, a setsid one, and a setsid one with an
+  // empty environment (no marker); then the firmware itself waits.
+  std::string HostileCommand(const std::string& then) const {
+    const std::string helper = "sh -c 'trap \"\" TERM; exec sleep " + token_ + "'";
+    return "sh -c \"" + helper + " & setsid " + helper + " & env -i /usr/bin/setsid " + helper +
+           " & sleep 0.2; " + then + "\"";
+  }
+  fs::path dir_;
+  std::string token_;
+};
+
+TEST_F(FirmwareSupervision, HelpersThatForkIgnoreSigtermAndSetsidAreGoneAfterTheRun) {
+  Scenario s = ShortPaper000();
+  s.firmware.command = HostileCommand("exec sleep 30");
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "stop"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("did not open ucan0"));
+  EXPECT_THAT(ProcessesWith(token_), ::testing::IsEmpty());
+}
+
+TEST_F(FirmwareSupervision, HelpersOfAFirmwareThatExitsAreGoneToo) {
+  Scenario s = ShortPaper000();
+  s.firmware.command = HostileCommand("exit 3");
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "exit"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("the firmware exited with status 3 before opening ucan0"));
+  EXPECT_THAT(ProcessesWith(token_), ::testing::IsEmpty());
+}
+
+TEST_F(FirmwareSupervision, ACrashIsReportedWithItsSignal) {
+  Scenario s = ShortPaper000();
+  s.firmware.command = "sh -c 'kill -SEGV $$'";
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "crash"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure,
+              HasSubstr("the firmware was killed by signal 11 (SIGSEGV) before opening ucan0"));
+}
+
+TEST_F(FirmwareSupervision, StaleRunDirectoriesAreRemovedLiveAndFreshOnesKept) {
+  const fs::path tmp = dir_ / "tmp";
+  fs::create_directories(tmp);
+  auto make = [&](const std::string& name, bool old) {
+    const fs::path d = tmp / name;
+    fs::create_directory(d);
+    fs::permissions(d, fs::perms::owner_all, fs::perm_options::replace);
+    std::ofstream(d / "ucan.lock").put('x');
+    std::ofstream(d / "ucan.sock").put('x');
+    if (old) {
+      const utimbuf t{std::time(nullptr) - 60, std::time(nullptr) - 60};
+      ::utime(d.c_str(), &t);
+    }
+    return d;
+  };
+  const fs::path stale = make("wheelhil-run-stale", true);
+  const fs::path live = make("wheelhil-run-live", true);
+  const fs::path fresh = make("wheelhil-run-fresh", false);
+  const fs::path other = make("someone-else", true);
+  const int held = ::open((live / "ucan.lock").c_str(), O_RDWR | O_CLOEXEC);
+  ASSERT_EQ(::flock(held, LOCK_EX | LOCK_NB), 0);
+  // What the killed run left running on its bus.
+  const pid_t orphan = ::fork();
+  if (orphan == 0) {
+    ::setenv("WHEELHIL_UCAN_DIR", stale.c_str(), 1);
+    ::execl("/bin/sleep", "sleep", token_.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // exec'd, environ readable
+  // Touch the stale dir's time back: the fork did not change it, but be explicit.
+  const utimbuf t{std::time(nullptr) - 60, std::time(nullptr) - 60};
+  ::utime(stale.c_str(), &t);
+
+  const char* old_tmp = std::getenv("TMPDIR");
+  const std::string saved = old_tmp ? old_tmp : "";
+  ::setenv("TMPDIR", tmp.c_str(), 1);
+  const auto removed = firmware::RemoveStaleRunDirs("wheelhil-run-");
+  if (old_tmp) {
+    ::setenv("TMPDIR", saved.c_str(), 1);
+  } else {
+    ::unsetenv("TMPDIR");
+  }
+  ::close(held);
+
+  EXPECT_EQ(removed, std::vector<std::string>{stale.string()});
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(fs::exists(live));
+  EXPECT_TRUE(fs::exists(fresh));
+  EXPECT_TRUE(fs::exists(other));
+  int status = 0;
+  ASSERT_EQ(::waitpid(orphan, &status, 0), orphan);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+}
+
+TEST(ProcessScope, FindsTheGroupTheMarkedAndTheirDescendants) {
+  firmware::ProcessScope scope;
+  const auto [key, value] = scope.EnvironmentEntry();
+  const std::string token = "86401." + std::to_string(::getpid());
+  const pid_t child = ::fork();
+  if (child == 0) {
+    ::setenv(key.c_str(), value.c_str(), 1);
+    // A grandchild that clears its environment: found as a descendant.
+    ::execl("/bin/sh", "sh", "-c", ("env -i sleep " + token + " & exec sleep " + token).c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(scope.Members().size(), 2u);
+  EXPECT_GE(scope.KillAll(), 2u);
+  EXPECT_THAT(ProcessesWith(token), ::testing::IsEmpty());
+  EXPECT_EQ(::waitpid(child, nullptr, WNOHANG), -1);  // reaped by KillAll
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::scenario
