@@ -42,10 +42,13 @@ std::error_code EnsureUcanRuntimeDir(const std::string& dir) noexcept {
 
 std::string UcanSocketPath(const std::string& dir) { return dir + "/" + ucan::kSocketName; }
 
-std::string CreateTempUcanRuntimeDir(const std::string& prefix) {
+std::string UcanTempRoot() {
   const char* tmp = std::getenv("TMPDIR");
-  std::string tmpl = (tmp != nullptr && tmp[0] != '\0' ? std::string(tmp) : std::string("/tmp")) +
-                     "/" + prefix + "XXXXXX";
+  return tmp != nullptr && tmp[0] != '\0' ? std::string(tmp) : std::string("/tmp");
+}
+
+std::string CreateTempUcanRuntimeDir(const std::string& prefix) {
+  std::string tmpl = UcanTempRoot() + "/" + prefix + "XXXXXX";
   std::vector<char> buf(tmpl.begin(), tmpl.end());
   buf.push_back('\0');
   if (::mkdtemp(buf.data()) == nullptr) {

@@ -28,6 +28,9 @@ std::error_code EnsureUcanRuntimeDir(const std::string& dir) noexcept;
 /// `<dir>/ucan.sock`.
 std::string UcanSocketPath(const std::string& dir);
 
+/// Where temporary runtime directories go: $TMPDIR, else /tmp.
+std::string UcanTempRoot();
+
 /// Creates a fresh private runtime directory (mkdtemp, mode 0700) under $TMPDIR or /tmp, for
 /// one run's private buses (e.g. UcanBrokerOptions{.runtime_dir = ..., .remove_runtime_dir =
 /// true}). Throws std::system_error when it cannot.

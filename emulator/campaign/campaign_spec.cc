@@ -381,14 +381,7 @@ CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
   }
 
   // The run count, refused before anything is expanded or started.
-  std::size_t points = spec.sampling == CampaignSpec::Sampling::kGrid ? 1 : spec.runs;
-  for (const auto& p : spec.parameters) {
-    if (spec.sampling != CampaignSpec::Sampling::kGrid) break;
-    const std::size_t n = p.kind == ParameterSpec::Kind::kList ? p.values.size() : p.steps;
-    if (points > CampaignSpec::kMaxRuns / n) points = CampaignSpec::kMaxRuns + 1;
-    else points *= n;
-  }
-  if (points > CampaignSpec::kMaxRuns / spec.repeats) {
+  if (RunCount(spec) > CampaignSpec::kMaxRuns) {
     L.Fail(root["repeats"] ? root["repeats"] : params, root["repeats"] ? "repeats" : "parameters",
            fmt::format("more than {} runs (points x repeats); split the campaign",
                        CampaignSpec::kMaxRuns));
@@ -480,7 +473,27 @@ json RunSpec::ParamsJson(const CampaignSpec& spec) const {
   return out;
 }
 
+std::size_t RunCount(const CampaignSpec& spec) {
+  constexpr std::size_t kTooMany = CampaignSpec::kMaxRuns + 1;
+  std::size_t points = 1;
+  if (spec.sampling == CampaignSpec::Sampling::kGrid) {
+    for (const auto& p : spec.parameters) {
+      const std::size_t n = p.kind == ParameterSpec::Kind::kList ? p.values.size()
+                                                                 : static_cast<std::size_t>(p.steps);
+      points = n != 0 && points > CampaignSpec::kMaxRuns / n ? kTooMany : points * n;
+    }
+  } else {
+    points = static_cast<std::size_t>(std::max(spec.runs, 0));
+  }
+  const auto repeats = static_cast<std::size_t>(std::max(spec.repeats, 1));
+  return points > CampaignSpec::kMaxRuns / repeats ? kTooMany : std::min(points * repeats, kTooMany);
+}
+
 std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec) {
+  if (RunCount(spec) > CampaignSpec::kMaxRuns) {
+    throw std::invalid_argument(fmt::format("{}: parameters: more than {} runs (points x repeats)",
+                                            spec.file, CampaignSpec::kMaxRuns));
+  }
   const std::size_t dims = spec.parameters.size();
   std::vector<std::vector<json>> points;
   switch (spec.sampling) {
@@ -490,11 +503,6 @@ std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec) {
       for (const auto& p : spec.parameters) {
         grids.push_back(p.GridValues());
         total *= grids.back().size();
-        if (total > CampaignSpec::kMaxRuns) {
-          throw std::invalid_argument(fmt::format("{}:{}:{}: parameters: grid of more than {} points",
-                                                  spec.file, p.line, p.column,
-                                                  CampaignSpec::kMaxRuns));
-        }
       }
       // First parameter varies slowest (row-major, like nested loops in file order).
       for (std::size_t n = 0; n < total; ++n) {

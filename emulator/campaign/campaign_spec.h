@@ -109,6 +109,9 @@ struct RunSpec {
   nlohmann::json ParamsJson(const CampaignSpec& spec) const;  ///< {"path": value, ...}
 };
 
+/// How many runs `spec` expands to (points x repeats), kMaxRuns + 1 for anything more.
+std::size_t RunCount(const CampaignSpec& spec);
+
 /// The full run list, in a deterministic order (points in sampling order, repeats inner).
 std::vector<RunSpec> ExpandRuns(const CampaignSpec& spec);
 

@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <signal.h>
-#include <string.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -14,6 +13,8 @@
 #include <thread>
 
 #include <fmt/format.h>
+
+#include "emulator/sim/signal_name.h"
 
 namespace wheelhil::emulator::firmware {
 
@@ -62,10 +63,8 @@ void FirmwareProcess::Reaped(int wait_status) {
 std::string FirmwareProcess::ExitDescription() const {
   if (wait_status_ < 0) return {};
   if (WIFSIGNALED(wait_status_)) {
-    const int sig = WTERMSIG(wait_status_);
-    const char* name = ::sigabbrev_np(sig);
-    return fmt::format("was killed by signal {} ({}{}){}", sig, name ? "SIG" : "",
-                       name ? name : "unknown", WCOREDUMP(wait_status_) ? ", core dumped" : "");
+    return fmt::format("was killed by {}{}", sim::SignalName(WTERMSIG(wait_status_)),
+                       WCOREDUMP(wait_status_) ? ", core dumped" : "");
   }
   return fmt::format("exited with status {}", WEXITSTATUS(wait_status_));
 }
@@ -74,7 +73,6 @@ std::optional<int> FirmwareProcess::Exited() {
   if (pid_ <= 0) return std::nullopt;
   int status = 0;
   if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-    (void)::kill(-pid_, SIGKILL);
     Reaped(status);
     return exit_status_;
   }

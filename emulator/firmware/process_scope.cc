@@ -23,8 +23,9 @@ namespace {
 
 constexpr const char* kMarkerKey = "WHEELHIL_FIRMWARE_SCOPE";
 
-// The whole of a small /proc file; empty when it cannot be read.
-std::string ReadSmallFile(const std::string& path) {
+}  // namespace
+
+std::string ReadProcFile(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return {};
   std::string out;
@@ -39,10 +40,8 @@ std::string ReadSmallFile(const std::string& path) {
   return out;
 }
 
-}  // namespace
-
 bool ReadProcStat(pid_t pid, ProcStat& out) {
-  const std::string text = ReadSmallFile(fmt::format("/proc/{}/stat", pid));
+  const std::string text = ReadProcFile(fmt::format("/proc/{}/stat", pid));
   // "pid (comm) state ppid pgrp session tty tpgid flags minflt cminflt majflt cmajflt utime
   // stime cutime cstime priority nice threads itrealvalue starttime ..."; comm may hold spaces
   // and parentheses, so fields are counted from the last ')'.
@@ -79,7 +78,7 @@ std::vector<pid_t> ListPids() {
 }
 
 bool EnvironHas(pid_t pid, const std::string& key, const std::string& value) {
-  const std::string env = ReadSmallFile(fmt::format("/proc/{}/environ", pid));
+  const std::string env = ReadProcFile(fmt::format("/proc/{}/environ", pid));
   const std::string entry = key + "=" + value;
   for (std::size_t pos = 0; pos < env.size();) {
     const auto nul = env.find('\0', pos);

@@ -54,6 +54,8 @@ struct ProcStat {
   unsigned long long start_time = 0;  ///< clock ticks after boot
 };
 bool ReadProcStat(pid_t pid, ProcStat& out);
+/// The whole of a small /proc file (at most about 1 MiB); empty when it cannot be read.
+std::string ReadProcFile(const std::string& path);
 /// The pids under /proc.
 std::vector<pid_t> ListPids();
 /// Whether /proc/<pid>/environ holds the entry `key=value` (false when it cannot be read).

@@ -6,7 +6,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <system_error>
@@ -20,10 +19,8 @@ namespace wheelhil::emulator::firmware {
 std::vector<std::string> RemoveStaleRunDirs(const std::string& prefix, double min_age_s) {
   namespace fs = std::filesystem;
   std::vector<std::string> removed;
-  const char* tmp = std::getenv("TMPDIR");
-  const fs::path root = tmp != nullptr && tmp[0] != '\0' ? fs::path(tmp) : fs::path("/tmp");
   std::error_code ec;
-  fs::directory_iterator it(root, ec);
+  fs::directory_iterator it(bus::UcanTempRoot(), ec);
   if (ec) return removed;
   const std::time_t now = std::time(nullptr);
   for (const auto& entry : it) {

@@ -21,6 +21,7 @@
 #include <fmt/format.h>
 
 #include "bus/vtime_protocol.h"
+#include "emulator/firmware/process_scope.h"
 
 namespace wheelhil::emulator::firmware {
 
@@ -38,15 +39,6 @@ std::string ReadAt0(int fd) {
   char buf[512];
   const ssize_t n = ::pread(fd, buf, sizeof(buf) - 1, 0);
   return n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
-}
-
-// A whole small /proc file by path; "" when it is gone.
-std::string ReadProcFile(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return {};
-  std::string s = ReadAt0(fd);
-  ::close(fd);
-  return s;
 }
 
 // The state letter of a /proc .../stat line (after the command in parentheses, which may hold

@@ -7,7 +7,6 @@
 /// Thread-compatible.
 
 #include <signal.h>
-#include <string.h>
 
 #include <atomic>
 #include <cstdint>
@@ -15,6 +14,8 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "emulator/sim/signal_name.h"
 
 namespace wheelhil::emulator::sim {
 
@@ -49,9 +50,7 @@ struct RunContext {
   /// A pending interruption becomes the failure ("interrupted by signal 2 (SIGINT)").
   void TakeInterrupt() {
     if (const int sig = InterruptSignal(); sig != 0 && failure.empty()) {
-      const char* name = ::sigabbrev_np(sig);
-      failure = "interrupted by signal " + std::to_string(sig) + " (SIG" +
-                (name != nullptr ? name : "?") + ")";
+      failure = "interrupted by " + SignalName(sig);
     }
   }
   /// Seconds since the motion start of t_ns (since the run start before the motion).

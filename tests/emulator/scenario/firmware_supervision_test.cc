@@ -73,26 +73,26 @@ class FirmwareSupervision : public ::testing::Test {
     return "sh -c \"" + helper + " & setsid " + helper + " & env -i /usr/bin/setsid " + helper +
            " & sleep 0.2; " + then + "\"";
   }
+  // Runs the hostile firmware ending in `then`: the run fails with `failure` and leaves none of
+  // its helpers.
+  void ExpectFailureAndNoHelperLeft(const std::string& then, const std::string& failure) {
+    Scenario s = ShortPaper000();
+    s.firmware.command = HostileCommand(then);
+    const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "run"));
+    EXPECT_EQ(r.exit_code, 1);
+    EXPECT_THAT(r.failure, HasSubstr(failure));
+    EXPECT_THAT(ProcessesWith(token_), ::testing::IsEmpty());
+  }
   fs::path dir_;
   std::string token_;
 };
 
 TEST_F(FirmwareSupervision, HelpersThatForkIgnoreSigtermAndSetsidAreGoneAfterTheRun) {
-  Scenario s = ShortPaper000();
-  s.firmware.command = HostileCommand("exec sleep 30");
-  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "stop"));
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_THAT(r.failure, HasSubstr("did not open ucan0"));
-  EXPECT_THAT(ProcessesWith(token_), ::testing::IsEmpty());
+  ExpectFailureAndNoHelperLeft("exec sleep 30", "did not open ucan0");
 }
 
 TEST_F(FirmwareSupervision, HelpersOfAFirmwareThatExitsAreGoneToo) {
-  Scenario s = ShortPaper000();
-  s.firmware.command = HostileCommand("exit 3");
-  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "exit"));
-  EXPECT_EQ(r.exit_code, 1);
-  EXPECT_THAT(r.failure, HasSubstr("the firmware exited with status 3 before opening ucan0"));
-  EXPECT_THAT(ProcessesWith(token_), ::testing::IsEmpty());
+  ExpectFailureAndNoHelperLeft("exit 3", "the firmware exited with status 3 before opening ucan0");
 }
 
 TEST_F(FirmwareSupervision, ACrashIsReportedWithItsSignal) {
