@@ -12,6 +12,8 @@
 #include <sys/eventfd.h>
 #include <sys/file.h>
 #include <sys/mman.h>
+#include <sys/random.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -19,6 +21,7 @@
 
 #include <algorithm>
 #include <array>
+#include <deque>
 #include <cerrno>
 #include <condition_variable>
 #include <cstring>
@@ -55,6 +58,10 @@ constexpr int kBatch = 64;
 // Per pass and connection. Honest clients never reach it (a pass reads each connection only up
 // to its first frame stamped after the pass began); it bounds a client that forges old stamps.
 constexpr int kReadBatchesPerPass = 64;
+// Connections accepted per pass: a connect flood cannot keep one pass (and the lock) forever.
+constexpr int kAcceptsPerPass = 64;
+// File descriptors the broker's process keeps for itself beyond its connections.
+constexpr rlim_t kReservedFds = 64;
 constexpr std::size_t kMaxRequest = sizeof(Request) + ucan::kMaxFilters * sizeof(can_filter);
 constexpr std::size_t kClientMsgBuf = 128;  // > 80, so a larger message shows as MSG_TRUNC
 
@@ -157,10 +164,16 @@ Filter Normalize(can_filter f) {
 struct Bus;
 
 /// The shared-memory rings of a data connection (bus/ucan_protocol.h, "Rings"): mapped here,
-/// the memfd passed to the client at kOpen. The client's indexes are untrusted.
+/// the memfd passed to the client at kOpen. The client can write all of it: the geometry and
+/// the broker's own indexes (rx tail, tx head) are kept here and only published there; the
+/// client's indexes are checked against them.
 struct Rings {
   ucan::RingHeader* header = nullptr;
   std::size_t bytes = 0;
+  std::uint32_t slots = 0;
+  std::uint64_t rx_tail = 0;  // next rx slot the broker writes
+  std::uint64_t tx_head = 0;  // next tx slot the broker reads
+  bool corrupt = false;       // impossible client indexes seen: never read again
   Rings() = default;
   Rings(const Rings&) = delete;
   Rings& operator=(const Rings&) = delete;
@@ -195,13 +208,16 @@ int CreateRings(std::uint32_t slots, Rings* out) {
   pthread_mutexattr_destroy(&a);
   out->header = h;
   out->bytes = bytes;
+  out->slots = slots;
   return fd;
 }
 
 struct Client {
   Fd fd;
   std::uint32_t id = 0;
+  std::uint64_t token = 0;  // kOpen: quoted by requests about this client
   pid_t pid = 0;
+  std::int64_t accepted_ns = 0;  // CLOCK_MONOTONIC
   bool data = false;  // kOpen done
   bool any = false;   // bound to ifindex 0
   bool dead = false;
@@ -310,7 +326,12 @@ struct UcanBroker::Impl {
   Fd epoll_fd;
   Fd wake_fd;
   Fd spare_fd;  // released to refuse a connection when the process is out of fds
-  std::uint64_t refused_connections = 0;
+  bool accept_paused = false;  // out of fds and no spare: the listen fd is off epoll for now
+  std::size_t max_connections = 0;
+  std::size_t connections = 0;                  // socket clients not yet reaped
+  std::unordered_map<pid_t, std::size_t> connections_of;  // per client pid
+  std::deque<std::pair<std::uint32_t, std::int64_t>> awaiting_request;  // id, accepted_ns
+  UcanBrokerHealth health;
   std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
@@ -398,6 +419,13 @@ struct UcanBroker::Impl {
     ev.data.u64 = kWakeTag;
     ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, wake_fd.get(), &ev);
     spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
+    max_connections = options.max_connections;
+    rlimit fds{};
+    if (::getrlimit(RLIMIT_NOFILE, &fds) == 0 && fds.rlim_cur != RLIM_INFINITY) {
+      const rlim_t usable = fds.rlim_cur > 2 * kReservedFds ? fds.rlim_cur - kReservedFds
+                                                            : fds.rlim_cur / 2;
+      max_connections = std::min<std::size_t>(max_connections, usable);
+    }
     thread = std::thread([this] { Loop(); });
   }
 
@@ -507,37 +535,125 @@ struct UcanBroker::Impl {
         ring_clients.erase(std::remove(ring_clients.begin(), ring_clients.end(), c),
                            ring_clients.end());
       }
+      if (!c->local) {
+        --connections;
+        if (auto n = connections_of.find(c->pid); n != connections_of.end() && --n->second == 0) {
+          connections_of.erase(n);
+        }
+      }
       it = clients.erase(it);
+    }
+    if (accept_paused) ResumeAccepting();
+  }
+
+  std::uint32_t NewClientId() {
+    for (;;) {
+      const std::uint32_t id = next_id++;
+      if (next_id < kFirstClientId) next_id = kFirstClientId;  // wrapped
+      if (id >= kFirstClientId && clients.find(id) == clients.end()) return id;
     }
   }
 
-  void AcceptAll() {
-    for (;;) {
+  /// Answers a connection's (coming) request with EMFILE and closes it.
+  void Refuse(int fd, std::string why) {
+    Reply reply;
+    reply.error = EMFILE;
+    [[maybe_unused]] ssize_t n =
+        ::send(fd, &reply, sizeof(reply), MSG_DONTWAIT | MSG_NOSIGNAL);
+    // The request, if it came already: closing with it unread would report ECONNRESET to the
+    // client ahead of the reply.
+    char request[sizeof(Request)];
+    for (int i = 0; i < 4 && ::recv(fd, request, sizeof(request), MSG_DONTWAIT) > 0; ++i) {
+    }
+    ::close(fd);
+    ++health.refused_connections;
+    health.last_refusal = std::move(why);
+    ++client_progress;
+  }
+
+  void ResumeAccepting() {
+    if (spare_fd.get() < 0) spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
+    if (spare_fd.get() < 0) return;
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.u64 = kListenTag;
+    if (::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, listen_fd.get(), &ev) == 0) {
+      accept_paused = false;
+    }
+  }
+
+  /// Connections that sent no request in time are closed (they hold an fd and a slot).
+  void ExpireSilentConnections() {
+    const std::int64_t deadline =
+        MonotonicNs() - std::int64_t{options.request_timeout_ms} * 1000000;
+    while (!awaiting_request.empty()) {
+      const auto [id, accepted_ns] = awaiting_request.front();
+      Client* c = Find(id);
+      if (c != nullptr && !c->data && c->accepted_ns == accepted_ns) {
+        if (accepted_ns > deadline) return;
+        ++health.silent_connections;
+        Kill(c);
+      }
+      awaiting_request.pop_front();
+    }
+  }
+
+  /// Accepts up to kAcceptsPerPass connections (the rest wait for the next pass: the listen
+  /// fd stays ready). Over a limit or out of fds, the newest connection is refused.
+  void AcceptSome() {
+    for (int i = 0; i < kAcceptsPerPass; ++i) {
       const int fd = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-      if (fd < 0 && (errno == EMFILE || errno == ENFILE) && spare_fd.get() >= 0) {
-        // Out of fds: refuse this connection (else the listen fd stays ready and we spin).
+      if (fd < 0 && (errno == EMFILE || errno == ENFILE)) {
+        const int err = errno;
+        if (spare_fd.get() < 0) spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
+        if (spare_fd.get() < 0) {
+          // Nothing to refuse with: stop watching the listen fd (else every pass finds it
+          // ready and the loop spins) until a connection is closed.
+          ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, listen_fd.get(), nullptr);
+          accept_paused = true;
+          return;
+        }
         spare_fd.Reset();
         const int refused = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_CLOEXEC);
-        if (refused >= 0) ::close(refused);
+        if (refused >= 0) {
+          Refuse(refused, std::string("the broker's process is out of file descriptors (") +
+                              (err == EMFILE ? "EMFILE" : "ENFILE") + ")");
+        }
         spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
-        ++refused_connections;
         continue;
       }
       if (fd < 0) return;  // EAGAIN
+      ucred cred{};
+      socklen_t len = sizeof(cred);
+      const pid_t pid =
+          ::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0 ? cred.pid : 0;
+      if (connections >= max_connections) {
+        Refuse(fd, "the bus serves " + std::to_string(connections) +
+                       " connections, its limit (process " + std::to_string(pid) +
+                       " asked for one more)");
+        continue;
+      }
+      std::size_t& of_pid = connections_of[pid];
+      if (of_pid >= options.max_connections_per_process) {
+        Refuse(fd, "process " + std::to_string(pid) + " has " + std::to_string(of_pid) +
+                       " connections to the bus open, the limit per process");
+        continue;
+      }
       ++client_progress;  // its request is read and answered by a later pass
       auto c = std::make_unique<Client>();
       c->fd = Fd(fd);
-      c->id = next_id++;
-      if (next_id < kFirstClientId) next_id = kFirstClientId;
-      ucred cred{};
-      socklen_t len = sizeof(cred);
-      if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0) c->pid = cred.pid;
+      c->id = NewClientId();
+      c->pid = pid;
+      c->accepted_ns = MonotonicNs();
       const int sndbuf = 1 << 20;
       ::setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof(sndbuf));
       epoll_event ev{};
       ev.events = EPOLLIN;
       ev.data.u64 = c->id;
       if (::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, fd, &ev) != 0) continue;
+      ++of_pid;
+      ++connections;
+      awaiting_request.emplace_back(c->id, c->accepted_ns);
       clients[c->id] = std::move(c);
     }
   }
@@ -631,6 +747,8 @@ struct UcanBroker::Impl {
           any_clients.push_back(c);
         }
         reply.client_id = c->id;
+        c->token = NewToken(c->id);
+        reply.token = c->token;
         int ring_fd = -1;
         if (req.flags & ucan::kOpenRings) {
           auto rings = std::make_unique<Rings>();
@@ -645,8 +763,8 @@ struct UcanBroker::Impl {
         return;  // stays connected
       }
       case Op::kSetOptions: {
-        Client* target = Find(req.client_id);
-        if (target == nullptr || !target->data) {
+        if (OptionsTarget(req) == nullptr) {
+          ++health.refused_requests;
           reply.error = ENOTCONN;
           break;
         }
@@ -677,16 +795,14 @@ struct UcanBroker::Impl {
         break;
       }
       case Op::kAddBus:
-        if (!IsValidUcanBusName(name)) {
-          reply.error = EINVAL;
-        } else {
-          reply.ifindex = AddBusLocked(name);
-          CopyName(reply.name, name);
-        }
-        break;
       case Op::kRemoveBus:
-        if (!RemoveBusLocked(name)) reply.error = ENODEV;
-        if (options.exit_when_empty && buses.empty()) stop_requested = true;
+      case Op::kShutdown:
+        if (!options.control_requests) {
+          ++health.refused_requests;
+          reply.error = EPERM;
+          break;
+        }
+        ControlRequest(req.op, name, &reply);
         break;
       case Op::kList: {
         std::vector<BusInfo> infos;
@@ -705,15 +821,49 @@ struct UcanBroker::Impl {
         Kill(c);
         return;
       }
-      case Op::kShutdown:
-        stop_requested = true;
-        break;
       default:
         reply.error = EOPNOTSUPP;
         break;
     }
     SendReply(c, reply);
     Kill(c);
+  }
+
+  void ControlRequest(Op op, const std::string& name, Reply* reply) {
+    if (op == Op::kAddBus) {
+      if (!IsValidUcanBusName(name)) {
+        reply->error = EINVAL;
+      } else {
+        reply->ifindex = AddBusLocked(name);
+        CopyName(reply->name, name);
+      }
+    } else if (op == Op::kRemoveBus) {
+      if (!RemoveBusLocked(name)) reply->error = ENODEV;
+      if (options.exit_when_empty && buses.empty()) stop_requested = true;
+    } else {
+      stop_requested = true;
+    }
+  }
+
+  /// The data connection a kSetOptions request may change: a socket client (never an
+  /// in-process port) whose token the request quotes.
+  Client* OptionsTarget(const Request& req) {
+    Client* target = Find(req.client_id);
+    if (target == nullptr || !target->data || target->local || target->token != req.token) {
+      return nullptr;
+    }
+    return target;
+  }
+
+  /// A secret per data connection: getrandom, else (no entropy yet) a mix of time and id that
+  /// a client cannot read from anywhere.
+  static std::uint64_t NewToken(std::uint32_t id) {
+    std::uint64_t token = 0;
+    if (::getrandom(&token, sizeof(token), GRND_NONBLOCK) != sizeof(token)) {
+      token = static_cast<std::uint64_t>(MonotonicNs()) * 0x9E3779B97F4A7C15ull ^
+              (std::uint64_t{id} << 32) ^ reinterpret_cast<std::uintptr_t>(&token);
+    }
+    return token == 0 ? 1 : token;
   }
 
   static std::uint32_t RingSlotsFor(std::size_t queue_limit) {
@@ -727,27 +877,35 @@ struct UcanBroker::Impl {
   /// A dead client's ring is drained too: what it wrote before closing is on the bus, as the
   /// messages queued in a closed socket are.
   void DrainRing(Client* c) {
-    if (!c->rings) return;
-    ucan::RingHeader* h = c->rings->header;
-    ucan::RingIndex& r = h->tx;
+    if (!c->rings || c->rings->corrupt) return;
+    Rings& rings = *c->rings;
+    ucan::RingIndex& r = rings.header->tx;
     r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
-    std::uint64_t head = r.head.load(std::memory_order_relaxed);
+    std::uint64_t head = rings.tx_head;
     const std::uint64_t tail = r.tail.load(std::memory_order_acquire);
-    if (tail - head > h->slots) {  // a client wrote nonsense into its indexes
-      ++orphan_bad_messages;
-      Kill(c);
+    if (tail - head > rings.slots) {  // the client wrote an impossible tail
+      CorruptRing(c);
       return;
     }
     const std::int64_t read_ns = MonotonicNs();
-    ucan::RingSlot* slots = ucan::TxSlots(h);
+    ucan::RingSlot* slots = ucan::TxSlots(rings.header, rings.slots);
     std::array<std::uint8_t, ucan::kSlotBytes> copy;
     for (; head != tail; ++head) {
-      const ucan::RingSlot& slot = slots[head & (h->slots - 1)];
+      const ucan::RingSlot& slot = slots[head & (rings.slots - 1)];
       const std::uint32_t len = std::min<std::uint32_t>(slot.len, ucan::kSlotBytes);
       std::memcpy(copy.data(), slot.bytes, len);  // copied once: the client may scribble
       HandleFrame(c, copy.data(), len, false, read_ns);
     }
+    rings.tx_head = head;
     r.head.store(head, std::memory_order_release);
+  }
+
+  void CorruptRing(Client* c) {
+    if (c->rings->corrupt) return;
+    c->rings->corrupt = true;
+    ++health.corrupt_rings;
+    CountBad(c);
+    Kill(c);
   }
 
   /// Reads `c`'s frames into `pending`, up to and including the first batch holding a frame
@@ -905,20 +1063,21 @@ struct UcanBroker::Impl {
   /// Route() to a ring client: a full ring is a drop (counted as a full queue is).
   void PushRx(Client* r, Bus* bus, const std::uint8_t* frame, std::size_t frame_len,
               std::uint32_t flags, std::int64_t ts) {
-    ucan::RingHeader* h = r->rings->header;
-    ucan::RingIndex& ring = h->rx;
-    const std::uint64_t tail = ring.tail.load(std::memory_order_relaxed);
+    Rings& rings = *r->rings;
+    if (rings.corrupt) return;
+    ucan::RingIndex& ring = rings.header->rx;
+    const std::uint64_t tail = rings.rx_tail;
     const std::uint64_t used = tail - ring.head.load(std::memory_order_acquire);
-    if (used > h->slots) {  // nonsense from the client
-      Kill(r);
+    if (used > rings.slots) {  // the client wrote an impossible head
+      CorruptRing(r);
       return;
     }
-    if (used == h->slots) {
+    if (used == rings.slots) {
       ++r->drops;
       ++bus->drops;
       return;
     }
-    ucan::RingSlot& slot = ucan::RxSlots(h)[tail & (h->slots - 1)];
+    ucan::RingSlot& slot = ucan::RxSlots(rings.header)[tail & (rings.slots - 1)];
     std::memcpy(slot.bytes, frame, frame_len);
     RxTrailer t;
     t.ifindex = bus->ifindex;
@@ -927,6 +1086,7 @@ struct UcanBroker::Impl {
     t.drops = r->drops;
     std::memcpy(slot.bytes + frame_len, &t, sizeof(t));
     slot.len = static_cast<std::uint32_t>(frame_len + sizeof(t));
+    rings.rx_tail = tail + 1;
     ring.tail.store(tail + 1, std::memory_order_release);
     if (!r->dirty) {
       r->dirty = true;
@@ -973,7 +1133,11 @@ struct UcanBroker::Impl {
       c->dirty = false;
       if (c->rings) {
         // One doorbell per pass at most, none while the client has not consumed the last one.
-        if (!c->dead && ucan::RingTakeDoorbell(c->rings->header->rx)) {
+        if (c->dead) continue;
+        const int rung = ucan::RingTakeDoorbell(c->rings->header->rx, ucan::kDoorbellTries);
+        if (rung < 0) {
+          CorruptRing(c);
+        } else if (rung > 0) {
           const std::uint64_t bell = 1;
           [[maybe_unused]] ssize_t n =
               ::send(c->fd.get(), &bell, sizeof(bell), MSG_DONTWAIT | MSG_NOSIGNAL);
@@ -995,8 +1159,8 @@ struct UcanBroker::Impl {
       Client* c = Find(d.request_id);
       if (c == nullptr || c->dead) continue;
       Reply reply;
-      Client* target = Find(d.req.client_id);
-      if (target == nullptr || !target->data) {
+      Client* target = OptionsTarget(d.req);
+      if (target == nullptr) {
         reply.error = ENOTCONN;
       } else {
         ReadData(target, kReadBatchesPerPass, INT64_MAX);
@@ -1037,7 +1201,7 @@ struct UcanBroker::Impl {
     for (int i = 0; i < n; ++i) {
       const std::uint64_t tag = events[i].data.u64;
       if (tag == kListenTag) {
-        AcceptAll();
+        AcceptSome();
         continue;
       }
       if (tag == kWakeTag) {
@@ -1062,8 +1226,15 @@ struct UcanBroker::Impl {
     Dispatch(pass_start_ns);
     ApplyDeferredOptions();
     FlushDirty();
+    ExpireSilentConnections();
     ReapDead();
     return !stop_requested;
+  }
+
+  int WaitTimeoutMs() {
+    std::lock_guard lk(mu);
+    if (accept_paused) return 100;
+    return awaiting_request.empty() ? -1 : std::max(1, options.request_timeout_ms / 4);
   }
 
   /// After the last pass: every client disconnected, Wait() released.
@@ -1078,7 +1249,8 @@ struct UcanBroker::Impl {
 
   void Loop() {
     std::vector<epoll_event> events(kBatch);
-    while (Pass(events, -1)) {
+    // Wakes up for the request deadline of connections that have not sent one.
+    while (Pass(events, WaitTimeoutMs())) {
       std::lock_guard lk(mu);
       if (handover_requested) return;  // the owner pumps from now on; clients stay connected
     }
@@ -1126,6 +1298,11 @@ std::vector<UcanBusStats> UcanBroker::Stats() const {
   return impl_->StatsLocked();
 }
 
+UcanBrokerHealth UcanBroker::Health() const {
+  std::lock_guard lk(impl_->mu);
+  return impl_->health;
+}
+
 void UcanBroker::Wait() {
   std::unique_lock lk(impl_->mu);
   impl_->stopped_cv.wait(lk, [this] { return impl_->stopped; });
@@ -1152,7 +1329,7 @@ int UcanBroker::OpenLocalPort(const std::string& bus_name) {
   auto c = std::make_unique<Client>();
   c->local = true;
   c->data = true;
-  c->id = impl_->next_id++;
+  c->id = impl_->NewClientId();
   c->pid = ::getpid();
   c->filters.push_back(Normalize(can_filter{0, 0}));  // a new socket receives everything
   c->bus = it->second.get();

@@ -11,6 +11,15 @@
 /// overflow is dropped for that reader only and counted (per bus in Stats(), per socket through
 /// SO_RXQ_OVFL). Bad client messages are counted and ignored; they never reach other clients.
 ///
+/// Clients are not trusted (bus/ucan_protocol.h): a request acts only on the connection whose
+/// token it quotes (never on an in-process port), ring geometry and the broker's ring indexes
+/// never come from shared memory, a client writing impossible indexes is disconnected, and
+/// connections are limited in total and per process. Past a limit, or out of file descriptors,
+/// a new connection is answered EMFILE and closed; one that sends no request within
+/// `request_timeout_ms` is closed. Each pass accepts a bounded number of connections, so a flood
+/// of them cannot hold the broker (or its lock) in one pass. All of it is counted in Health().
+/// (Limits apply to socket clients; in-process ports are the owner's.)
+///
 /// Interface indexes are stable per runtime directory: "ucanN" -> 1000 + N, other names 2000 +
 /// order of first creation (a removed and re-added bus keeps its index).
 ///
@@ -39,6 +48,24 @@ struct UcanBrokerOptions {
   /// On destruction also remove the lock file and the (then empty) runtime directory: for a
   /// private directory from CreateTempUcanRuntimeDir().
   bool remove_runtime_dir = false;
+  /// Connections served at once, requests included (at most the fd limit less 64), and per
+  /// client process (SO_PEERCRED pid).
+  std::size_t max_connections = 1024;
+  std::size_t max_connections_per_process = 256;
+  /// A connection that sends no request within this many ms is closed.
+  int request_timeout_ms = 5000;
+  /// Control requests from clients (add/remove a bus, shut down). Off for a bus owned by a
+  /// program (a run's private bus): those requests get EPERM.
+  bool control_requests = true;
+};
+
+/// What the broker refused or cut off to protect itself and its other clients.
+struct UcanBrokerHealth {
+  std::uint64_t refused_connections = 0;    ///< Over a limit, or out of fds: answered EMFILE.
+  std::uint64_t silent_connections = 0;     ///< Closed: no request within the timeout.
+  std::uint64_t corrupt_rings = 0;          ///< Disconnected: impossible shared-ring indexes.
+  std::uint64_t refused_requests = 0;       ///< A wrong token, or control requests off.
+  std::string last_refusal;                 ///< Why the last connection was refused.
 };
 
 struct UcanBusStats {
@@ -67,6 +94,7 @@ class UcanBroker {
   /// False when there is no such bus.
   bool RemoveBus(const std::string& name);
   std::vector<UcanBusStats> Stats() const;
+  UcanBrokerHealth Health() const;
 
   /// Blocks until the broker stops (a kShutdown request, exit_when_empty, or Stop()).
   void Wait();

@@ -123,6 +123,7 @@ struct UcanSocket {
   int ifindex = 0;
   char name[ucan::kNameSize] = {};
   std::uint32_t client_id = 0;
+  std::uint64_t token = 0;  // the broker's kOpen Reply: quoted by kSetOptions
   ucan::RawOptions options;
   can_filter* filters = nullptr;  // options.filter_count entries (malloc'd)
   int timestamp_mode = 0;         // 0 none, 1 us, 2 ns
@@ -274,12 +275,14 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msghdr msg{};
   msg.msg_iov = iov;
   msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
-  if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0) {
+  if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0 && errno != EPIPE && errno != ECONNRESET) {
     const int err = errno;
     real_close()(s);
     errno = err;
     return -1;
   }
+  // EPIPE / ECONNRESET: a broker that refuses the connection (its limits) answers before it
+  // reads the request and closes: the answer is waiting below.
   pollfd p{s, POLLIN, 0};
   int rc = 0;
   do {
@@ -292,7 +295,9 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
   rmsg.msg_control = control;
   rmsg.msg_controllen = sizeof(control);
-  const ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC) : -1;
+  ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC) : -1;
+  // A socket closed with our request unread reports ECONNRESET once, before the reply.
+  if (n < 0 && errno == ECONNRESET) n = real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC);
   if (n >= 0) {
     for (cmsghdr* c = CMSG_FIRSTHDR(&rmsg); c != nullptr; c = CMSG_NXTHDR(&rmsg, c)) {
       if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_RIGHTS &&
@@ -319,8 +324,9 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   return s;
 }
 
-/// name -> ifindex on the ucan broker; 0 when it is not a ucan bus.
-int ResolveName(const char* name) {
+/// name -> ifindex on the ucan broker; 0 when it is not a ucan bus (`*refused` = EMFILE when
+/// the broker refused the connection: its limits, see bus/ucan_broker.h).
+int ResolveName(const char* name, int* refused = nullptr) {
   ucan::Request req;
   req.op = ucan::Op::kResolveName;
   std::strncpy(req.name, name, ucan::kNameSize - 1);
@@ -330,11 +336,12 @@ int ResolveName(const char* name) {
   errno = saved;
   if (s < 0) return 0;
   real_close()(s);
+  if (refused != nullptr && reply.error == EMFILE) *refused = EMFILE;
   return reply.error == 0 ? reply.ifindex : 0;
 }
 
-/// ifindex -> name; false when it is not a ucan bus.
-bool ResolveIndex(int ifindex, char (&name)[ucan::kNameSize]) {
+/// ifindex -> name; false when it is not a ucan bus (`*refused` as for ResolveName).
+bool ResolveIndex(int ifindex, char (&name)[ucan::kNameSize], int* refused = nullptr) {
   if (ifindex <= 0) return false;
   ucan::Request req;
   req.op = ucan::Op::kResolveIndex;
@@ -345,6 +352,7 @@ bool ResolveIndex(int ifindex, char (&name)[ucan::kNameSize]) {
   errno = saved;
   if (s < 0) return false;
   real_close()(s);
+  if (refused != nullptr && reply.error == EMFILE) *refused = EMFILE;
   if (reply.error != 0) return false;
   std::memcpy(name, reply.name, sizeof(name));
   name[ucan::kNameSize - 1] = '\0';
@@ -353,7 +361,7 @@ bool ResolveIndex(int ifindex, char (&name)[ucan::kNameSize]) {
 
 /// Copies the socket's options under the lock (filters into `filters`, malloc'd).
 bool SnapshotOptions(int fd, ucan::RawOptions* opts, can_filter** filters, int* type_flags,
-                     std::uint32_t* client_id, bool* bound) {
+                     std::uint32_t* client_id, bool* bound, std::uint64_t* token = nullptr) {
   bool ok = false;
   LockTable();
   if (UcanSocket* s = (fd >= 0 && fd < kMaxFds) ? g_sockets[fd] : nullptr) {
@@ -366,6 +374,7 @@ bool SnapshotOptions(int fd, ucan::RawOptions* opts, can_filter** filters, int* 
     }
     *type_flags = s->type_flags;
     *client_id = s->client_id;
+    if (token != nullptr) *token = s->token;
     *bound = s->bound;
     ok = s->options.filter_count == 0 || *filters != nullptr;
   }
@@ -380,11 +389,13 @@ void SyncOptions(int fd) {
   int type_flags = 0;
   std::uint32_t client_id = 0;
   bool bound = false;
-  if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound)) return;
+  std::uint64_t token = 0;
+  if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound, &token)) return;
   if (bound) {
     ucan::Request req;
     req.op = ucan::Op::kSetOptions;
     req.client_id = client_id;
+    req.token = token;
     req.options = opts;
     ucan::Reply reply;
     const int saved = errno;
@@ -482,8 +493,9 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   std::memcpy(&sa, addr, std::min<std::size_t>(len, sizeof(sa)));
   if (sa.can_family != AF_CAN) return EINVAL;
   char name[ucan::kNameSize] = {};
-  if (sa.can_ifindex != 0 && !ResolveIndex(sa.can_ifindex, name)) {
-    return SwitchToKernel(fd, addr, len);
+  int refused = 0;
+  if (sa.can_ifindex != 0 && !ResolveIndex(sa.can_ifindex, name, &refused)) {
+    return refused != 0 ? refused : SwitchToKernel(fd, addr, len);
   }
   ucan::RawOptions opts;
   can_filter* filters = nullptr;
@@ -535,6 +547,7 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
       std::memcpy(s->name, reply.name, sizeof(s->name));
       s->name[ucan::kNameSize - 1] = '\0';
       s->client_id = reply.client_id;
+      s->token = reply.token;
       ReleaseRings(s->rings);
       s->rings = rings;
       rings = nullptr;
@@ -597,12 +610,13 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
     }
     return static_cast<ssize_t>(frame_len);
   }
-  ucan::RingSlot& slot = ucan::TxSlots(h)[tail & (h->slots - 1)];
+  ucan::RingSlot& slot = ucan::TxSlots(h, h->slots)[tail & (h->slots - 1)];
   std::memcpy(slot.bytes, msg, len);
   slot.len = static_cast<std::uint32_t>(len);
   r.tail.store(tail + 1, std::memory_order_release);
   pthread_mutex_unlock(&r.lock);
-  if (ucan::RingTakeDoorbell(r)) {
+  // A doorbell too many (-1: the word kept changing) is harmless: they may be spurious.
+  if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0) {
     const std::uint64_t bell = 1;
     if (real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT) < 0 &&
         (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) {
@@ -1015,7 +1029,14 @@ UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
 
 UCAN_EXPORT unsigned if_nametoindex(const char* name) {
   if (name != nullptr) {
-    if (const int index = ResolveName(name); index > 0) return static_cast<unsigned>(index);
+    int refused = 0;
+    if (const int index = ResolveName(name, &refused); index > 0) {
+      return static_cast<unsigned>(index);
+    }
+    if (refused != 0) {
+      errno = refused;
+      return 0;
+    }
   }
   return real_if_nametoindex()(name);
 }

@@ -13,6 +13,12 @@
 ///   broker -> client: the frame (16 / 72 bytes) followed by an RxTrailer (24 bytes).
 /// All other ops are one request, one Reply, then the broker closes the connection.
 ///
+/// Nothing a client sends or writes is trusted: a request may act only on the data connection
+/// whose kOpen Reply carried its `token`; the rings' geometry and the broker's own indexes are
+/// kept in the broker, the client's indexes are checked (a client that writes impossible ones
+/// is disconnected). Connections are limited (UcanBrokerOptions): past a limit the broker
+/// answers the first request with EMFILE and closes the connection.
+///
 /// Rings (v3, opt-in per data connection: Request::flags & kOpenRings): the kOpen Reply then
 /// carries (SCM_RIGHTS) a sealed memfd holding a RingHeader and two rings of RingSlot: broker ->
 /// client (slot = the message above: frame + RxTrailer) and client -> broker (frame + TxStamp
@@ -34,7 +40,7 @@ namespace wheelhil::bus::ucan {
 
 inline constexpr char kSocketName[] = "ucan.sock";
 inline constexpr char kLockName[] = "ucan.lock";
-inline constexpr std::uint32_t kMagic = 0x33414355u;  // "UCA3" (v3: optional rings)
+inline constexpr std::uint32_t kMagic = 0x34414355u;  // "UCA4" (v4: request tokens)
 inline constexpr std::size_t kNameSize = 16;          // IFNAMSIZ, including the NUL
 inline constexpr std::size_t kCanMtu = 16;            // sizeof(struct can_frame)
 inline constexpr std::size_t kCanFdMtu = 72;          // sizeof(struct canfd_frame)
@@ -47,13 +53,13 @@ inline constexpr int kRequestTimeoutMs = 5000;
 
 enum class Op : std::uint32_t {
   kOpen = 1,          ///< Become a data connection on `name` ("" = any bus, ifindex 0).
-  kSetOptions = 2,    ///< Replace the CAN_RAW options of data client `client_id`.
+  kSetOptions = 2,    ///< Replace the CAN_RAW options of data client `client_id` (+ `token`).
   kResolveName = 3,   ///< name -> ifindex.
   kResolveIndex = 4,  ///< ifindex -> name.
-  kAddBus = 5,        ///< Idempotent; replies with the ifindex.
-  kRemoveBus = 6,     ///< Disconnects the bus's clients; ENODEV when unknown.
+  kAddBus = 5,        ///< Idempotent; replies with the ifindex. EPERM: control requests off.
+  kRemoveBus = 6,     ///< Disconnects the bus's clients; ENODEV when unknown. EPERM: as above.
   kList = 7,          ///< Reply followed by `count` BusInfo records.
-  kShutdown = 8,      ///< Stops the broker.
+  kShutdown = 8,      ///< Stops the broker. EPERM: as above.
 };
 
 /// The CAN_RAW socket options the broker applies (filters follow the Request).
@@ -77,6 +83,7 @@ struct Request {
   RawOptions options;
   std::uint32_t flags = 0;  ///< kOpen: kOpenRings.
   std::uint32_t reserved = 0;
+  std::uint64_t token = 0;  ///< kSetOptions: the token of `client_id`'s kOpen Reply.
 };
 
 inline constexpr std::uint32_t kOpenRings = 1;
@@ -89,6 +96,7 @@ struct Reply {
   char name[kNameSize] = {};
   std::uint32_t count = 0;  ///< kList: BusInfo records that follow.
   std::uint32_t reserved = 0;
+  std::uint64_t token = 0;  ///< kOpen: a random secret; requests about this client quote it.
 };
 
 struct BusInfo {
@@ -146,6 +154,8 @@ struct RingIndex {
   pthread_mutex_t lock;           ///< Client side (threads, forked processes): robust, shared.
 };
 
+/// Client-writable: the broker reads only the client's indexes (rx.head, tx.tail, the bells)
+/// and checks them; `slots` and its own indexes it keeps to itself.
 struct RingHeader {
   std::uint32_t magic = kMagic;
   std::uint32_t slots = 0;               ///< Per ring, a power of two.
@@ -162,16 +172,22 @@ inline RingSlot* RxSlots(RingHeader* h) {
   return reinterpret_cast<RingSlot*>(reinterpret_cast<std::uint8_t*>(h) +
                                      (sizeof(RingHeader) + 63) / 64 * 64);
 }
-inline RingSlot* TxSlots(RingHeader* h) { return RxSlots(h) + h->slots; }
+/// `slots`: the geometry as the caller knows it (the broker never takes it from the header).
+inline RingSlot* TxSlots(RingHeader* h, std::uint32_t slots) { return RxSlots(h) + slots; }
 
-/// After a producer's pushes: true when it must send one doorbell.
-inline bool RingTakeDoorbell(RingIndex& r) {
+/// A producer's doorbell takes one compare-exchange unless the consumer clears `pending` at
+/// the same moment; this many failures mean the other side keeps rewriting the word.
+inline constexpr int kDoorbellTries = 64;
+
+/// After a producer's pushes: 1 when it must send one doorbell, 0 when one is pending, -1 when
+/// `max_tries` compare-exchanges failed (the other side keeps rewriting the word).
+inline int RingTakeDoorbell(RingIndex& r, int max_tries) {
   std::atomic_thread_fence(std::memory_order_seq_cst);
   std::uint64_t w = r.bell.load();
-  while (!(w & 1)) {
-    if (r.bell.compare_exchange_weak(w, w + 3)) return true;
+  for (int i = 0; i < max_tries && !(w & 1); ++i) {
+    if (r.bell.compare_exchange_weak(w, w + 3)) return 1;
   }
-  return false;
+  return (w & 1) ? 0 : -1;
 }
 
 /// A client consumer, `lock` held, after it found the ring empty at `head` or took its last
@@ -199,6 +215,8 @@ static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 static_assert(sizeof(RxTrailer) == 24);
 static_assert(sizeof(TxAddress) == 8);
 static_assert(sizeof(TxStamp) == 8);
+static_assert(sizeof(Request) == 64);
+static_assert(sizeof(Reply) == 48);
 inline constexpr std::size_t kMaxRxMessage = kCanFdMtu + sizeof(RxTrailer);
 static_assert(kMaxRxMessage <= kSlotBytes);
 static_assert(kCanFdMtu + sizeof(TxStamp) + sizeof(TxAddress) <= kSlotBytes);

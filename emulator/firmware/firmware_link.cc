@@ -51,6 +51,7 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::Run
     bus::UcanBrokerOptions bo;
     bo.runtime_dir = runtime_dir_;
     bo.remove_runtime_dir = true;
+    bo.control_requests = false;  // the run owns its bus: the firmware cannot remove it
     broker_ = std::make_unique<bus::UcanBroker>(bo);
     iface_ = "ucan0";
     broker_->AddBus(iface_);
@@ -146,9 +147,19 @@ bool FirmwareLink::Send(const bus::CanFrame& frame) {
 void FirmwareLink::Pump(int timeout_ms) {
   unpumped_frames_ = 0;
   if (!broker_->Pump(timeout_ms)) run_.Fail("the userspace bus stopped");
+  CheckBrokerLimits();
+}
+
+void FirmwareLink::CheckBrokerLimits() {
+  const bus::UcanBrokerHealth health = broker_->Health();
+  if (health.refused_connections == 0) return;
+  run_.Fail(fmt::format("the firmware opened too many connections to the bus: {} ({} refused "
+                        "with EMFILE; a CAN socket is one connection, see docs/ucan.md)",
+                        health.last_refusal, health.refused_connections));
 }
 
 void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
+  if (broker_) CheckBrokerLimits();
   bus::ReceivedFrame rx;
   int wait = timeout_ms;
   while (!can_->Receive(rx, wait)) {
@@ -290,6 +301,10 @@ bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
       continue;
     }
     const auto ec = can_->Receive(rx, wait_ms);
+    if (broker_) {
+      CheckBrokerLimits();
+      if (run_.failed()) return false;
+    }
     if (!ec) {
       on_frame(rx.frame);
     } else if (process.running() && process.Exited()) {

@@ -73,6 +73,8 @@ class FirmwareLink {
 
  private:
   void Pump(int timeout_ms);
+  // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
+  void CheckBrokerLimits();
   // "the firmware was killed by signal 11 (SIGSEGV) during the run (see firmware.log)".
   void FailExited(const FirmwareProcess& process);
 

@@ -104,6 +104,22 @@ TEST_F(FirmwareSupervision, ACrashIsReportedWithItsSignal) {
               HasSubstr("the firmware was killed by signal 11 (SIGSEGV) before opening ucan0"));
 }
 
+TEST_F(FirmwareSupervision, AFirmwareOpeningHundredsOfSocketsEndsWithANamedReason) {
+  Scenario s = ShortPaper000();
+  s.firmware.command =
+      "/usr/bin/python3 -c \"import socket, time\n"
+      "held = []\n"
+      "for i in range(400):\n"
+      "    c = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)\n"
+      "    c.bind(('ucan0',))\n"
+      "    held.append(c)\n"
+      "time.sleep(30)\"";
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "sockets"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("the firmware opened too many connections to the bus"));
+  EXPECT_THAT(r.failure, HasSubstr("connections to the bus open, the limit per process"));
+}
+
 TEST_F(FirmwareSupervision, StaleRunDirectoriesAreRemovedLiveAndFreshOnesKept) {
   const fs::path tmp = dir_ / "tmp";
   fs::create_directories(tmp);
