@@ -2,7 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -107,7 +109,59 @@ void FieldReader::CheckNoDuplicateKeys(const YAML::Node& node, const std::string
   }
 }
 
+namespace {
+
+/// Offset of the first byte that does not start a valid UTF-8 sequence (overlong forms,
+/// surrogates and code points past U+10FFFF included), or npos.
+std::size_t FirstInvalidUtf8(std::string_view s) {
+  std::size_t i = 0;
+  while (i < s.size()) {
+    const auto b = static_cast<unsigned char>(s[i]);
+    std::size_t n = 0;
+    std::uint32_t cp = 0;
+    if (b < 0x80) {
+      ++i;
+      continue;
+    } else if ((b & 0xE0) == 0xC0) {
+      n = 1;
+      cp = b & 0x1F;
+    } else if ((b & 0xF0) == 0xE0) {
+      n = 2;
+      cp = b & 0x0F;
+    } else if ((b & 0xF8) == 0xF0) {
+      n = 3;
+      cp = b & 0x07;
+    } else {
+      return i;
+    }
+    for (std::size_t k = 1; k <= n; ++k) {
+      if (i + k >= s.size()) return i;
+      const auto c = static_cast<unsigned char>(s[i + k]);
+      if ((c & 0xC0) != 0x80) return i;
+      cp = cp << 6 | (c & 0x3F);
+    }
+    const std::uint32_t min = n == 1 ? 0x80 : n == 2 ? 0x800 : 0x10000;
+    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return i;
+    i += n + 1;
+  }
+  return std::string_view::npos;
+}
+
+}  // namespace
+
 YAML::Node FieldReader::Parse(const std::string& text) const {
+  // YAML is Unicode; wheelhil writes names and values it read into JSON reports, which must be
+  // UTF-8. Refused here, once, for every input file.
+  if (const std::size_t bad = FirstInvalidUtf8(text); bad != std::string_view::npos) {
+    YAML::Mark at;
+    at.pos = static_cast<int>(bad);
+    at.line = static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(bad), '\n'));
+    const std::size_t nl = bad == 0 ? std::string::npos : text.rfind('\n', bad - 1);
+    at.column = static_cast<int>(nl == std::string::npos ? bad : bad - nl - 1);
+    Fail(at, "(document)",
+         fmt::format("not UTF-8 text (byte 0x{:02X} at offset {})",
+                     static_cast<unsigned char>(text[bad]), bad));
+  }
   YAML::Node root;
   try {
     root = YAML::Load(text);

@@ -37,6 +37,10 @@ constexpr std::array<std::string_view, 16> kQuantityNames = {"rate_x",
                                                              "motor_torque"};
 /// Events naming refused frames, at most this many per device (the count goes on).
 constexpr std::uint64_t kRejectedFrameEvents = 10;
+/// A wheel speed set point beyond this (rad/s at the wheel, ~9 500 rpm) is clamped to it, as a
+/// drive clamps to its maximum speed: no wheeled robot's wheel turns that fast, and a float
+/// signal can say 1e30.
+constexpr double kMaxWheelSpeedSetpointRadS = 1000.0;
 
 [[noreturn]] void Fail(const std::string& field, const std::string& problem) {
   throw std::invalid_argument(fmt::format("{}: {}", field, problem));
@@ -326,7 +330,18 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
       if (!std::isfinite(v)) continue;
       Channel& c = ChannelOf(b.binding->wheel_index);
       if (b.binding->quantity == DbcQuantity::kWheelSpeedSetpoint) {
-        c.omega_rad_s = b.binding->gain * b.unit.ToSi(v);
+        const double omega = b.binding->gain * b.unit.ToSi(v);
+        c.omega_rad_s = std::clamp(omega, -kMaxWheelSpeedSetpointRadS, kMaxWheelSpeedSetpointRadS);
+        if (c.omega_rad_s != omega && ++clamped_setpoints_ <= kRejectedFrameEvents) {
+          port.Event(nlohmann::json{{"t_s", port.MotionSeconds(t_ns)},
+                                    {"event", "setpoint_clamped"},
+                                    {"device", name_},
+                                    {"message", r.msg->name},
+                                    {"signal", b.signal->name},
+                                    {"wheel", c.wheel},
+                                    {"commanded_rad_s", omega},
+                                    {"limit_rad_s", kMaxWheelSpeedSetpointRadS}});
+        }
         c.commanded = true;
       } else {
         c.enabled = v != 0.0;

@@ -145,6 +145,8 @@ class DbcDevice final : public Device {
   /// Motor controller: set-point frames taken, and refused (wrong length).
   std::uint64_t setpoint_frames() const { return setpoint_frames_; }
   std::uint64_t rejected_frames() const { return rejected_frames_; }
+  /// Set points beyond +-1000 rad/s at the wheel, clamped to it (`setpoint_clamped` events).
+  std::uint64_t clamped_setpoints() const { return clamped_setpoints_; }
 
   /// The messages it sends, in DBC order, and their periods.
   std::size_t message_count() const { return messages_.size(); }
@@ -208,6 +210,7 @@ class DbcDevice final : public Device {
   bool setpoint_timed_out_ = false;
   std::uint64_t setpoint_frames_ = 0;
   std::uint64_t rejected_frames_ = 0;
+  std::uint64_t clamped_setpoints_ = 0;
 };
 
 }  // namespace wheelhil::emulator

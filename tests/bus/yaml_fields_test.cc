@@ -159,6 +159,20 @@ TEST(FieldReader, ParseReportsSyntaxErrorsWithTheirPosition) {
   EXPECT_TRUE(r.Parse("").IsNull());
 }
 
+TEST(FieldReader, ParseRefusesTextThatIsNotUtf8AtItsPosition) {
+  const FieldReader r("bad.yaml");
+  // 0x8F alone (the campaign fuzzer's find: it reached a JSON fingerprint and threw there).
+  EXPECT_THAT(MessageOf([&] { r.Parse("name: ok\npath: ab\x8F\n"); }),
+              HasSubstr("bad.yaml:2:9: (document): not UTF-8 text (byte 0x8F at offset 17)"));
+  for (const char* bad : {"\xC0\xAF", "\xED\xA0\x80", "\xF4\x90\x80\x80", "\xE2\x82", "\xFF"}) {
+    EXPECT_THAT(MessageOf([&] { r.Parse(std::string("a: ") + bad); }), HasSubstr("not UTF-8"))
+        << bad;
+  }
+  // Valid: 2-, 3- and 4-byte forms.
+  EXPECT_EQ(r.Parse("a: \xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80")["a"].as<std::string>(),
+            "\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80");
+}
+
 TEST(FieldReader, ReadFileNamesAFileThatCannotBeRead) {
   EXPECT_THAT([] { FieldReader("/nonexistent/x.yaml").ReadFile(); },
               ThrowsMessage<std::invalid_argument>(

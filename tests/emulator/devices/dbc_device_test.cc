@@ -297,6 +297,52 @@ TEST(DbcMotorController, SetPointsDriveTheWheelsAndFeedbackReportsThem) {
   EXPECT_DOUBLE_EQ(fb.at("FbPosLeft"), 500);
 }
 
+TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
+  // A float signal can command 1e30 rad/s (or inf: non-finite values are ignored already).
+  constexpr const char* kFloatDbc = R"(VERSION ""
+BU_: Fw Mc
+BO_ 512 MC_Command: 8 Fw
+ SG_ SpeedLeft : 0|32@1- (1,0) [0|0] "rad/s" Mc
+ SG_ SpeedRight : 32|32@1- (1,0) [0|0] "rad/s" Mc
+BO_ 513 MC_Status: 1 Mc
+ SG_ Alive : 0|8@1+ (1,0) [0|255] "" Fw
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_ "GenMsgCycleTime" BO_ 513 10;
+SIG_VALTYPE_ 512 SpeedLeft : 1;
+SIG_VALTYPE_ 512 SpeedRight : 1;
+)";
+  const auto db =
+      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
+  DbcDeviceConfig c;
+  c.name = "mc";
+  c.node = "Mc";
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint),
+               Bind("Alive", DbcQuantity::kCounter)};
+  c.signals[0].motor_torque_limit_nm = 4.8;
+  c.signals[1].wheel_index = 1;
+  c.signals[1].motor_torque_limit_nm = 4.8;
+  DbcDevice d(db, c);
+  RecordingPort port;
+  d.OnFrame(bus::EncodeMessage(*db->FindMessage("MC_Command"),
+                               {{"SpeedLeft", 1e30}, {"SpeedRight", -12.5}}),
+            1'000'000, port);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 1000.0);
+  EXPECT_EQ(d.wheel_drives()[1].command.omega_rad_s, -12.5);
+  EXPECT_EQ(d.clamped_setpoints(), 1u);
+  ASSERT_EQ(port.events.size(), 1u);
+  EXPECT_EQ(port.events[0]["event"], "setpoint_clamped");
+  EXPECT_EQ(port.events[0]["signal"], "SpeedLeft");
+  EXPECT_EQ(port.events[0]["wheel"], 0);
+  EXPECT_NEAR(port.events[0]["commanded_rad_s"].get<double>(), 1e30, 1e24);
+  EXPECT_EQ(port.events[0]["limit_rad_s"], 1000.0);
+  d.OnFrame(bus::EncodeMessage(*db->FindMessage("MC_Command"),
+                               {{"SpeedLeft", -3e38}, {"SpeedRight", 0}}),
+            2'000'000, port);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, -1000.0);
+  EXPECT_EQ(d.clamped_setpoints(), 2u);
+}
+
 TEST(DbcMotorController, BindingsTheDbcCannotCarryAreRefusedNamingTheField) {
   const auto db =
       std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kMotorDbc, "mc.dbc"));
