@@ -71,8 +71,8 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::Run
 FirmwareLink::~FirmwareLink() { Close(); }
 
 void FirmwareLink::FailExited(const FirmwareProcess& process) {
-  run_.Fail(fmt::format("the firmware {} during the run (see firmware.log)",
-                        process.ExitDescription()));
+  run_.Fail(fmt::format("the firmware {} during the run (see firmware.log){}",
+                        process.ExitDescription(), process.CrashSummary()));
 }
 
 void FirmwareLink::Close() {
@@ -102,8 +102,8 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
     while (WallSeconds(t0) < timeout_s &&
            CountKernelCanReceivers(iface_) <= kernel_receivers_before_) {
       if (auto code = process.Exited(); code && *code != 0) {
-        why = fmt::format("the firmware {} before opening {} (see firmware.log)",
-                          process.ExitDescription(), iface_);
+        why = fmt::format("the firmware {} before opening {} (see firmware.log){}",
+                          process.ExitDescription(), iface_, process.CrashSummary());
         return false;
       } else if (code) {
         break;
@@ -118,8 +118,8 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
       if (st.name == iface_ && st.clients >= 2) return true;
     }
     if (auto code = process.Exited()) {
-      why = fmt::format("the firmware {} before opening {} (see firmware.log)",
-                        process.ExitDescription(), iface_);
+      why = fmt::format("the firmware {} before opening {} (see firmware.log){}",
+                        process.ExitDescription(), iface_, process.CrashSummary());
       return false;
     }
     if (pumped_) {

@@ -3,17 +3,21 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
-#include <functional>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
 #include <stdexcept>
 #include <thread>
 
 #include <fmt/format.h>
 
+#include "emulator/firmware/crash_frames.h"
 #include "emulator/sim/signal_name.h"
 
 namespace wheelhil::emulator::firmware {
@@ -25,9 +29,14 @@ void FirmwareProcess::Start(const std::string& command,
   ProcessScope::BecomeSubreaper();
   scope_ = ProcessScope();
   wait_status_ = -1;
+  log_path_ = log_path;
+  crash_frames_.clear();
+  std::error_code ec;
+  cwd_ = std::filesystem::current_path(ec).string();
   const auto [marker_key, marker_value] = scope_.EnvironmentEntry();
   const pid_t parent = ::getpid();
   pid_ = ::fork();
+  started_pid_ = pid_;
   if (pid_ < 0) {
     if (log_fd >= 0) ::close(log_fd);
     throw std::runtime_error("fork failed");
@@ -58,6 +67,46 @@ void FirmwareProcess::Reaped(int wait_status) {
   exit_status_ = WIFEXITED(wait_status) ? WEXITSTATUS(wait_status) : 128 + WTERMSIG(wait_status);
   // Helpers it left behind go with it.
   scope_.KillAll();
+  if (WIFSIGNALED(wait_status)) NoteCrash(WTERMSIG(wait_status), WCOREDUMP(wait_status) != 0);
+}
+
+void FirmwareProcess::NoteCrash(int signal, bool core_dumped) {
+  std::string note;
+  if (core_dumped) {
+    const std::string dir = std::filesystem::path(log_path_).parent_path().string();
+    const CrashFrames crash = ReadCrashFrames(started_pid_, cwd_, dir.empty() ? "." : dir);
+    crash_frames_ = crash.frames;
+    note = crash.frames.empty() ? "no stack: " + crash.note : "";
+    for (const std::string& f : crash.frames) note += f + "\n";
+    if (!crash.core_path.empty()) note += "core: " + crash.core_path + "\n";
+  } else if (signal == SIGSEGV || signal == SIGABRT || signal == SIGBUS || signal == SIGFPE ||
+             signal == SIGILL || signal == SIGTRAP || signal == SIGSYS) {
+    rlimit core{};
+    if (::getrlimit(RLIMIT_CORE, &core) == 0 && core.rlim_cur == 0) {
+      note = "no core dump (ulimit -c is 0): run with `ulimit -c unlimited` and gdb installed "
+             "for the crash's first frames\n";
+    }
+  }
+  if (note.empty() || log_path_.empty()) return;
+  std::ofstream log(log_path_, std::ios::app);
+  log << "wheelhil: the firmware was killed by " << sim::SignalName(signal) << "\n" << note;
+}
+
+std::string FirmwareProcess::CrashSummary() const {
+  if (crash_frames_.empty()) return {};
+  std::string shown;
+  for (std::size_t i = 0; i < crash_frames_.size() && i < 3; ++i) {
+    // "#0  0x000055d0c1 in crash_here (p=0x0) at fw.c:2" -> "crash_here (p=0x0) at fw.c:2"
+    std::string f = crash_frames_[i];
+    if (const std::size_t in = f.find(" in "); in != std::string::npos) {
+      f = f.substr(in + 4);
+    } else if (const std::size_t sp = f.find_first_of(' '); sp != std::string::npos) {
+      f = f.substr(f.find_first_not_of(' ', sp));
+    }
+    shown += (i == 0 ? "" : " <- ") + f;
+  }
+  return fmt::format("; first frames: {} (firmware.core; {} frames in firmware.log)", shown,
+                     crash_frames_.size());
 }
 
 std::string FirmwareProcess::ExitDescription() const {

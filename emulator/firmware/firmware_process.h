@@ -35,6 +35,10 @@ class FirmwareProcess {
   /// How it ended, for a failure reason: "exited with status 3", "was killed by signal 11
   /// (SIGSEGV)". Empty while it runs.
   std::string ExitDescription() const;
+  /// After a crash with a core: "; first frames: crash_here (p=0x0) at fw.c:2 <- caller () at
+  /// fw.c:3 <- main () at fw.c:4 (firmware.core; 8 frames in firmware.log)", else empty (the
+  /// log says why there are none: core dumps off, gdb missing, ...). See crash_frames.h.
+  std::string CrashSummary() const;
   /// Ends the process group (see above). Idempotent. `while_waiting` (each call short) runs
   /// in the grace period instead of a sleep: a firmware on the virtual clock needs its time to
   /// go on to see its own shutdown through.
@@ -44,8 +48,14 @@ class FirmwareProcess {
 
  private:
   void Reaped(int wait_status);
+  // Reads the core's first frames (or says in the log why there are none).
+  void NoteCrash(int signal, bool core_dumped);
 
   pid_t pid_ = -1;
+  pid_t started_pid_ = -1;
+  std::string log_path_;
+  std::string cwd_;
+  std::vector<std::string> crash_frames_;
   int exit_status_ = 0;
   int wait_status_ = -1;  // as waitpid gave it; -1 before the end
   ProcessScope scope_;

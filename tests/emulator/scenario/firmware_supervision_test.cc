@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -102,6 +103,32 @@ TEST_F(FirmwareSupervision, ACrashIsReportedWithItsSignal) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.failure,
               HasSubstr("the firmware was killed by signal 11 (SIGSEGV) before opening ucan0"));
+}
+
+TEST_F(FirmwareSupervision, ACrashWithACoreIsReportedWithItsFirstFrames) {
+  std::ifstream pattern_file("/proc/sys/kernel/core_pattern");
+  std::string pattern;
+  std::getline(pattern_file, pattern);
+  rlimit core{};
+  ::getrlimit(RLIMIT_CORE, &core);
+  if (pattern.empty() || pattern[0] == '|' || core.rlim_max == 0 ||
+      std::system("command -v gdb >/dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "needs core files (core_pattern '" << pattern
+                 << "', a hard core limit above 0) and gdb";
+  }
+  Scenario s = ShortPaper000();
+  s.firmware.command = std::string("sh -c 'ulimit -c unlimited; exec ") + CRASH_FIRMWARE + "'";
+  const fs::path out = dir_ / "core";
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("the firmware was killed by signal 11 (SIGSEGV), core dumped"));
+  EXPECT_THAT(r.failure, HasSubstr("; first frames: crash_here (p=0x0) at "));
+  EXPECT_THAT(r.failure, HasSubstr("crash_firmware.c:8 <- caller () at "));
+  EXPECT_TRUE(fs::exists(out / "firmware.core"));
+  std::ifstream log(out / "firmware.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(text, HasSubstr("#2 "));
+  EXPECT_THAT(text, HasSubstr("main () at "));
 }
 
 TEST_F(FirmwareSupervision, AFirmwareOpeningHundredsOfSocketsEndsWithANamedReason) {
