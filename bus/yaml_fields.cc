@@ -111,15 +111,29 @@ void FieldReader::CheckNoDuplicateKeys(const YAML::Node& node, const std::string
 
 namespace {
 
+/// YAML 1.2 c-printable: TAB, LF, CR, U+0020..U+007E, U+0085, U+00A0..U+D7FF,
+/// U+E000..U+FFFD, U+10000..U+10FFFF. yaml-cpp lets the rest through (a NUL in a scalar came
+/// out of it as a byte that is not UTF-8).
+bool YamlPrintable(std::uint32_t cp) {
+  return cp == 0x09 || cp == 0x0A || cp == 0x0D || (cp >= 0x20 && cp <= 0x7E) || cp == 0x85 ||
+         (cp >= 0xA0 && cp <= 0xD7FF) || (cp >= 0xE000 && cp <= 0xFFFD) || cp >= 0x10000;
+}
+
 /// Offset of the first byte that does not start a valid UTF-8 sequence (overlong forms,
-/// surrogates and code points past U+10FFFF included), or npos.
-std::size_t FirstInvalidUtf8(std::string_view s) {
+/// surrogates and code points past U+10FFFF included), or npos; `*cp` is the code point at a
+/// valid one that is not YAML-printable (0xFFFFFFFF: invalid UTF-8).
+std::size_t FirstInvalidUtf8(std::string_view s, std::uint32_t* bad_cp) {
+  *bad_cp = 0xFFFFFFFFu;
   std::size_t i = 0;
   while (i < s.size()) {
     const auto b = static_cast<unsigned char>(s[i]);
     std::size_t n = 0;
     std::uint32_t cp = 0;
     if (b < 0x80) {
+      if (!YamlPrintable(b)) {
+        *bad_cp = b;
+        return i;
+      }
       ++i;
       continue;
     } else if ((b & 0xE0) == 0xC0) {
@@ -142,6 +156,10 @@ std::size_t FirstInvalidUtf8(std::string_view s) {
     }
     const std::uint32_t min = n == 1 ? 0x80 : n == 2 ? 0x800 : 0x10000;
     if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return i;
+    if (!YamlPrintable(cp)) {
+      *bad_cp = cp;
+      return i;
+    }
     i += n + 1;
   }
   return std::string_view::npos;
@@ -152,15 +170,19 @@ std::size_t FirstInvalidUtf8(std::string_view s) {
 YAML::Node FieldReader::Parse(const std::string& text) const {
   // YAML is Unicode; wheelhil writes names and values it read into JSON reports, which must be
   // UTF-8. Refused here, once, for every input file.
-  if (const std::size_t bad = FirstInvalidUtf8(text); bad != std::string_view::npos) {
+  std::uint32_t bad_cp = 0;
+  if (const std::size_t bad = FirstInvalidUtf8(text, &bad_cp); bad != std::string_view::npos) {
     YAML::Mark at;
     at.pos = static_cast<int>(bad);
     at.line = static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(bad), '\n'));
     const std::size_t nl = bad == 0 ? std::string::npos : text.rfind('\n', bad - 1);
     at.column = static_cast<int>(nl == std::string::npos ? bad : bad - nl - 1);
     Fail(at, "(document)",
-         fmt::format("not UTF-8 text (byte 0x{:02X} at offset {})",
-                     static_cast<unsigned char>(text[bad]), bad));
+         bad_cp == 0xFFFFFFFFu
+             ? fmt::format("not UTF-8 text (byte 0x{:02X} at offset {})",
+                           static_cast<unsigned char>(text[bad]), bad)
+             : fmt::format("not YAML text: control character U+{:04X} at offset {}", bad_cp,
+                           bad));
   }
   YAML::Node root;
   try {

@@ -168,6 +168,16 @@ TEST(FieldReader, ParseRefusesTextThatIsNotUtf8AtItsPosition) {
     EXPECT_THAT(MessageOf([&] { r.Parse(std::string("a: ") + bad); }), HasSubstr("not UTF-8"))
         << bad;
   }
+  // Valid UTF-8 but not YAML: a NUL in a scalar (the campaign fuzzer's second find: yaml-cpp
+  // turned it into a byte that is not UTF-8), other C0/C1 controls, DEL.
+  EXPECT_THAT(MessageOf([&] { r.Parse(std::string("a: x\0y\n", 7)); }),
+              HasSubstr("bad.yaml:1:5: (document): not YAML text: control character U+0000"));
+  for (const char* bad : {"\x01", "\x7F", "\xC2\x9B"}) {
+    EXPECT_THAT(MessageOf([&] { r.Parse(std::string("a: ") + bad); }),
+                HasSubstr("control character"))
+        << bad;
+  }
+  EXPECT_EQ(r.Parse("a:\tb\r\n")["a"].as<std::string>(), "b");
   // Valid: 2-, 3- and 4-byte forms.
   EXPECT_EQ(r.Parse("a: \xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80")["a"].as<std::string>(),
             "\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80");
