@@ -24,6 +24,7 @@
 
 #include "bus/ucan_broker.h"
 #include "bus/ucan_protocol.h"
+#include "tests/bus/ucan_raw_io.h"
 #include "tests/bus/ucan_test_util.h"
 
 namespace wheelhil::bus {
@@ -71,22 +72,12 @@ class RawClient {
   std::optional<ucan::Reply> Reply(int* passed_fd = nullptr) {
     if (!testing::Readable(fd_, 2000)) return std::nullopt;
     ucan::Reply reply;
-    iovec iov{&reply, sizeof(reply)};
-    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
-    msghdr msg{};
-    msg.msg_iov = &iov;
-    msg.msg_iovlen = 1;
-    msg.msg_control = control;
-    msg.msg_controllen = sizeof(control);
-    ssize_t n = ::recvmsg(fd_, &msg, MSG_CMSG_CLOEXEC);
+    ssize_t n = testing::ReceiveWithFd(fd_, &reply, sizeof(reply), 0, passed_fd);
     // Closed with our request unread: ECONNRESET once, then the reply (as the library does).
-    if (n < 0 && errno == ECONNRESET) n = ::recvmsg(fd_, &msg, MSG_CMSG_CLOEXEC | MSG_DONTWAIT);
-    if (n != static_cast<ssize_t>(sizeof(reply))) return std::nullopt;
-    for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
-      if (c->cmsg_type == SCM_RIGHTS && passed_fd != nullptr) {
-        std::memcpy(passed_fd, CMSG_DATA(c), sizeof(int));
-      }
+    if (n < 0 && errno == ECONNRESET) {
+      n = testing::ReceiveWithFd(fd_, &reply, sizeof(reply), MSG_DONTWAIT, passed_fd);
     }
+    if (n != static_cast<ssize_t>(sizeof(reply))) return std::nullopt;
     return reply;
   }
   /// kOpen on `bus` (receive everything); with rings, maps them. nullopt when refused.
@@ -106,12 +97,9 @@ class RawClient {
     auto reply = Reply(&memfd);
     if (!reply || reply->error != 0) return reply;
     if (memfd >= 0) {
-      struct stat st {};
-      ::fstat(memfd, &st);
-      ring_bytes_ = static_cast<std::size_t>(st.st_size);
-      void* p = ::mmap(nullptr, ring_bytes_, PROT_READ | PROT_WRITE, MAP_SHARED, memfd, 0);
+      void* p = testing::MapRingMemfd(memfd, &ring_bytes_);
       ::close(memfd);
-      if (p != MAP_FAILED) {
+      if (p != nullptr) {
         rings_ = static_cast<ucan::RingHeader*>(p);
         slots_ = rings_->slots;
       }

@@ -11,7 +11,6 @@
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
@@ -26,6 +25,7 @@
 #include "bus/ucan_broker.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
+#include "tests/bus/ucan_raw_io.h"
 #include "tests/fuzz/fuzz_target.h"
 
 namespace {
@@ -61,29 +61,11 @@ struct Connection {
   /// Takes the reply (and a ring memfd) if one is there.
   void TakeReply() {
     alignas(8) std::uint8_t buf[sizeof(ucan::Reply) + 64];
-    iovec iov{buf, sizeof(buf)};
-    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
-    msghdr msg{};
-    msg.msg_iov = &iov;
-    msg.msg_iovlen = 1;
-    msg.msg_control = control;
-    msg.msg_controllen = sizeof(control);
-    if (::recvmsg(fd, &msg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC) <= 0) return;
-    for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c)) {
-      if (c->cmsg_type != SCM_RIGHTS) continue;
-      int memfd = -1;
-      std::memcpy(&memfd, CMSG_DATA(c), sizeof(memfd));
-      struct stat st {};
-      if (rings == nullptr && ::fstat(memfd, &st) == 0 && st.st_size > 0) {
-        void* p = ::mmap(nullptr, static_cast<std::size_t>(st.st_size), PROT_READ | PROT_WRITE,
-                         MAP_SHARED, memfd, 0);
-        if (p != MAP_FAILED) {
-          rings = p;
-          ring_bytes = static_cast<std::size_t>(st.st_size);
-        }
-      }
-      ::close(memfd);
-    }
+    int memfd = -1;
+    if (testing::ReceiveWithFd(fd, buf, sizeof(buf), MSG_DONTWAIT, &memfd) <= 0) return;
+    if (memfd < 0) return;
+    if (rings == nullptr) rings = testing::MapRingMemfd(memfd, &ring_bytes);
+    ::close(memfd);
   }
 };
 
