@@ -79,32 +79,54 @@ std::string FieldReader::ReadFile() const {
   return text;
 }
 
-void FieldReader::CheckNoDuplicateKeys(const YAML::Node& node, const std::string& field,
-                                       int depth, std::size_t& nodes) const {
-  if (depth > kMaxDepth) Fail(node, field.empty() ? "(document)" : field, "nested too deeply");
+std::string FieldReader::FieldName(const std::vector<PathStep>& path) {
+  std::string name;
+  for (const PathStep& step : path) {
+    if (step.kind == PathStep::kKey) {
+      name = Join(name, step.key);
+    } else if (step.kind == PathStep::kIndex) {
+      name += fmt::format("[{}]", step.index);
+    }
+  }
+  return name;
+}
+
+void FieldReader::CheckNoDuplicateKeys(const YAML::Node& node, std::vector<PathStep>& path,
+                                       std::size_t& nodes) const {
+  const auto field = [&] {
+    const std::string name = FieldName(path);
+    return name.empty() ? std::string("(document)") : name;
+  };
+  if (path.size() > static_cast<std::size_t>(kMaxDepth)) Fail(node, field(), "nested too deeply");
   // Aliases share nodes, so a small file can expand to billions of them ("billion laughs").
   if (++nodes > kMaxNodes) {
-    Fail(node, field.empty() ? "(document)" : field,
+    Fail(node, field(),
          fmt::format("the document expands to more than {} nodes (aliases?)", kMaxNodes));
   }
   if (node.IsSequence()) {
-    for (std::size_t i = 0; i < node.size(); ++i) {
-      CheckNoDuplicateKeys(node[i], fmt::format("{}[{}]", field, i), depth + 1, nodes);
+    const std::size_t n = node.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      path.push_back({PathStep::kIndex, {}, i});
+      CheckNoDuplicateKeys(node[i], path, nodes);
+      path.pop_back();
     }
   } else if (node.IsMap()) {
-    std::map<std::string, YAML::Mark> seen;
+    std::map<std::string_view, YAML::Mark> seen;
     for (const auto& kv : node) {
       if (kv.first.IsScalar()) {
         const std::string& key = kv.first.Scalar();
         const auto [it, inserted] = seen.emplace(key, kv.first.Mark());
+        path.push_back({PathStep::kKey, key, 0});
         if (!inserted) {
-          Fail(kv.first, Join(field, key),
+          Fail(kv.first, FieldName(path),
                fmt::format("duplicate key (first at line {})", it->second.line + 1));
         }
-        CheckNoDuplicateKeys(kv.second, Join(field, key), depth + 1, nodes);
+        CheckNoDuplicateKeys(kv.second, path, nodes);
       } else {
-        CheckNoDuplicateKeys(kv.second, field, depth + 1, nodes);
+        path.push_back({PathStep::kSame, {}, 0});
+        CheckNoDuplicateKeys(kv.second, path, nodes);
       }
+      path.pop_back();
     }
   }
 }
@@ -191,7 +213,8 @@ YAML::Node FieldReader::Parse(const std::string& text) const {
     Fail(e.mark, "(document)", "YAML syntax error: " + e.msg);
   }
   std::size_t nodes = 0;
-  CheckNoDuplicateKeys(root, "", 0, nodes);
+  std::vector<PathStep> path;
+  CheckNoDuplicateKeys(root, path, nodes);
   return root;
 }
 

@@ -20,6 +20,7 @@
 #include <set>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <yaml-cpp/yaml.h>
 
@@ -117,7 +118,16 @@ class FieldReader {
 
  private:
   [[noreturn]] void FailYaml(const YAML::Exception& e) const;
-  void CheckNoDuplicateKeys(const YAML::Node& node, const std::string& field, int depth,
+  // One step from the document to a node: a key, an index, or a complex key's value (the
+  // field name stays its parent's). The name is formatted only for a message: the walk over a
+  // document of a million nodes must not build a million strings.
+  struct PathStep {
+    enum Kind { kKey, kIndex, kSame } kind;
+    std::string_view key;
+    std::size_t index;
+  };
+  static std::string FieldName(const std::vector<PathStep>& path);
+  void CheckNoDuplicateKeys(const YAML::Node& node, std::vector<PathStep>& path,
                             std::size_t& nodes) const;
   YAML::Node Required(const YAML::Node& parent, const std::string& key,
                       std::string_view field) const;

@@ -11,6 +11,7 @@
 
 #include "bus/canopen.h"
 #include "bus/dbc_codec.h"
+#include "bus/install_paths.h"
 #include "firmware_stub/dbc_binding.h"
 
 namespace wheelhil::fw {
@@ -287,7 +288,8 @@ FwProtocol FwProtocol::LoadDir(const std::string& dir, const std::vector<int>& n
   Sources s;
   auto load = [&](const std::string& name) {
     const fs::path p = fs::path(dir) / name;
-    if (!fs::exists(p)) {
+    std::error_code ec;
+    if (!fs::exists(p, ec)) {
       throw std::invalid_argument(fmt::format("{}: DBC file not found", p.string()));
     }
     return std::make_shared<const DbcDatabase>(DbcDatabase::LoadFile(p.string()));
@@ -304,15 +306,9 @@ FwProtocol FwProtocol::LoadDir(const std::string& dir, const std::vector<int>& n
 }
 
 std::string FwProtocol::FindDbcDir(const std::string& configured, const std::string& exe_dir) {
-  namespace fs = std::filesystem;
   if (!configured.empty()) return configured;
   if (const char* env = std::getenv("WHEELHIL_DBC_DIR"); env && *env) return env;
-  for (const fs::path& cand : {fs::path(exe_dir) / ".." / ".." / "bus" / "dbc",
-                               fs::path(exe_dir) / ".." / "share" / "wheelhil" / "dbc"}) {
-    std::error_code ec;
-    if (fs::exists(cand / "wheelhil_fw.dbc", ec)) return cand.lexically_normal().string();
-  }
-  return {};
+  return bus::FindShippedDbcDir(exe_dir);
 }
 
 FrameKind FwProtocol::Classify(const CanFrame& f, std::uint8_t& node_id) const noexcept {

@@ -147,9 +147,8 @@ class FwProtocol {
   static FwProtocol LoadDir(const std::string& dir, const std::vector<int>& node_ids,
                             std::uint32_t imu_yaw_id, std::uint32_t accel_id);
 
-  /// The DBC directory: `configured` if not empty; else $WHEELHIL_DBC_DIR; else the first of
-  /// <exe_dir>/../../bus/dbc (a build tree's bin/), <exe_dir>/../share/wheelhil/dbc (an
-  /// install) that holds wheelhil_fw.dbc. Empty when none does.
+  /// The DBC directory: `configured` if not empty; else $WHEELHIL_DBC_DIR; else the shipped
+  /// files of a build tree or an install (bus/install_paths.h). Empty when none is found.
   static std::string FindDbcDir(const std::string& configured, const std::string& exe_dir);
 
   FrameKind Classify(const bus::CanFrame& frame, std::uint8_t& node_id) const noexcept;

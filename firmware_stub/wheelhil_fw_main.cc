@@ -23,6 +23,7 @@
 #include <system_error>
 
 #include "bus/candump_log.h"
+#include "bus/install_paths.h"
 #include "bus/socketcan_transport.h"
 #include "firmware_stub/drive_protocol.h"
 #include "firmware_stub/fw_app.h"
@@ -54,11 +55,6 @@ std::int64_t RealtimeNs() {
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-std::string ExeDir() {
-  std::error_code ec;
-  const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string(".") : p.parent_path().string();
-}
 
 }  // namespace
 
@@ -74,7 +70,8 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path, "Firmware config YAML")->required();
   app.add_option("--dbc-dir", dbc_dir,
                  "Directory with the protocol DBC files (default: config dbc_dir, "
-                 "$WHEELHIL_DBC_DIR, <exe>/../../bus/dbc, <exe>/../share/wheelhil/dbc)");
+                 "$WHEELHIL_DBC_DIR, the shipped files: <exe>/../../bus/dbc in a build tree, "
+                 "<exe>/" + bus::InstalledDataDirFromBin() + "/dbc installed)");
   app.add_option("--log", log_path, "Write every frame received and sent (candump -L format)");
   app.add_flag("--quiet", quiet, "No start-up / summary messages on stderr");
   app.add_option("--clock-rate", g_clock_rate,
@@ -109,11 +106,12 @@ int main(int argc, char** argv) {
   try {
     cfg = fw::LoadFwConfig(config_path);
     const std::string dir =
-        fw::FwProtocol::FindDbcDir(dbc_dir.empty() ? cfg.dbc_dir : dbc_dir, ExeDir());
+        fw::FwProtocol::FindDbcDir(dbc_dir.empty() ? cfg.dbc_dir : dbc_dir, bus::RunningExecutableDir());
     if (dir.empty()) {
       throw std::invalid_argument(
           "no DBC directory: set dbc_dir in the config, --dbc-dir or WHEELHIL_DBC_DIR "
-          "(searched <exe>/../../bus/dbc and <exe>/../share/wheelhil/dbc)");
+          "(searched <exe>/../../bus/dbc and <exe>/" +
+          bus::InstalledDataDirFromBin() + "/dbc)");
     }
     std::vector<int> ids;
     for (const auto& n : cfg.encoder_nodes()) ids.push_back(n.node_id);

@@ -157,12 +157,13 @@ CampaignOutcome RunCampaign(const CampaignSpec& spec, const CampaignOptions& opt
 
 std::vector<fs::path> FindSmokeScenarios(const fs::path& dir_or_list) {
   std::vector<fs::path> out;
-  if (fs::is_directory(dir_or_list)) {
+  std::error_code ec;
+  if (fs::is_directory(dir_or_list, ec)) {
     for (const auto& e : fs::directory_iterator(dir_or_list)) {
       if (e.is_regular_file() && e.path().extension() == ".yaml") out.push_back(e.path());
     }
     std::sort(out.begin(), out.end());
-  } else if (fs::is_regular_file(dir_or_list)) {
+  } else if (fs::is_regular_file(dir_or_list, ec)) {
     std::ifstream in(dir_or_list);
     std::string line;
     int n = 0;
@@ -174,7 +175,7 @@ std::vector<fs::path> FindSmokeScenarios(const fs::path& dir_or_list) {
       if (line.empty()) continue;
       fs::path p = line;
       if (p.is_relative()) p = dir_or_list.parent_path() / p;
-      if (!fs::is_regular_file(p)) {
+      if (!fs::is_regular_file(p, ec)) {
         throw std::invalid_argument(
             fmt::format("{}:{}: scenario: '{}' not found", dir_or_list.string(), n, p.string()));
       }

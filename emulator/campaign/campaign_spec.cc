@@ -259,9 +259,12 @@ CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
   const std::string base = L.NonEmpty(root, "base", "base");
   spec.base_scenario = fs::path(base).is_absolute() ? fs::path(base) : dir / base;
   spec.base_scenario = spec.base_scenario.lexically_normal();
-  if (!fs::is_regular_file(spec.base_scenario)) {
+  // The error_code forms: a path the file system refuses (too long, a loop) is an input error.
+  std::error_code ec;
+  if (!fs::is_regular_file(spec.base_scenario, ec)) {
     L.Fail(root["base"], "base",
-           fmt::format("scenario '{}' not found", spec.base_scenario.string()));
+           fmt::format("scenario '{}' not found{}", spec.base_scenario.string(),
+                       ec ? " (" + ec.message() + ")" : std::string()));
   }
 
   const std::string sampling = root["sampling"] ? L.NonEmpty(root["sampling"], "sampling") : "grid";

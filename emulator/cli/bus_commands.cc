@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "bus/install_paths.h"
 #include "bus/ucan_broker.h"
 #include "bus/ucan_runtime_dir.h"
 
@@ -120,12 +121,28 @@ int RunList() {
   return 0;
 }
 
-int RunExec(const std::vector<std::string>& buses, const std::vector<std::string>& command) {
+// `runtime_dir` empty: the user's buses (bus/ucan_runtime_dir.h), started on demand; else a bus
+// that already runs there, such as a run's private bus, which exec only attaches to.
+int RunExec(const std::vector<std::string>& buses, const std::string& runtime_dir,
+            const std::vector<std::string>& command) {
   if (command.empty()) {
     fmt::print(stderr, "wheelhil exec: no program given (wheelhil exec -- PROGRAM ARGS...)\n");
     return 2;
   }
-  const std::string dir = bus::ResolveUcanRuntimeDir();
+  const std::string dir = runtime_dir.empty() ? bus::ResolveUcanRuntimeDir() : runtime_dir;
+  if (!runtime_dir.empty()) {
+    if (!buses.empty()) {
+      fmt::print(stderr, "wheelhil exec: --runtime-dir attaches to buses that run there; it "
+                         "cannot start one (--bus)\n");
+      return 2;
+    }
+    std::vector<bus::UcanBusStats> stats;
+    if (const auto ec = bus::UcanListBuses(dir, &stats)) {
+      fmt::print(stderr, "wheelhil exec: no userspace bus runs in {}: {} (has its run ended?)\n",
+                 dir, NoBroker(ec) ? std::string("no broker there") : ec.message());
+      return 1;
+    }
+  }
   try {
     for (const auto& name : buses) EnsureUcanBus(dir, name);
   } catch (const std::exception& e) {
@@ -177,11 +194,7 @@ std::string UcanPreloadLibraryPath() {
   if (const char* lib = std::getenv("WHEELHIL_UCAN_LIB"); lib != nullptr && lib[0] != '\0') {
     return lib;
   }
-  char exe[4096] = {};
-  const ssize_t n = ::readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-  std::string dir = n > 0 ? std::string(exe, static_cast<std::size_t>(n)) : std::string(".");
-  dir = dir.substr(0, dir.find_last_of('/'));
-  return dir + "/../lib/libwheelhil_ucan.so";
+  return bus::FindPreloadLibrary(bus::RunningExecutableDir(), "libwheelhil_ucan.so");
 }
 
 BusCommands::BusCommands(CLI::App& app) {
@@ -197,6 +210,9 @@ BusCommands::BusCommands(CLI::App& app) {
   // Registered for --help; the command line is split by RunExecIfRequested() before CLI11
   // sees it, so the program's own options and `--` reach it untouched.
   exec_->add_option("--bus", exec_buses_, "Bring this bus up first (repeatable)");
+  exec_->add_option("--runtime-dir", exec_runtime_dir_,
+                    "Attach to the buses running in this directory (a run's private bus: "
+                    "`wheelhil run` prints it) instead of your own");
   exec_->allow_extras();
 }
 
@@ -204,13 +220,14 @@ std::optional<int> BusCommands::Run() {
   if (up_->parsed()) return RunUp(up_name_);
   if (down_->parsed()) return RunDown(down_name_);
   if (list_->parsed()) return RunList();
-  if (exec_->parsed()) return RunExec(exec_buses_, exec_->remaining());
+  if (exec_->parsed()) return RunExec(exec_buses_, exec_runtime_dir_, exec_->remaining());
   return std::nullopt;
 }
 
 std::optional<int> BusCommands::RunExecIfRequested(int argc, char** argv) {
   if (argc < 2 || std::strcmp(argv[1], "exec") != 0) return std::nullopt;
   std::vector<std::string> buses;
+  std::string runtime_dir;
   int i = 2;
   for (; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -222,17 +239,23 @@ std::optional<int> BusCommands::RunExecIfRequested(int argc, char** argv) {
       buses.push_back(argv[++i]);
     } else if (arg.rfind("--bus=", 0) == 0) {
       buses.push_back(arg.substr(6));
+    } else if (arg == "--runtime-dir" && i + 1 < argc) {
+      runtime_dir = argv[++i];
+    } else if (arg.rfind("--runtime-dir=", 0) == 0) {
+      runtime_dir = arg.substr(14);
     } else if (arg == "-h" || arg == "--help") {
       return std::nullopt;  // CLI11 prints the help
     } else if (!arg.empty() && arg[0] == '-') {
-      fmt::print(stderr, "wheelhil exec: unknown option {} (exec [--bus NAME] -- PROGRAM ARGS)\n",
+      fmt::print(stderr,
+                 "wheelhil exec: unknown option {} (exec [--bus NAME | --runtime-dir DIR] -- "
+                 "PROGRAM ARGS)\n",
                  arg);
       return 2;
     } else {
       break;
     }
   }
-  return RunExec(buses, std::vector<std::string>(argv + i, argv + argc));
+  return RunExec(buses, runtime_dir, std::vector<std::string>(argv + i, argv + argc));
 }
 
 }  // namespace wheelhil::emulator

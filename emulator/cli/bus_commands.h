@@ -1,8 +1,9 @@
 #pragma once
-/// `wheelhil bus up|down|list NAME` and `wheelhil exec [--bus NAME] -- PROGRAM ARGS...`: the
-/// userspace CAN bus daemon and running unmodified SocketCAN programs on it (LD_PRELOAD of
-/// libwheelhil_ucan.so, found at ../lib next to the wheelhil executable, or $WHEELHIL_UCAN_LIB).
-/// The runtime directory comes from the environment (bus/ucan_runtime_dir.h).
+/// `wheelhil bus up|down|list NAME` and `wheelhil exec [--bus NAME | --runtime-dir DIR] --
+/// PROGRAM ARGS...`: the userspace CAN bus daemon and running unmodified SocketCAN programs on
+/// it (LD_PRELOAD of libwheelhil_ucan.so of this build tree or install, or $WHEELHIL_UCAN_LIB).
+/// The runtime directory comes from the environment (bus/ucan_runtime_dir.h), or for exec from
+/// --runtime-dir (a run's private bus).
 /// Thread-compatible; exec replaces the process.
 
 #include <CLI/CLI.hpp>
@@ -34,6 +35,7 @@ class BusCommands {
   std::string up_name_;
   std::string down_name_;
   std::vector<std::string> exec_buses_;
+  std::string exec_runtime_dir_;
 };
 
 /// Makes sure a daemon broker serves `runtime_dir` (starting one, detached, if none does) and
@@ -47,8 +49,8 @@ int EnsureUcanBus(const std::string& runtime_dir, const std::string& name);
 std::vector<std::pair<std::string, std::string>> UcanChildEnvironment(
     const std::string& runtime_dir);
 
-/// Path of libwheelhil_ucan.so for LD_PRELOAD: $WHEELHIL_UCAN_LIB, else
-/// <dir of the running executable>/../lib/libwheelhil_ucan.so.
+/// Path of libwheelhil_ucan.so for LD_PRELOAD: $WHEELHIL_UCAN_LIB, else the one of the build
+/// tree or the install this executable belongs to (bus/install_paths.h).
 std::string UcanPreloadLibraryPath();
 
 }  // namespace wheelhil::emulator

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <stdexcept>
 
+#include "bus/install_paths.h"
 #include "emulator/campaign/campaign.h"
 #include "emulator/campaign/run_pool.h"
 #include "emulator/cli/finite_number.h"
@@ -19,14 +20,16 @@ namespace fs = std::filesystem;
 namespace cmp = campaign;
 
 // scenarios/smoke next to the current directory, else in the source tree next to the build
-// directory that holds this executable (build-x/bin/wheelhil -> ../../scenarios/smoke).
+// directory that holds this executable (build-x/bin/wheelhil -> ../../scenarios/smoke), else
+// the installed examples (<bindir>/../share/wheelhil/scenarios/smoke).
 std::string DefaultSmokeDir() {
   if (fs::is_directory("scenarios/smoke")) return "scenarios/smoke";
-  try {
-    const fs::path exe = cmp::ThisExecutable();
-    const fs::path candidate = exe.parent_path().parent_path().parent_path() / "scenarios/smoke";
-    if (fs::is_directory(candidate)) return candidate.string();
-  } catch (const std::exception&) {
+  const fs::path bin = bus::RunningExecutableDir();
+  for (const fs::path& candidate :
+       {bin / ".." / ".." / "scenarios" / "smoke",
+        bin / bus::InstalledDataDirFromBin() / "scenarios" / "smoke"}) {
+    std::error_code ec;
+    if (fs::is_directory(candidate, ec)) return candidate.lexically_normal().string();
   }
   return "scenarios/smoke";
 }

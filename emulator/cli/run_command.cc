@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "bus/install_paths.h"
 #include "emulator/cli/bus_commands.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
@@ -20,22 +21,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string ExeDir() {
-  std::error_code ec;
-  const auto p = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string(".") : p.parent_path().string();
-}
-
-// $WHEELHIL_DBC_DIR, <exe>/../../bus/dbc (build tree), <exe>/../share/wheelhil/dbc (install).
+// $WHEELHIL_DBC_DIR, else the shipped files of a build tree or an install.
 std::string FindDbcDir() {
   if (const char* env = std::getenv("WHEELHIL_DBC_DIR"); env != nullptr && env[0] != '\0') {
     return env;
   }
-  for (const fs::path& p :
-       {fs::path(ExeDir()) / "../../bus/dbc", fs::path(ExeDir()) / "../share/wheelhil/dbc"}) {
-    if (fs::exists(p / "wheelhil_fw.dbc")) return fs::canonical(p).string();
-  }
-  return {};
+  return bus::FindShippedDbcDir(bus::RunningExecutableDir());
 }
 
 void PrintSummary(const nlohmann::json& r) {
@@ -86,6 +77,20 @@ void PrintSummary(const nlohmann::json& r) {
 
 RunCommand::RunCommand(CLI::App& app) {
   run_ = app.add_subcommand("run", "Run a scenario with the firmware in the loop");
+  run_->footer(
+      "Artefacts (in --out, default ./out):\n"
+      "  can.log               every frame on the bus, candump -L format, virtual timestamps\n"
+      "  report.json           verdict, metrics, expectations, events (docs/scenarios.md)\n"
+      "  report.html           the same as a self-contained page with plots\n"
+      "  events.jsonl          slip intervals, faults, firmware events, one JSON object a line\n"
+      "  truth.csv, truth.tum  ground truth (body pose, wheel speeds, slip) / its pose, TUM\n"
+      "  estimate.csv          the firmware's decoded outputs, one row a cycle\n"
+      "  estimate.tum, estimate_raw.tum   the firmware's pose streams, TUM format\n"
+      "  firmware.log          the firmware's stdout and stderr\n"
+      "  firmware_config.yaml  the firmware config the run used\n"
+      "  firmware.core         only after a crash: its core (first frames in firmware.log)\n"
+      "Exit status: 0 every expectation holds, 1 the run or an expectation failed, 2 input "
+      "error.");
   run_->add_option("scenario", scenario_, "Scenario file (scenarios/*.yaml)")->required();
   run_->add_option("--out", out_, "Output directory (can.log, report.json, ...)");
   run_->add_option("--seed", seed_, "Seed (overrides the scenario's)");
@@ -142,7 +147,16 @@ std::optional<int> RunCommand::Run() {
                      : physics_thread_ == "off" ? scenario::RunOptions::PhysicsThread::kOff
                                                 : scenario::RunOptions::PhysicsThread::kAuto;
   o.progress = !quiet_ && ::isatty(2);
-  o.bin_dir = ExeDir();
+  o.progress_lines_s = quiet_ ? 0 : 10;
+  if (!quiet_) {
+    o.on_private_bus = [](const std::string& bus, const std::string& dir) {
+      fmt::print(stderr,
+                 "wheelhil run: the firmware's bus is {}, a private userspace bus in {}; to "
+                 "watch it: wheelhil exec --runtime-dir {} -- candump -L {}\n",
+                 bus, dir, dir, bus);
+    };
+  }
+  o.bin_dir = bus::RunningExecutableDir();
   o.dbc_dir = FindDbcDir();
   o.ucan_child_env = [](const std::string& dir) { return UcanChildEnvironment(dir); };
   // Ctrl-C, a CI job's timeout (SIGTERM) or a closed terminal end the run as a failure would:

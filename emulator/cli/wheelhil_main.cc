@@ -14,6 +14,7 @@
 #include "emulator/cli/bench_command.h"
 #include "emulator/cli/bus_commands.h"
 #include "emulator/cli/campaign_command.h"
+#include "emulator/cli/completion_command.h"
 #include "emulator/cli/run_command.h"
 
 namespace {
@@ -31,12 +32,13 @@ int RunVersion() {
 int main(int argc, char** argv) {
   if (auto code = wheelhil::emulator::BusCommands::RunExecIfRequested(argc, argv)) return *code;
   CLI::App app{"wheelhil - hardware-in-the-loop emulator for wheeled mobile robots"};
-  app.require_subcommand(1);
+  app.require_subcommand(0, 1);
   auto* version = app.add_subcommand("version", "Print the version and build facts");
   wheelhil::emulator::BusCommands bus_commands(app);
   wheelhil::emulator::BenchCommand bench_command(app);
   wheelhil::emulator::CampaignCommand campaign_command(app);
   wheelhil::emulator::RunCommand run_command(app);
+  wheelhil::emulator::CompletionCommand completion_command(app);
 
   try {
     app.parse(argc, argv);
@@ -45,6 +47,10 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
   if (version->parsed()) return RunVersion();
+  if (app.get_subcommands().empty()) {  // `wheelhil` alone: what it can do
+    fmt::print("{}", app.help());
+    return 0;
+  }
   // The commands report their own errors; this is the boundary for what escapes them, so that
   // no input ends in std::terminate. Input errors (the loaders' std::invalid_argument, which
   // carry file:line:col, and yaml-cpp's own) exit 2; anything else is a fault of ours.
@@ -53,6 +59,7 @@ int main(int argc, char** argv) {
     if (auto code = bench_command.Run()) return *code;
     if (auto code = campaign_command.Run()) return *code;
     if (auto code = run_command.Run()) return *code;
+    if (auto code = completion_command.Run()) return *code;
   } catch (const std::invalid_argument& e) {
     fmt::print(stderr, "wheelhil: {}\n", e.what());
     return 2;

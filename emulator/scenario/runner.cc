@@ -271,6 +271,9 @@ void Run::Build() {
     clock_ = std::make_unique<firmware::VirtualClock>(link_->runtime_dir());
     link_->UseReceiveClock(*clock_);
   }
+  if (link_->private_bus() && o_.on_private_bus) {
+    o_.on_private_bus(link_->interface(), link_->runtime_dir());
+  }
   hub_->OpenLog(out_ + "/can.log", link_->interface());
   hub_->SetFirmwareSend([this](const bus::CanFrame& f) { return link_->Send(f); });
   handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
@@ -435,14 +438,17 @@ void Run::RunPhases() {
 }
 
 void Run::Progress(bool final) {
-  if (!o_.progress) return;
-  if (!final && WallSeconds(last_progress_) < 0.2) return;
+  const bool lines = !o_.progress && o_.progress_lines_s > 0;
+  if (!o_.progress && !lines) return;
+  if (lines && final) return;  // the summary follows
+  if (!final && WallSeconds(last_progress_) < (lines ? o_.progress_lines_s : 0.2)) return;
   last_progress_ = Clock::now();
   const double sim = run_.MotionSeconds(run_.now_ns);
   const double wall = WallSeconds(wall0_);
-  fmt::print(stderr, "\r{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}", s_.name,
-             std::max(0.0, sim), s_.timing.duration_s, handshake_->syncs_sent(),
-             wall > 0 ? std::max(0.0, sim) / wall : 0.0, final ? "\n" : "");
+  fmt::print(stderr, "{}{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}",
+             lines ? "" : "\r", s_.name, std::max(0.0, sim), s_.timing.duration_s,
+             handshake_->syncs_sent(), wall > 0 ? std::max(0.0, sim) / wall : 0.0,
+             final || lines ? "\n" : "");
 }
 
 json Run::Report(double wall_s) {

@@ -39,6 +39,12 @@ struct RunOptions {
   std::string can_iface;              ///< Empty: private userspace bus "ucan0".
   bool realtime = false;              ///< Overrides timing.mode.
   bool progress = false;              ///< Progress line on stderr (a terminal).
+  /// Not a terminal: a plain progress line on stderr every `progress_lines_s` of wall time
+  /// (0: none), for CI logs of long runs.
+  double progress_lines_s = 0;
+  /// Called once the private userspace bus is up, before the firmware starts: its name and
+  /// runtime directory (where other SocketCAN programs can attach to watch it).
+  std::function<void(const std::string& bus, const std::string& runtime_dir)> on_private_bus;
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.
   /// Lockstep only: the CPU the run (emulator, bus and firmware process) is confined to.

@@ -52,7 +52,11 @@ TerrainSpec ReadTerrain(const Reader& r, const YAML::Node& n) {
     r.CheckCount(m, "terrain.meshes", ScenarioLimits::kMeshes);
     for (std::size_t i = 0; i < m.size(); ++i) {
       const std::string p = r.Path(r.ToString(m[i], fmt::format("terrain.meshes[{}]", i)));
-      if (!fs::exists(p)) r.Fail(m[i], fmt::format("terrain.meshes[{}]", i), p + " not found");
+      std::error_code ec;
+      if (!fs::exists(p, ec)) {
+        r.Fail(m[i], fmt::format("terrain.meshes[{}]", i),
+               p + " not found" + (ec ? " (" + ec.message() + ")" : std::string()));
+      }
       t.meshes.push_back(p);
     }
   }
@@ -331,8 +335,12 @@ FirmwareSpec ReadFirmware(const Reader& r, const YAML::Node& n) {
   const std::string cfg = r.String(n, "config", "firmware", std::string());
   if (!cfg.empty()) {
     fw.config = r.Path(cfg);
-    if (!fs::exists(fw.config)) r.Fail(n["config"], "firmware.config", fw.config + " not found");
-    if (!fs::is_regular_file(fw.config)) {
+    std::error_code ec;
+    if (!fs::exists(fw.config, ec)) {
+      r.Fail(n["config"], "firmware.config",
+             fw.config + " not found" + (ec ? " (" + ec.message() + ")" : std::string()));
+    }
+    if (!fs::is_regular_file(fw.config, ec)) {
       r.Fail(n["config"], "firmware.config", fw.config + " is not a regular file");
     }
   }
