@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 
 #include <fmt/format.h>
 
+#include "emulator/scoring/metric_format.h"
 #include "emulator/xml_escape.h"
 
 namespace wheelhil::emulator::scoring {
@@ -70,8 +72,8 @@ void WriteText(const std::string& path, const std::string& text) {
 }
 
 std::string SvgPlot(const std::string& title, const std::string& x_label,
-                    const std::string& y_label, const std::vector<Series>& series, bool equal_axes,
-                    int width, int height) {
+                    const std::string& y_label, const std::vector<Series>& series,
+                    const std::vector<Band>& bands, bool equal_axes, int width, int height) {
   double x0 = std::numeric_limits<double>::infinity(), x1 = -x0, y0 = x0, y1 = -x0;
   for (const auto& s : series) {
     for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
@@ -85,6 +87,14 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
   if (!std::isfinite(x0)) x0 = 0, x1 = 1, y0 = 0, y1 = 1;
   if (x1 - x0 < 1e-12) x1 = x0 + 1;
   if (y1 - y0 < 1e-12) y0 -= 0.5, y1 += 0.5;
+  // Round the ranges out to whole ticks (a 1-2-5 step), so the frame starts and ends on labels.
+  const auto widen = [](double& lo, double& hi) {
+    const AxisTicks t = NiceTicks(lo, hi);
+    lo = std::floor(lo / t.step + 1e-9) * t.step;
+    hi = std::ceil(hi / t.step - 1e-9) * t.step;
+  };
+  widen(x0, x1);
+  widen(y0, y1);
   const double ml = 70, mr = 20, mt = 30, mb = 45;
   const double pw = width - ml - mr, ph = height - mt - mb;
   if (equal_axes) {
@@ -109,13 +119,35 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
       "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n<text x=\"14\" y=\"{}\" "
       "transform=\"rotate(-90 14 {})\" text-anchor=\"middle\">{}</text>\n",
       ml + pw / 2, height - 8, EscapeXml(x_label), mt + ph / 2, mt + ph / 2, EscapeXml(y_label));
-  for (int i = 0; i <= 4; ++i) {
-    const double xv = x0 + (x1 - x0) * i / 4, yv = y0 + (y1 - y0) * i / 4;
+  std::vector<std::pair<std::string, std::string>> band_legend;
+  for (const auto& b : bands) {
+    const double a = std::max(x0, std::min(b.x0, b.x1)), z = std::min(x1, std::max(b.x0, b.x1));
+    if (!(z > a)) continue;
     svg += fmt::format(
-        "<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.4g}</text>\n<text x=\"{}\" "
-        "y=\"{:.1f}\" text-anchor=\"end\">{:.4g}</text>\n<line x1=\"{:.1f}\" y1=\"{}\" "
-        "x2=\"{:.1f}\" y2=\"{}\" stroke=\"#eee\"/>\n",
-        X(xv), mt + ph + 15, xv, ml - 4, Y(yv) + 4, yv, X(xv), mt, X(xv), mt + ph);
+        "<rect class=\"band\" x=\"{:.1f}\" y=\"{}\" width=\"{:.1f}\" height=\"{}\" "
+        "fill=\"{}\" fill-opacity=\"0.18\"><title>{}: {:.3f}-{:.3f}</title></rect>\n",
+        X(a), mt, std::max(0.5, X(z) - X(a)), ph, b.color, EscapeXml(b.label), b.x0, b.x1);
+    if (std::find_if(band_legend.begin(), band_legend.end(),
+                     [&](const auto& l) { return l.first == b.label; }) == band_legend.end()) {
+      band_legend.emplace_back(b.label, b.color);
+    }
+  }
+  const AxisTicks tx = NiceTicks(x0, x1), ty = NiceTicks(y0, y1);
+  for (int i = 0; i < tx.count; ++i) {
+    const double xv = tx.first + i * tx.step;
+    svg += fmt::format(
+        "<text x=\"{:.1f}\" y=\"{}\" text-anchor=\"middle\">{:.{}f}</text>\n<line x1=\"{:.1f}\" "
+        "y1=\"{}\" x2=\"{:.1f}\" y2=\"{}\" stroke=\"#eee\"/>\n",
+        X(xv), mt + ph + 15, std::fabs(xv) < tx.step * 1e-6 ? 0.0 : xv, tx.decimals, X(xv), mt,
+        X(xv), mt + ph);
+  }
+  for (int i = 0; i < ty.count; ++i) {
+    const double yv = ty.first + i * ty.step;
+    svg += fmt::format(
+        "<text x=\"{}\" y=\"{:.1f}\" text-anchor=\"end\">{:.{}f}</text>\n<line x1=\"{}\" "
+        "y1=\"{:.1f}\" x2=\"{}\" y2=\"{:.1f}\" stroke=\"#eee\"/>\n",
+        ml - 4, Y(yv) + 4, std::fabs(yv) < ty.step * 1e-6 ? 0.0 : yv, ty.decimals, ml, Y(yv),
+        ml + pw, Y(yv));
   }
   int legend = 0;
   for (const auto& s : series) {
@@ -136,6 +168,13 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
         mt + 16 + 14 * legend, EscapeXml(s.name));
     ++legend;
   }
+  for (const auto& [label, color] : band_legend) {
+    svg += fmt::format(
+        "<rect x=\"{}\" y=\"{}\" width=\"20\" height=\"8\" fill=\"{}\" fill-opacity=\"0.3\"/>"
+        "<text x=\"{}\" y=\"{}\">{}</text>\n",
+        ml + 8, mt + 8 + 14 * legend, color, ml + 32, mt + 16 + 14 * legend, EscapeXml(label));
+    ++legend;
+  }
   svg += "</svg>\n";
   return svg;
 }
@@ -145,7 +184,7 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
       "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>wheelhil run: " +
       EscapeXml(report.value("scenario", std::string())) +
       "</title><style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
-      "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}.pass{color:#070}"
+      "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}table.metrics td:first-child{text-align:left;font-family:monospace}h3{margin:1em 0 .3em}.pass{color:#070}"
       ".fail{color:#b00}</style></head><body>\n";
   const std::string verdict = report.value("verdict", std::string());
   h += fmt::format(
@@ -164,18 +203,31 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
                      EscapeXml(e.contains("value") ? e["value"].dump() : std::string("-")),
                      ok ? "pass" : "fail", ok ? "pass" : "FAIL");
   }
-  h += "</table>\n<h2>Metrics</h2>\n<table><tr><th>stream</th><th>metric</th><th>value</th></tr>\n";
+  h += "</table>\n<h2>Metrics</h2>\n";
   // Named: items() only refers to the object it is called on, so iterating the items() of the
   // temporary that value() returns would read a destroyed map (crashed `wheelhil run`).
   const nlohmann::json metrics = report.value("metrics", nlohmann::json::object());
+  // One table per stream; nested groups (ape, rpe_1m) as dotted names; each value rounded to
+  // its meaning with its unit, the exact one in the cell's title (and in report.json).
   for (const auto& [stream, m] : metrics.items()) {
     if (!m.is_object()) continue;
-    for (const auto& [k, v] : m.items()) {
-      h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td></tr>\n", EscapeXml(stream),
-                       EscapeXml(k), EscapeXml(v.dump()));
-    }
+    h += "<h3>" + EscapeXml(stream) + "</h3>\n<table class=\"metrics\">\n";
+    const std::function<void(const std::string&, const nlohmann::json&)> rows =
+        [&](const std::string& prefix, const nlohmann::json& obj) {
+          for (const auto& [k, v] : obj.items()) {
+            const std::string name = prefix.empty() ? k : prefix + "." + k;
+            if (v.is_object()) {
+              rows(name, v);
+              continue;
+            }
+            h += fmt::format("<tr><td>{}</td><td title=\"{}\">{}</td></tr>\n", EscapeXml(name),
+                             EscapeXml(v.dump()), EscapeXml(FormatMetricValue(k, v)));
+          }
+        };
+    rows("", m);
+    h += "</table>\n";
   }
-  h += "</table>\n<h2>Plots</h2>\n";
+  h += "<h2>Plots</h2>\n";
   for (const auto& s : svg_plots) h += "<div>" + s + "</div>\n";
   h += "</body></html>\n";
   return h;

@@ -44,10 +44,19 @@ struct Series {
   bool dashed = false;
 };
 
-/// A line plot as an <svg> element (axes with min/max ticks, legend); equal_axes keeps 1:1.
+/// An interval of the x axis shaded behind the lines (a slip interval, a fault window).
+struct Band {
+  double x0 = 0, x1 = 0;
+  std::string label;  ///< One legend entry per distinct label.
+  std::string color;  ///< CSS colour (drawn translucent).
+};
+
+/// A line plot as an <svg> element: round ticks (1, 2, 5 x 10^k) on both axes, the bands
+/// shaded, a legend; equal_axes keeps 1:1 (a trajectory, where a drift must look its size).
 std::string SvgPlot(const std::string& title, const std::string& x_label,
                     const std::string& y_label, const std::vector<Series>& series,
-                    bool equal_axes = false, int width = 640, int height = 360);
+                    const std::vector<Band>& bands = {}, bool equal_axes = false,
+                    int width = 640, int height = 360);
 
 /// The HTML report: title, the report's summary table (from report.json) and the plots.
 std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots);

@@ -1,6 +1,7 @@
 #include "emulator/scoring/run_artefacts.h"
 
 #include <cmath>
+#include <map>
 
 #include <fmt/format.h>
 
@@ -30,6 +31,24 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
   WriteText(out + "/report.json", report.dump(2) + "\n");
 
   const char* colors[] = {"#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"};
+  // Shaded on every time plot: the ground truth's slip intervals and the injected faults.
+  std::vector<Band> time_bands;
+  std::map<std::string, double> fault_started;
+  for (const auto& e : events) {
+    const std::string kind = e.value("event", std::string());
+    if (kind == "slip" && e.contains("start_s") && e.contains("end_s")) {
+      time_bands.push_back({e.value("start_s", 0.0), e.value("end_s", 0.0), "slip", "#ff7f0e"});
+    } else if (kind == "fault_start" || kind == "fault_end") {
+      const std::string key =
+          e.value("fault", std::string()) + "/" + e.value("node_id", nlohmann::json()).dump();
+      if (kind == "fault_start") {
+        fault_started[key] = e.value("t_s", 0.0);
+      } else if (auto it = fault_started.find(key); it != fault_started.end()) {
+        time_bands.push_back({it->second, e.value("t_s", 0.0), "fault", "#7f7f7f"});
+        fault_started.erase(it);
+      }
+    }
+  }
   std::vector<std::string> plots;
   {
     std::vector<Series> ss;
@@ -42,7 +61,7 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
       for (const auto& p : est) e.x.push_back(p.x_m), e.y.push_back(p.y_m);
       ss.push_back(e);
     }
-    plots.push_back(SvgPlot("Trajectory: truth vs estimates", "x [m]", "y [m]", ss, false));
+    plots.push_back(SvgPlot("Trajectory: truth vs estimates (equal axes)", "x [m]", "y [m]", ss, {}, true));
   }
   for (const auto& [stream, residual] : estimates.residuals()) {
     std::vector<Series> ss{{"residual r", "#1f77b4", residual.t_s, residual.residual_rad}};
@@ -52,7 +71,7 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
     }
     plots.push_back(SvgPlot(fmt::format("{}: residual against its band (cf. paper 000 fig 8)",
                                         stream),
-                            "t [s]", "r [rad]", ss));
+                            "t [s]", "r [rad]", ss, time_bands));
   }
   if (!vel_streams.empty()) {
     std::vector<Series> ss;
@@ -65,7 +84,8 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
       for (const auto& v : est) e.x.push_back(v.t_s), e.y.push_back(v.vx_m_s);
       ss.push_back(e);
     }
-    plots.push_back(SvgPlot("Forward velocity (cf. paper 002 figs 2-4)", "t [s]", "vx [m/s]", ss));
+    plots.push_back(SvgPlot("Forward velocity (cf. paper 002 figs 2-4)", "t [s]", "vx [m/s]", ss,
+                            time_bands));
   }
   if (!pose_streams.empty() && !truth_pose.empty()) {
     std::vector<Series> ss;
