@@ -537,7 +537,17 @@ RunResult Run::Execute() {
   const bool passed = all_ok && !run_.failed();
   report["verdict"] = passed ? "pass" : "fail";
   if (run_.failed()) report["failure"] = run_.failure;
-  scoring::WriteRunArtefacts(out_, report, *truth_, *estimates_, run_.events);
+  scoring::ReplayRobot robot;
+  robot.half_length_m = s_.platform.vehicle.half_extents_m.x();
+  robot.half_width_m = s_.platform.vehicle.half_extents_m.y();
+  for (std::size_t w = 0; w < s_.platform.vehicle.wheels.size(); ++w) {
+    const auto& spec = s_.platform.vehicle.wheels[w];
+    const auto& drives = s_.platform.drive_wheels;
+    const auto it = std::find(drives.begin(), drives.end(), w);
+    robot.wheels.push_back({spec.name, spec.mount_B.x(), spec.mount_B.y(), spec.radius_m,
+                            it == drives.end() ? -1 : static_cast<int>(it - drives.begin())});
+  }
+  scoring::WriteRunArtefacts(out_, report, *truth_, *estimates_, run_.events, robot);
   RunResult result;
   result.report = report;
   result.failure = run_.failure;

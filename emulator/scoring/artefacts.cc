@@ -179,13 +179,95 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
   return svg;
 }
 
-std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots) {
+namespace {
+
+// The replay's player: equal axes, the traces up to the current instant, the robot at its true
+// pose. Plain ES2017, no libraries.
+constexpr const char* kReplayScript = R"js(
+(function () {
+  const d = JSON.parse(document.getElementById('replay-data').textContent);
+  const cv = document.getElementById('replay'), g = cv.getContext('2d');
+  const slider = document.getElementById('replay-t'), label = document.getElementById('replay-label');
+  const play = document.getElementById('replay-play'), speed = document.getElementById('replay-speed');
+  const T = d.truth, R = d.robot, n = T.t.length;
+  const colors = ['#d62728', '#2ca02c', '#9467bd', '#ff7f0e', '#8c564b'];
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  const grow = (xs, ys) => { for (let i = 0; i < xs.length; ++i) {
+    x0 = Math.min(x0, xs[i]); x1 = Math.max(x1, xs[i]); y0 = Math.min(y0, ys[i]); y1 = Math.max(y1, ys[i]); } };
+  grow(T.x, T.y);
+  for (const k in d.estimates) grow(d.estimates[k].x, d.estimates[k].y);
+  const pad = 1.5 * Math.hypot(R.half_length, R.half_width);
+  if (!isFinite(x0)) { x0 = y0 = -1; x1 = y1 = 1; }
+  x0 -= pad; x1 += pad; y0 -= pad; y1 += pad;
+  const s = Math.min((cv.width - 20) / (x1 - x0), (cv.height - 20) / (y1 - y0));
+  const ox = (cv.width - s * (x1 - x0)) / 2, oy = (cv.height - s * (y1 - y0)) / 2;
+  const X = x => ox + (x - x0) * s, Y = y => cv.height - oy - (y - y0) * s;
+  const tEnd = n ? T.t[n - 1] : 0, tStart = n ? T.t[0] : 0;
+  let t = tStart, playing = false, last = null;
+  slider.min = tStart; slider.max = tEnd; slider.step = (tEnd - tStart) / 1000 || 0.001;
+  const upTo = (ts, t) => { let lo = 0, hi = ts.length; while (lo < hi) { const m = (lo + hi) >> 1;
+    if (ts[m] <= t) lo = m + 1; else hi = m; } return lo; };
+  function trace(xs, ys, k, color, dash) {
+    g.strokeStyle = color; g.setLineDash(dash); g.lineWidth = 1.5; g.beginPath();
+    for (let i = 0; i < k; ++i) { if (i) g.lineTo(X(xs[i]), Y(ys[i])); else g.moveTo(X(xs[i]), Y(ys[i])); }
+    g.stroke(); g.setLineDash([]);
+  }
+  function draw() {
+    g.fillStyle = '#fff'; g.fillRect(0, 0, cv.width, cv.height);
+    // a 1 m grid (0.1 m when the run is small)
+    const step = (x1 - x0) > 4 ? 1 : 0.1;
+    g.strokeStyle = '#eee'; g.lineWidth = 1; g.beginPath();
+    for (let gx = Math.ceil(x0 / step) * step; gx <= x1; gx += step) { g.moveTo(X(gx), 0); g.lineTo(X(gx), cv.height); }
+    for (let gy = Math.ceil(y0 / step) * step; gy <= y1; gy += step) { g.moveTo(0, Y(gy)); g.lineTo(cv.width, Y(gy)); }
+    g.stroke();
+    const k = upTo(T.t, t);
+    trace(T.x, T.y, k, '#1f77b4', []);
+    let c = 0;
+    for (const name in d.estimates) { const e = d.estimates[name];
+      trace(e.x, e.y, upTo(e.t, t), colors[c++ % colors.length], [5, 3]); }
+    if (k > 0) {
+      const i = k - 1, th = T.theta[i], slip = T.slip[i];
+      g.save(); g.translate(X(T.x[i]), Y(T.y[i])); g.rotate(-th); g.scale(s, s);
+      g.lineWidth = 2 / s; g.strokeStyle = '#333'; g.fillStyle = 'rgba(31,119,180,0.15)';
+      g.fillRect(-R.half_length, -R.half_width, 2 * R.half_length, 2 * R.half_width);
+      g.strokeRect(-R.half_length, -R.half_width, 2 * R.half_length, 2 * R.half_width);
+      g.beginPath(); g.moveTo(R.half_length, 0); g.lineTo(R.half_length * 0.6, 0); g.stroke();
+      for (const w of R.wheels) {
+        const slipping = w.bit >= 0 && (slip >> w.bit) & 1;
+        g.fillStyle = slipping ? '#ff7f0e' : '#444';
+        g.fillRect(w.x - w.r, -w.y - w.r * 0.35, 2 * w.r, 0.7 * w.r);
+      }
+      g.restore();
+      label.textContent = 't = ' + t.toFixed(2) + ' s' + (slip ? '  (wheel slip)' : '');
+    }
+  }
+  function frame(now) {
+    if (!playing) return;
+    if (last !== null) t = Math.min(tEnd, t + (now - last) / 1000 * Number(speed.value));
+    last = now; slider.value = t; draw();
+    if (t >= tEnd) { playing = false; play.textContent = 'play'; return; }
+    requestAnimationFrame(frame);
+  }
+  play.onclick = () => { playing = !playing; play.textContent = playing ? 'pause' : 'play';
+    if (playing) { if (t >= tEnd) t = tStart; last = null; requestAnimationFrame(frame); } };
+  slider.oninput = () => { t = Number(slider.value); draw(); };
+  t = tEnd; slider.value = t; draw();
+  document.body.dataset.replayReady = '1';
+})();
+)js";
+
+}  // namespace
+
+std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots,
+                       const nlohmann::json& replay) {
   std::string h =
       "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>wheelhil run: " +
       EscapeXml(report.value("scenario", std::string())) +
       "</title><style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}"
       "td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}table.metrics td:first-child{text-align:left;font-family:monospace}h3{margin:1em 0 .3em}.pass{color:#070}"
-      ".fail{color:#b00}</style></head><body>\n";
+      ".fail{color:#b00}</style>"
+      "<script>window.onerror=function(m){document.body.dataset.scriptErrors="
+      "(document.body.dataset.scriptErrors||'')+m+';';};</script></head><body>\n";
   const std::string verdict = report.value("verdict", std::string());
   h += fmt::format(
       "<h1>{}</h1>\n<p>seed {} &middot; {:.3f} s simulated &middot; verdict <b "
@@ -198,9 +280,14 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
   h += "<h2>Expectations</h2>\n<table><tr><th>expectation</th><th>value</th><th>result</th></tr>\n";
   for (const auto& e : report.value("expectations", nlohmann::json::array())) {
     const bool ok = e.value("passed", false);
-    h += fmt::format("<tr><td>{}</td><td>{}</td><td class=\"{}\">{}</td></tr>\n",
-                     EscapeXml(e.value("text", std::string())),
-                     EscapeXml(e.contains("value") ? e["value"].dump() : std::string("-")),
+    // The metric is the expectation's first word ("pose.final_position_error_m < 0.25"); its
+    // last name part says the unit.
+    const std::string text = e.value("text", std::string());
+    const std::string metric = text.substr(0, text.find(' '));
+    const std::string leaf = metric.substr(metric.rfind('.') + 1);
+    h += fmt::format("<tr><td>{}</td><td title=\"{}\">{}</td><td class=\"{}\">{}</td></tr>\n",
+                     EscapeXml(text), EscapeXml(e.contains("value") ? e["value"].dump() : ""),
+                     EscapeXml(e.contains("value") ? FormatMetricValue(leaf, e["value"]) : "-"),
                      ok ? "pass" : "fail", ok ? "pass" : "FAIL");
   }
   h += "</table>\n<h2>Metrics</h2>\n";
@@ -226,6 +313,22 @@ std::string HtmlReport(const nlohmann::json& report, const std::vector<std::stri
         };
     rows("", m);
     h += "</table>\n";
+  }
+  if (!replay.is_null()) {
+    std::string data = replay.dump();
+    // Inside <script>, "</" would end the element: JSON allows "<\/" for it.
+    for (std::size_t at = data.find("</"); at != std::string::npos; at = data.find("</", at + 3)) {
+      data.replace(at, 2, "<\\/");
+    }
+    h += "<h2>Replay</h2>\n<p><button id=\"replay-play\">play</button> <select "
+         "id=\"replay-speed\"><option value=\"1\">1x</option><option value=\"5\" "
+         "selected>5x</option><option value=\"20\">20x</option></select> <input "
+         "id=\"replay-t\" type=\"range\" style=\"width:420px\"> <span "
+         "id=\"replay-label\"></span></p>\n<canvas id=\"replay\" width=\"720\" height=\"440\" "
+         "style=\"border:1px solid #ccc\"></canvas>\n<p>Top down, equal axes: truth (blue), the "
+         "estimates (dashed), the robot at its true pose, a wheel orange while it slips.</p>\n"
+         "<script type=\"application/json\" id=\"replay-data\">" +
+         data + "</script>\n<script>" + kReplayScript + "</script>\n";
   }
   h += "<h2>Plots</h2>\n";
   for (const auto& s : svg_plots) h += "<div>" + s + "</div>\n";

@@ -59,6 +59,11 @@ std::string SvgPlot(const std::string& title, const std::string& x_label,
                     int width = 640, int height = 360);
 
 /// The HTML report: title, the report's summary table (from report.json) and the plots.
-std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots);
+/// `replay` (run_artefacts.cc's ReplayData; null: none) adds a top-down replay of the run that
+/// plays in the page: the robot's outline and wheels (orange while the truth says a wheel
+/// slips), the truth's and the estimates' traces so far. Self-contained: no network. The page
+/// sets data-replay-ready on <body> once drawn, data-script-errors if any script failed.
+std::string HtmlReport(const nlohmann::json& report, const std::vector<std::string>& svg_plots,
+                       const nlohmann::json& replay = nullptr);
 
 }  // namespace wheelhil::emulator::scoring

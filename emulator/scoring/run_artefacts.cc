@@ -10,9 +10,60 @@
 
 namespace wheelhil::emulator::scoring {
 
+namespace {
+
+// Rounded for the page (0.1 mm, 0.1 mrad, 1 ms): a replay needs no more, and the page stays small.
+double R4(double v) { return std::isfinite(v) ? std::round(v * 1e4) / 1e4 : 0.0; }
+
+// The replay's data: truth at <= 1500 instants, each pose stream at <= 1500, the robot.
+nlohmann::json ReplayData(const TruthRecorder& truth, const EstimateDecoder& estimates,
+                          const ReplayRobot& robot) {
+  using nlohmann::json;
+  json d;
+  const auto& rows = truth.rows();
+  const std::size_t stride = std::max<std::size_t>(1, rows.size() / 1500);
+  json t = json::array(), x = json::array(), y = json::array(), th = json::array(),
+       slip = json::array();
+  for (std::size_t i = 0; i < rows.size(); i += stride) {
+    int mask = 0;  // a slip anywhere inside the stride shows
+    for (std::size_t k = i; k < std::min(rows.size(), i + stride); ++k) {
+      mask |= rows[k].slipping_wheels;
+    }
+    t.push_back(R4(rows[i].t_s));
+    x.push_back(R4(rows[i].x_m));
+    y.push_back(R4(rows[i].y_m));
+    th.push_back(R4(rows[i].theta_rad));
+    slip.push_back(mask);
+  }
+  d["truth"] = {{"t", t}, {"x", x}, {"y", y}, {"theta", th}, {"slip", slip}};
+  json est = json::object();
+  for (const auto& [name, poses] : estimates.pose_streams()) {
+    const std::size_t s = std::max<std::size_t>(1, poses.size() / 1500);
+    json et = json::array(), ex = json::array(), ey = json::array();
+    for (std::size_t i = 0; i < poses.size(); i += s) {
+      et.push_back(R4(poses[i].t_s));
+      ex.push_back(R4(poses[i].x_m));
+      ey.push_back(R4(poses[i].y_m));
+    }
+    est[name] = {{"t", et}, {"x", ex}, {"y", ey}};
+  }
+  d["estimates"] = est;
+  json wheels = json::array();
+  for (const auto& w : robot.wheels) {
+    wheels.push_back({{"name", w.name}, {"x", R4(w.x_m)}, {"y", R4(w.y_m)}, {"r", R4(w.radius_m)},
+                      {"bit", w.slip_bit}});
+  }
+  d["robot"] = {{"half_length", R4(robot.half_length_m)},
+                {"half_width", R4(robot.half_width_m)},
+                {"wheels", wheels}};
+  return d;
+}
+
+}  // namespace
+
 void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
                        const TruthRecorder& truth, const EstimateDecoder& estimates,
-                       const std::vector<nlohmann::json>& events) {
+                       const std::vector<nlohmann::json>& events, const ReplayRobot& robot) {
   const auto& truth_pose = truth.poses();
   const auto& truth_vel = truth.velocities();
   const auto& pose_streams = estimates.pose_streams();
@@ -110,7 +161,8 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
     plots.push_back(
         SvgPlot("Position error over distance travelled", "distance [m]", "error [m]", ss));
   }
-  WriteText(out + "/report.html", HtmlReport(report, plots));
+  WriteText(out + "/report.html",
+            HtmlReport(report, plots, ReplayData(truth, estimates, robot)));
 }
 
 }  // namespace wheelhil::emulator::scoring

@@ -14,8 +14,21 @@
 
 namespace wheelhil::emulator::scoring {
 
+/// The robot as the report's top-down replay draws it: its chassis box and its wheels, in the
+/// body frame (x forward, y left, m). `slip_bit`: the wheel's bit in TruthRow::slipping_wheels
+/// (-1: its slip is not scored).
+struct ReplayRobot {
+  double half_length_m = 0.2, half_width_m = 0.15;
+  struct Wheel {
+    std::string name;
+    double x_m = 0, y_m = 0, radius_m = 0.05;
+    int slip_bit = -1;
+  };
+  std::vector<Wheel> wheels;
+};
+
 void WriteRunArtefacts(const std::string& out_dir, const nlohmann::json& report,
                        const TruthRecorder& truth, const EstimateDecoder& estimates,
-                       const std::vector<nlohmann::json>& events);
+                       const std::vector<nlohmann::json>& events, const ReplayRobot& robot = {});
 
 }  // namespace wheelhil::emulator::scoring
