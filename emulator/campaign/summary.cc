@@ -11,6 +11,7 @@
 #include <set>
 #include <stdexcept>
 
+#include "emulator/scoring/metric_format.h"
 #include "emulator/xml_escape.h"
 
 namespace wheelhil::emulator::campaign {
@@ -118,6 +119,12 @@ Stats StatsOf(const std::vector<RunRecord>& runs, const std::vector<std::size_t>
 
 std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.4g}", v) : "-"; }
 
+// A metric's value for the page: rounded with the unit its name says (scoring/metric_format.h).
+std::string Shown(const std::string& metric, double v) {
+  if (!std::isfinite(v)) return "-";
+  return scoring::FormatMetricValue(metric.substr(metric.rfind('.') + 1), v);
+}
+
 // Scatter plot: parameter (x) against metric (y); passed runs green dots, failed red crosses,
 // metric bounds of the criteria as dashed lines.
 std::string SvgPlot(const CampaignSpec& spec, const std::vector<RunRecord>& runs,
@@ -157,6 +164,17 @@ std::string SvgPlot(const CampaignSpec& spec, const std::vector<RunRecord>& runs
   for (double b : bounds) y0 = std::min(y0, b), y1 = std::max(y1, b);
   if (x1 == x0) x0 -= 0.5, x1 += 0.5;
   if (y1 == y0) y0 -= 0.5, y1 += 0.5;
+  // Round ticks (1-2-5 steps), the y range widened to whole ticks.
+  const scoring::AxisTicks yt0 = scoring::NiceTicks(y0, y1);
+  y0 = std::floor(y0 / yt0.step + 1e-9) * yt0.step;
+  y1 = std::ceil(y1 / yt0.step - 1e-9) * yt0.step;
+  if (categories.empty()) {
+    const scoring::AxisTicks xt0 = scoring::NiceTicks(x0, x1);
+    x0 = std::floor(x0 / xt0.step + 1e-9) * xt0.step;
+    x1 = std::ceil(x1 / xt0.step - 1e-9) * xt0.step;
+  } else {
+    x0 -= 0.5, x1 += 0.5;  // categories sit between the frame's edges
+  }
   auto sx = [&](double x) { return L + (x - x0) / (x1 - x0) * (W - L - R); };
   auto sy = [&](double y) { return H - B - (y - y0) / (y1 - y0) * (H - T - B); };
   std::string svg = fmt::format(
@@ -164,13 +182,19 @@ std::string SvgPlot(const CampaignSpec& spec, const std::vector<RunRecord>& runs
       "viewBox=\"0 0 {} {}\" font-family=\"sans-serif\" font-size=\"11\">\n"
       "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"#fafafa\" stroke=\"#999\"/>\n",
       W, H, W, H, L, T, W - L - R, H - T - B);
-  for (int i = 0; i <= 4; ++i) {
-    const double yv = y0 + (y1 - y0) * i / 4, xv = x0 + (x1 - x0) * i / 4;
-    svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"end\">{}</text>\n", L - 4,
-                       sy(yv) + 4, Num(yv));
-    if (categories.empty()) {
-      svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                         sx(xv), H - B + 14, Num(xv));
+  const scoring::AxisTicks yt = scoring::NiceTicks(y0, y1);
+  for (int i = 0; i < yt.count; ++i) {
+    const double yv = yt.first + i * yt.step;
+    svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"end\">{:.{}f}</text>\n",
+                       L - 4, sy(yv) + 4, std::fabs(yv) < yt.step * 1e-6 ? 0.0 : yv, yt.decimals);
+  }
+  if (categories.empty()) {
+    const scoring::AxisTicks xt = scoring::NiceTicks(x0, x1);
+    for (int i = 0; i < xt.count; ++i) {
+      const double xv = xt.first + i * xt.step;
+      svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{:.{}f}</text>\n",
+                         sx(xv), H - B + 14, std::fabs(xv) < xt.step * 1e-6 ? 0.0 : xv,
+                         xt.decimals);
     }
   }
   for (std::size_t c = 0; c < categories.size(); ++c) {
@@ -183,11 +207,14 @@ std::string SvgPlot(const CampaignSpec& spec, const std::vector<RunRecord>& runs
       "<text x=\"12\" y=\"{:.1f}\" transform=\"rotate(-90 12 {:.1f})\" "
       "text-anchor=\"middle\">{}</text>\n",
       T + (H - T - B) / 2, T + (H - T - B) / 2, EscapeXml(metric));
+  const std::string leaf = metric.substr(metric.rfind('.') + 1);
   for (double b : bounds) {
     svg += fmt::format(
-        "<line x1=\"{}\" x2=\"{}\" y1=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"#c60\" "
-        "stroke-dasharray=\"5,4\"/>\n",
-        L, W - R, sy(b), sy(b));
+        "<line class=\"threshold\" x1=\"{}\" x2=\"{}\" y1=\"{:.1f}\" y2=\"{:.1f}\" "
+        "stroke=\"#c60\" stroke-dasharray=\"5,4\"/>\n<text x=\"{}\" y=\"{:.1f}\" "
+        "text-anchor=\"end\" fill=\"#c60\">pass limit {}</text>\n",
+        L, W - R, sy(b), sy(b), W - R - 2, sy(b) - 3,
+        EscapeXml(scoring::FormatMetricValue(leaf, b)));
   }
   for (const auto& [x, y, ok] : pts) {
     if (ok) {
@@ -348,7 +375,7 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
         EscapeXml(r.run_dir), EscapeXml(r.key), r.seed, r.passed ? "pass" : "fail",
         r.passed ? "pass" : "FAIL", EscapeXml(ParamsText(r)));
     for (const auto& m : s.key_metrics)
-      h += fmt::format("<td>{}</td>", Num(MetricOf(r, m).value_or(NAN)));
+      h += fmt::format("<td>{}</td>", EscapeXml(Shown(m, MetricOf(r, m).value_or(NAN))));
     h += fmt::format("<td class=\"l\">{}</td></tr>\n", EscapeXml(r.failure));
   }
   h += "</table>\n";
@@ -367,8 +394,9 @@ void WriteCampaignHtml(const std::filesystem::path& file, const CampaignSpec& sp
                        any.n, any.n ? 100.0 * any.passed / any.n : 0.0);
       for (const auto& m : s.key_metrics) {
         const Stats st = StatsOf(runs, g.runs, m);
-        h += fmt::format("<td>{}</td><td>{}</td>", Num(st.with_metric ? st.mean : NAN),
-                         Num(st.with_metric ? st.max : NAN));
+        h += fmt::format("<td>{}</td><td>{}</td>",
+                         EscapeXml(Shown(m, st.with_metric ? st.mean : NAN)),
+                         EscapeXml(Shown(m, st.with_metric ? st.max : NAN)));
       }
       h += "</tr>\n";
     }

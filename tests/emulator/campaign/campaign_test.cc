@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <regex>
 #include <random>
 #include <set>
 #include <sstream>
@@ -128,6 +129,12 @@ TEST_F(CampaignTest, RunsStoresAndSummarises) {
   const std::string html = ReadAll(o.out_dir / "campaign.html");
   EXPECT_THAT(html, HasSubstr("<svg"));
   EXPECT_THAT(html, HasSubstr("fake_envelope"));
+  // Parameter-vs-metric plots draw the criterion's limit (0.1 m) with its value and unit, and
+  // the table cells and ticks are rounded, never in exponent notation.
+  EXPECT_THAT(html, HasSubstr("class=\"threshold\""));
+  EXPECT_THAT(html, HasSubstr("pass limit 100 mm"));
+  EXPECT_THAT(html, HasSubstr(" mm</td>"));
+  EXPECT_FALSE(std::regex_search(html, std::regex(R"(>[-0-9.]+e[-+][0-9]+<)")));
   EXPECT_THAT(ReadAll(o.junit), HasSubstr("tests=\"26\""));
 
   // Same command again: everything already stored, nothing runs, same results.
