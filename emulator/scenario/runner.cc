@@ -540,6 +540,7 @@ RunResult Run::Execute() {
   scoring::ReplayRobot robot;
   robot.half_length_m = s_.platform.vehicle.half_extents_m.x();
   robot.half_width_m = s_.platform.vehicle.half_extents_m.y();
+  robot.bus_bitrate_bps = s_.sensors.bitrate_bps;
   for (std::size_t w = 0; w < s_.platform.vehicle.wheels.size(); ++w) {
     const auto& spec = s_.platform.vehicle.wheels[w];
     const auto& drives = s_.platform.drive_wheels;

@@ -1,10 +1,13 @@
 #include "emulator/scoring/run_artefacts.h"
 
 #include <cmath>
+#include <fstream>
 #include <map>
 
 #include <fmt/format.h>
 
+#include "bus/candump_log.h"
+#include "emulator/devices/can_bus_model.h"
 #include "emulator/scoring/artefacts.h"
 #include "emulator/scoring/metrics.h"
 
@@ -57,6 +60,32 @@ nlohmann::json ReplayData(const TruthRecorder& truth, const EstimateDecoder& est
                 {"half_width", R4(robot.half_width_m)},
                 {"wheels", wheels}};
   return d;
+}
+
+// Bus load in 100 ms bins from the can.log just written: the bits of each frame on the wire
+// (stuffing as the bus model's Tindell bound) over the bits the bin has. The log's clock is
+// the bus's; `bus_at_motion_s` (the motion_start event) shifts it to the plots' time.
+Series BusLoadSeries(const std::string& can_log, double bitrate_bps, double bus_at_motion_s) {
+  Series s{"bus load", "#1f77b4", {}, {}};
+  std::ifstream in(can_log);
+  if (!in || bitrate_bps <= 0) return s;
+  constexpr double kBin = 0.1;
+  std::vector<double> bits;
+  std::string line;
+  std::size_t n = 0;
+  bus::CandumpRecord rec;
+  while (std::getline(in, line)) {
+    if (bus::ParseCandumpLine(line, ++n, rec) != bus::CandumpLineStatus::kRecord) continue;
+    const auto bin = static_cast<std::size_t>(static_cast<double>(rec.timestamp_ns) * 1e-9 / kBin);
+    if (bin > 10'000'000) break;  // a log that is not ours; the plot is only an aid
+    if (bits.size() <= bin) bits.resize(bin + 1, 0.0);
+    bits[bin] += CanFrameBits(rec.frame, StuffingMode::kTindell);
+  }
+  for (std::size_t i = 0; i < bits.size(); ++i) {
+    s.x.push_back((static_cast<double>(i) + 0.5) * kBin - bus_at_motion_s);
+    s.y.push_back(100.0 * bits[i] / (bitrate_bps * kBin));
+  }
+  return s;
 }
 
 }  // namespace
@@ -160,6 +189,20 @@ void WriteRunArtefacts(const std::string& out, const nlohmann::json& report,
     }
     plots.push_back(
         SvgPlot("Position error over distance travelled", "distance [m]", "error [m]", ss));
+  }
+  if (robot.bus_bitrate_bps > 0) {
+    double bus_at_motion_s = 0;
+    for (const auto& e : events) {
+      if (e.value("event", std::string()) == "motion_start") {
+        bus_at_motion_s = e.value("bus_time_s", 0.0);
+      }
+    }
+    const Series load = BusLoadSeries(out + "/can.log", robot.bus_bitrate_bps, bus_at_motion_s);
+    if (!load.x.empty()) {
+      plots.push_back(SvgPlot(fmt::format("Bus load (100 ms bins, {:.0f} kbit/s)",
+                                          robot.bus_bitrate_bps / 1000),
+                              "t [s]", "load [%]", {load}, time_bands));
+    }
   }
   WriteText(out + "/report.html",
             HtmlReport(report, plots, ReplayData(truth, estimates, robot)));

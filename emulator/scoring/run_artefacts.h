@@ -25,6 +25,8 @@ struct ReplayRobot {
     int slip_bit = -1;
   };
   std::vector<Wheel> wheels;
+  /// The bus's bit rate, for the bus-load timeline read back from can.log (0: no timeline).
+  double bus_bitrate_bps = 0;
 };
 
 void WriteRunArtefacts(const std::string& out_dir, const nlohmann::json& report,

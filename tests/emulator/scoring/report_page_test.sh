@@ -26,6 +26,7 @@ grep -q 'data-replay-ready="1"' <<<"$body" || fail "the replay did not draw: $bo
 grep -q '<canvas id="replay"' "$tmp/dom.html" || fail "no replay canvas"
 [ "$(grep -c '<svg' "$tmp/dom.html")" -ge 3 ] || fail "fewer than 3 plots"
 grep -q 'class="band"' "$tmp/dom.html" || fail "no shaded slip or fault interval"
+grep -q '>Bus load (100 ms bins, 500 kbit/s)<' "$tmp/dom.html" || fail "no bus-load timeline"
 grep -qE '<td title="[^"]*">[0-9.]+ mm</td>' "$tmp/dom.html" || fail "no metric shown in mm"
 timeout 60 "${chrome[@]}" --user-data-dir="$tmp/profile2" --window-size=1000,2400 \
   --screenshot="$tmp/report.png" "$page" 2>>"$tmp/chromium.log" || fail "chromium --screenshot"
