@@ -78,7 +78,7 @@ void PrintSummary(const nlohmann::json& r) {
 RunCommand::RunCommand(CLI::App& app) {
   run_ = app.add_subcommand("run", "Run a scenario with the firmware in the loop");
   run_->footer(
-      "Artefacts (in --out, default ./out):\n"
+      "Artefacts (in --out, default ./out/run):\n"
       "  can.log               every frame on the bus, candump -L format, virtual timestamps\n"
       "  report.json           verdict, metrics, expectations, events (docs/scenarios.md)\n"
       "  report.html           the same as a self-contained page with plots\n"
