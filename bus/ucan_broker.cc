@@ -183,7 +183,7 @@ struct Rings {
 };
 
 /// Creates the sealed memfd and maps it; -1 on failure (the client then uses plain messages).
-int CreateRings(std::uint32_t slots, Rings* out) {
+int CreateRings(std::uint32_t slots, bool tx_drained_every_pass, Rings* out) {
   const std::size_t bytes = ucan::RingBytes(slots);
   const int fd = ::memfd_create("ucan-rings", MFD_CLOEXEC | MFD_ALLOW_SEALING);
   if (fd < 0) return -1;
@@ -199,6 +199,7 @@ int CreateRings(std::uint32_t slots, Rings* out) {
   }
   auto* h = new (p) ucan::RingHeader;
   h->slots = slots;
+  h->tx_drained_every_pass.store(tx_drained_every_pass ? 1 : 0);
   pthread_mutexattr_t a;
   pthread_mutexattr_init(&a);
   pthread_mutexattr_setpshared(&a, PTHREAD_PROCESS_SHARED);
@@ -752,7 +753,8 @@ struct UcanBroker::Impl {
         int ring_fd = -1;
         if (req.flags & ucan::kOpenRings) {
           auto rings = std::make_unique<Rings>();
-          ring_fd = CreateRings(RingSlotsFor(options.client_queue_limit), rings.get());
+          ring_fd = CreateRings(RingSlotsFor(options.client_queue_limit),
+                                options.tx_rings_drained_every_pass, rings.get());
           if (ring_fd >= 0) {
             c->rings = std::move(rings);
             ring_clients.push_back(c);

@@ -57,6 +57,11 @@ struct UcanBrokerOptions {
   /// Control requests from clients (add/remove a bus, shut down). Off for a bus owned by a
   /// program (a run's private bus): those requests get EPERM.
   bool control_requests = true;
+  /// The owner pumps the broker (UseCallerThread) and never waits in Pump() for a client's
+  /// frame, so every pass drains the tx rings anyway: ring clients are told to send no tx
+  /// doorbells (a system call per frame saved on their side and on the broker's). A Pump()
+  /// with a timeout then does not end early for a frame sent through a ring.
+  bool tx_rings_drained_every_pass = false;
 };
 
 /// What the broker refused or cut off to protect itself and its other clients.

@@ -616,7 +616,8 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   r.tail.store(tail + 1, std::memory_order_release);
   pthread_mutex_unlock(&r.lock);
   // A doorbell too many (-1: the word kept changing) is harmless: they may be spurious.
-  if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0) {
+  if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0 &&
+      h->tx_drained_every_pass.load(std::memory_order_relaxed) == 0) {
     const std::uint64_t bell = 1;
     if (real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT) < 0 &&
         (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) {

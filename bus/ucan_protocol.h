@@ -160,7 +160,10 @@ struct RingHeader {
   std::uint32_t magic = kMagic;
   std::uint32_t slots = 0;               ///< Per ring, a power of two.
   std::atomic<std::uint32_t> closed{0};  ///< Set by the broker before it drops the connection.
-  std::uint32_t reserved = 0;
+  /// Set by a broker whose every pass drains the tx ring (an owner that pumps it and never
+  /// waits in the pass for traffic): the client may leave out its tx doorbells. Only the
+  /// client's own wake-up of the broker depends on it.
+  std::atomic<std::uint32_t> tx_drained_every_pass{0};
   RingIndex rx;  ///< broker -> client
   RingIndex tx;  ///< client -> broker
 };

@@ -133,10 +133,14 @@ timespec ToTimespec(std::int64_t ns) {
   return timespec{static_cast<time_t>(ns / 1000000000), static_cast<long>(ns % 1000000000)};
 }
 
-void Transition() {
+/// A thread entered or left a wait (or started, or ended). The host is woken only by a change
+/// that may leave the whole firmware blocked (a wait entered, a thread gone): one that sets a
+/// thread running cannot, and waking the host then costs it a look while the firmware runs
+/// (two context switches on one CPU). Every change counts, so a look that raced one is retried.
+void Transition(bool may_block = false) {
   g_page->transitions.fetch_add(1);
-  // Only the first transition after the host went to sleep wakes it (one system call).
-  if (g_page->host_waiting.load() != 0 && g_page->host_waiting.exchange(0) != 0) {
+  // Only the first such change after the host went to sleep wakes it (one system call).
+  if (may_block && g_page->host_waiting.load() != 0 && g_page->host_waiting.exchange(0) != 0) {
     Futex(&g_page->transitions, FUTEX_WAKE, 1);
   }
 }
@@ -177,7 +181,7 @@ void FreeThreadSlot(int i) {
   s.tid.store(0);
   s.pid.store(0);
   s.state.store(vt::kFree);
-  Transition();
+  Transition(true);
 }
 
 /// The calling thread's slot (claimed at its first call for a thread the library did not see
@@ -206,7 +210,7 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
   s.deadline_ns.store(deadline);
   s.calls.store(0, std::memory_order_relaxed);
   s.state.store(vt::kWaiting);
-  Transition();
+  Transition(true);
 }
 
 void EndWait(vt::ThreadSlot& s) {

@@ -41,8 +41,9 @@ int CountKernelCanReceivers(const std::string& iface) {
   return count;
 }
 
-FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::RunContext& run)
+FirmwareLink::FirmwareLink(const std::string& can_iface, Pacing pacing, sim::RunContext& run)
     : run_(run) {
+  const bool lockstep = pacing != Pacing::kRealTime;
   bus::CanTransportOptions opt;
   opt.receive_own = false;
   if (can_iface.empty()) {
@@ -52,6 +53,7 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, bool lockstep, sim::Run
     bo.runtime_dir = runtime_dir_;
     bo.remove_runtime_dir = true;
     bo.control_requests = false;  // the run owns its bus: the firmware cannot remove it
+    bo.tx_rings_drained_every_pass = pacing == Pacing::kVirtualClock;
     broker_ = std::make_unique<bus::UcanBroker>(bo);
     iface_ = "ucan0";
     broker_->AddBus(iface_);
@@ -197,7 +199,8 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
                           const FrameFn& on_frame) {
   // Blocked at the end of the last settle, nothing sent to it since and no deadline reached:
   // nothing can have woken it.
-  if (clock.WakeDue() == 0 && firmware_blocked_) return true;
+  const bool ended_waits = clock.WakeDue() > 0;
+  if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
   const auto t0 = Clock::now();
   bool checked_exit = false;
@@ -220,7 +223,8 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   };
   // What the run sent since the last settle; if that reached the firmware, it runs now (and
   // cannot be blocked yet).
-  bool woke = pass();
+  // Waits it just ended run now as well: no look at the firmware can find it blocked yet.
+  bool woke = pass() || ended_waits;
   for (;;) {
     if (run_.failed()) return false;
     if (!woke && clock.Blocked()) {

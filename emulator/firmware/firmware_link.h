@@ -32,9 +32,14 @@ class FirmwareLink {
  public:
   using FrameFn = std::function<void(const bus::CanFrame&)>;
 
+  /// How the run waits for the firmware: at wall-clock instants, in lockstep by handshake, or
+  /// in lockstep on the firmware's virtual clock (Settle; the private bus then tells its ring
+  /// clients that every pass drains their frames, so they send no doorbells).
+  enum class Pacing { kRealTime, kLockstep, kVirtualClock };
+
   /// `can_iface` empty: the private userspace bus. Throws what the transport throws for a
   /// kernel interface that cannot be opened.
-  FirmwareLink(const std::string& can_iface, bool lockstep, sim::RunContext& run);
+  FirmwareLink(const std::string& can_iface, Pacing pacing, sim::RunContext& run);
   ~FirmwareLink();
 
   const std::string& interface() const { return iface_; }

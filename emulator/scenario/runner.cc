@@ -260,7 +260,11 @@ void Run::Build() {
   CanBusConfig bc;
   bc.bitrate_bps = s_.sensors.bitrate_bps;
   hub_ = std::make_unique<sim::BusHub>(bc, devices_, run_);
-  link_ = std::make_unique<firmware::FirmwareLink>(o_.can_iface, lockstep_, run_);
+  using Pacing = firmware::FirmwareLink::Pacing;
+  link_ = std::make_unique<firmware::FirmwareLink>(
+      o_.can_iface,
+      virtual_time_ ? Pacing::kVirtualClock : lockstep_ ? Pacing::kLockstep : Pacing::kRealTime,
+      run_);
   if (virtual_time_) {
     if (!link_->private_bus()) {
       throw std::invalid_argument(fmt::format(
