@@ -127,9 +127,14 @@ std::optional<int> RunCommand::Run() {
   }
   if (!clock_.empty()) {
     sc.timing.virtual_clock = clock_ == "virtual";
+    sc.timing.clock_named = true;
     sc.timing.firmware_produces_sync = sc.timing.virtual_clock;
+    sc.timing.sync_producer_named = false;
   }
-  if (!sync_producer_.empty()) sc.timing.firmware_produces_sync = sync_producer_ == "firmware";
+  if (!sync_producer_.empty()) {
+    sc.timing.firmware_produces_sync = sync_producer_ == "firmware";
+    sc.timing.sync_producer_named = true;
+  }
   if (sc.timing.firmware_produces_sync && sc.timing.lockstep && !realtime_ &&
       !sc.timing.virtual_clock) {
     fmt::print(stderr,

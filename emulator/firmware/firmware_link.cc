@@ -73,8 +73,10 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, Pacing pacing, sim::Run
 FirmwareLink::~FirmwareLink() { Close(); }
 
 void FirmwareLink::FailExited(const FirmwareProcess& process) {
-  run_.Fail(fmt::format("the firmware {} during the run (see firmware.log){}",
-                        process.ExitDescription(), process.CrashSummary()));
+  run_.Fail(fmt::format("the firmware {} {} (see firmware.log){}", process.ExitDescription(),
+                        FirmwareConnected() || opened_once_ ? std::string("during the run")
+                                            : fmt::format("before opening {}", iface_),
+                        process.CrashSummary()));
 }
 
 void FirmwareLink::Close() {
@@ -116,9 +118,7 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
   }
   const auto t0 = Clock::now();
   while (WallSeconds(t0) < timeout_s) {
-    for (const auto& st : broker_->Stats()) {
-      if (st.name == iface_ && st.clients >= 2) return true;
-    }
+    if (FirmwareConnected()) return true;
     if (auto code = process.Exited()) {
       why = fmt::format("the firmware {} before opening {} (see firmware.log){}",
                         process.ExitDescription(), iface_, process.CrashSummary());
@@ -173,7 +173,7 @@ void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
 bool FirmwareLink::FirmwareConnected() const {
   if (!broker_) return true;
   for (const auto& st : broker_->Stats()) {
-    if (st.name == iface_ && st.clients >= 2) return true;
+    if (st.name == iface_ && st.clients >= 2) return opened_once_ = true;
   }
   return false;
 }
@@ -202,7 +202,11 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
-  const auto t0 = Clock::now();
+  // The limit is on running without blocking: a firmware that blocks and is woken again by
+  // what it asked the bus for (a burst of socket opens, requests) makes progress, and starts
+  // the count again; only a far longer stay at one instant ends the run as well.
+  const auto settle_start = Clock::now();
+  auto t0 = settle_start;
   bool checked_exit = false;
   auto exited = [&] {
     FailExited(process);
@@ -232,6 +236,15 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       // routing them wakes nobody, the firmware stays blocked.
       if (pass()) {
         woke = true;
+        t0 = Clock::now();
+        const double cap_s = std::max(kMinSecondsAtOneInstant, kTimeoutsAtOneInstant * timeout_s);
+        if (WallSeconds(settle_start) > cap_s) {
+          run_.Fail(fmt::format("the firmware kept the bus busy at one instant of virtual time "
+                                "for {} s of wall time (each time it blocked, the bus woke it "
+                                "again)",
+                                cap_s));
+          return false;
+        }
         continue;
       }
       if (run_.failed()) return false;

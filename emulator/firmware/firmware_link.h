@@ -91,9 +91,14 @@ class FirmwareLink {
   bool pumped_ = false;
   int local_port_ = -1;  // the emulator's port on the pumped bus
   static constexpr int kMaxUnpumpedFrames = 32;
+  // Settle: wall time at one virtual instant for a firmware that keeps blocking and being woken
+  // by the bus: this many timeouts, and at least this many seconds.
+  static constexpr double kTimeoutsAtOneInstant = 20;
+  static constexpr double kMinSecondsAtOneInstant = 60;
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
+  mutable bool opened_once_ = false;  // FirmwareConnected() was true once
   std::chrono::steady_clock::time_point last_exit_check_{};
 };
 

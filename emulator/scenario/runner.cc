@@ -97,6 +97,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void WaitLastStatus(int cycle, std::int64_t k) override;
 
  private:
+  // Which clock and which SYNC producer this run has (TimingSpec: unnamed, the virtual clock
+  // wherever there can be one). Throws std::invalid_argument for a combination that cannot run.
+  void ResolveClock();
   void Build();
   // Closed loop: the drives' power stages onto their wheels, before each physics step.
   void CommandDrives();
@@ -113,6 +116,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void RunPhases();
   void Progress(bool final);
   json Report(double wall_s);
+  std::uint64_t MotionCycles() const { return handshake_->syncs_sent() - syncs_before_motion_; }
   // The time of an estimate: since the motion start, negative before it (not scored).
   double ScoredSeconds(std::int64_t t_ns) const {
     return motion_started_ ? run_.MotionSeconds(t_ns) : -1.0;
@@ -123,6 +127,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   std::uint64_t seed_ = 1;
   bool lockstep_ = true;
   bool virtual_time_ = false;
+  bool firmware_sync_ = false;  // the firmware produces SYNC (ResolveClock)
+  // SYNCs before the motion phase (a SYNC-producing firmware's boot): not counted as cycles.
+  std::uint64_t syncs_before_motion_ = 0;
   bool motion_started_ = false;
   std::string out_;
   sim::RunContext run_;
@@ -206,7 +213,7 @@ void Run::StepDevices(std::int64_t t_ns, bool motion) {
 void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
-  if (s_.timing.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
+  if (firmware_sync_ && f.id == bus::canopen::kSyncCobId && !f.rtr) {
     // The firmware is the SYNC producer: its SYNCs number the cycles.
     estimates_->OnSync(ScoredSeconds(hub_->now_ns()));
     handshake_->OnSyncSent();
@@ -251,6 +258,31 @@ void Run::StartFirmwareOnVirtualClock() {
   }
 }
 
+void Run::ResolveClock() {
+  const auto& t = s_.timing;
+  // No virtual clock without a firmware process to put on it, nor on a kernel interface.
+  const bool possible = !s_.firmware.command.empty() && o_.can_iface.empty();
+  virtual_time_ = lockstep_ && t.virtual_clock && (possible || t.clock_named);
+  if (virtual_time_ && !possible && !o_.can_iface.empty()) {
+    throw std::invalid_argument(fmt::format(
+        "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
+        "({}) the firmware's time is the host's (use --realtime, --clock cooperative, or no "
+        "--can)",
+        s_.source_path, o_.can_iface));
+  }
+  if (s_.firmware.command.empty()) virtual_time_ = false;  // an attached firmware: its own clock
+  firmware_sync_ = t.sync_producer_named ? t.firmware_produces_sync : virtual_time_;
+  if (firmware_sync_ && lockstep_ && !virtual_time_) {
+    throw std::invalid_argument(fmt::format(
+        "{}: timing.sync_producer: firmware: a firmware that produces SYNC runs in lockstep only "
+        "on the virtual clock, which this run does not have ({}; use --realtime, or "
+        "sync_producer: emulator)",
+        s_.source_path,
+        s_.firmware.command.empty() ? "no firmware.command"
+                                    : fmt::format("kernel interface {}", o_.can_iface)));
+  }
+}
+
 void Run::Build() {
   physics_ = std::make_unique<PhysicsStage>(s_, seed_, run_);
   devices_ = BuildScenarioDevices(
@@ -266,12 +298,6 @@ void Run::Build() {
       virtual_time_ ? Pacing::kVirtualClock : lockstep_ ? Pacing::kLockstep : Pacing::kRealTime,
       run_);
   if (virtual_time_) {
-    if (!link_->private_bus()) {
-      throw std::invalid_argument(fmt::format(
-          "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
-          "({}) the firmware's time is the host's (use --realtime, or no --can)",
-          s_.source_path, o_.can_iface));
-    }
     clock_ = std::make_unique<firmware::VirtualClock>(link_->runtime_dir());
     link_->UseReceiveClock(*clock_);
   }
@@ -309,7 +335,7 @@ void Run::StartFirmware() {
     scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(
                                      s_.firmware.config, s_.firmware.overrides_yaml,
                                      {s_.timing.sync_period_s, lockstep_ && !virtual_time_,
-                                      !s_.timing.firmware_produces_sync}));
+                                      !firmware_sync_}));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",
@@ -412,6 +438,7 @@ void Run::RunPhases() {
   run_.motion0_ns = run_.now_ns;
   run_.motion0_s = static_cast<double>(run_.now_ns) * 1e-9;
   motion_started_ = true;
+  syncs_before_motion_ = handshake_->syncs_sent();
   physics_->StartMotion(run_.now_ns);
   truth_->StartMotion(run_.now_ns, physics_->vehicle().body_truth());
   // Its bus time (can.log's clock) aligns can.log with truth.csv.
@@ -433,7 +460,7 @@ void Run::RunPhases() {
               .steps = cycles * steps_per_cycle});
   sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns, period_ns,
                        cycles);
-  if (s_.timing.firmware_produces_sync) {
+  if (firmware_sync_) {
     loop.Run({"motion", sources({&tick}), steps_done});
   } else {
     loop.Run({"motion", sources({&tick, &sync}),
@@ -451,7 +478,7 @@ void Run::Progress(bool final) {
   const double wall = WallSeconds(wall0_);
   fmt::print(stderr, "{}{}: t = {:7.2f} / {:.2f} s  cycle {:6}  {:7.1f}x real time{}",
              lines ? "" : "\r", s_.name, std::max(0.0, sim), s_.timing.duration_s,
-             handshake_->syncs_sent(), wall > 0 ? std::max(0.0, sim) / wall : 0.0,
+             MotionCycles(), wall > 0 ? std::max(0.0, sim) / wall : 0.0,
              final || lines ? "\n" : "");
 }
 
@@ -461,7 +488,7 @@ json Run::Report(double wall_s) {
   r["seed"] = seed_;
   const double sim = std::max(0.0, run_.MotionSeconds(run_.now_ns));
   r["sim_time_s"] = sim;
-  r["cycles"] = handshake_->syncs_sent();
+  r["cycles"] = MotionCycles();
   r["sync_period_s"] = s_.timing.sync_period_s;
   json metrics = json::object();
   std::vector<std::string> wheel_names;
@@ -498,7 +525,7 @@ RunResult Run::Execute() {
         fmt::format("no DBC files in '{}' (set WHEELHIL_DBC_DIR)", o_.dbc_dir));
   }
   lockstep_ = s_.timing.lockstep && !o_.realtime;
-  virtual_time_ = lockstep_ && s_.timing.virtual_clock && !s_.firmware.command.empty();
+  ResolveClock();
   if (lockstep_) cpus_.ConfineToOneCpu(o_.cpu);
   wall0_ = Clock::now();
   last_progress_ = wall0_;
@@ -507,6 +534,9 @@ RunResult Run::Execute() {
                              {"event", "run_start"},
                              {"seed", seed_},
                              {"lockstep", lockstep_},
+                             {"clock", virtual_time_ ? "virtual" : lockstep_ ? "cooperative"
+                                                                             : "wall"},
+                             {"sync_producer", firmware_sync_ ? "firmware" : "emulator"},
                              {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
   StartFirmware();
   RunPhases();

@@ -384,17 +384,18 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
               "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
-  const std::string clock = r.String(n, "clock", "timing", std::string("cooperative"));
-  if (clock == "virtual") {
-    t.virtual_clock = true;
-  } else if (clock != "cooperative") {
+  t.clock_named = n["clock"].IsDefined();
+  const std::string clock = r.String(n, "clock", "timing", std::string("virtual"));
+  if (clock == "cooperative") {
+    t.virtual_clock = false;
+  } else if (clock != "virtual") {
     r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual or cooperative", clock));
   }
+  t.sync_producer_named = n["sync_producer"].IsDefined();
   const std::string producer = r.String(n, "sync_producer", "timing",
                                         std::string(t.virtual_clock ? "firmware" : "emulator"));
-  if (producer == "firmware") {
-    t.firmware_produces_sync = true;
-  } else if (producer != "emulator") {
+  t.firmware_produces_sync = producer == "firmware";
+  if (producer != "firmware" && producer != "emulator") {
     r.Fail(n["sync_producer"], "timing.sync_producer",
            fmt::format("'{}' is not firmware or emulator", producer));
   }

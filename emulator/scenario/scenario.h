@@ -233,11 +233,16 @@ struct TimingSpec {
   double physics_rate_hz = 1000;
   double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
-  /// Lockstep on the firmware's virtual clock (libwheelhil_vtime.so: docs/virtual-time.md)
-  /// instead of the cooperative FW_Status handshake.
-  bool virtual_clock = false;
+  /// Lockstep on the firmware's virtual clock (libwheelhil_vtime.so: docs/virtual-time.md),
+  /// the default, instead of the cooperative FW_Status handshake (timing.clock: cooperative).
+  /// A run without a firmware command or on a kernel CAN interface has no virtual clock: unless
+  /// the clock was named, it is then cooperative (RunScenario decides).
+  bool virtual_clock = true;
+  bool clock_named = false;  ///< timing.clock (or --clock) was given.
   /// The firmware is the SYNC producer (the CANopen master's role); else the emulator is.
-  bool firmware_produces_sync = false;
+  /// Unless named, the firmware exactly when the run is on the virtual clock.
+  bool firmware_produces_sync = true;
+  bool sync_producer_named = false;
 };
 
 using Expectation = scoring::Expectation;

@@ -9,8 +9,8 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
 # A SYNC-producing firmware in cooperative lockstep cannot be: exit 2 with the fix named.
-"$wheelhil" run "$src/scenarios/smoke/paper000_slip_short.yaml" --sync-producer firmware \
-  --out "$work/out2" >"$work/log2" 2>&1
+"$wheelhil" run "$src/scenarios/smoke/paper000_slip_short.yaml" --clock cooperative \
+  --sync-producer firmware --out "$work/out2" >"$work/log2" 2>&1
 rc=$?
 want="runs in lockstep only on the virtual clock (--clock virtual, or --realtime)"
 if [ "$rc" -ne 2 ] || ! grep -qF -- "$want" "$work/log2"; then

@@ -232,10 +232,14 @@ class ScenarioFaultsRun : public ::testing::Test {
 };
 
 TEST_F(ScenarioFaultsRun, FrameDropRemovesExactlyTheFramesDueInItsWindow) {
-  (void)Run(Short(""), "base");
-  const nlohmann::json r = Run(
-      Short("  - {type: frame, kind: drop, id: 0x174, probability: 1, start_s: 1.0, end_s: 1.5}\n"),
-      "drop");
+  // The emulator's SYNCs mark the motion start here (cooperative clock).
+  Scenario plain = Short("");
+  testing::UseCooperativeClock(plain);
+  (void)Run(plain, "base");
+  Scenario with_drop =
+      Short("  - {type: frame, kind: drop, id: 0x174, probability: 1, start_s: 1.0, end_s: 1.5}\n");
+  testing::UseCooperativeClock(with_drop);
+  const nlohmann::json r = Run(with_drop, "drop");
   const auto base = ReadLog(dir_ / "base" / "can.log");
   const auto drop = ReadLog(dir_ / "drop" / "can.log");
   // Motion start: the first SYNC (0x080) is queued at that (whole-ms) instant, done within 1 ms.
@@ -513,6 +517,7 @@ TEST_F(ScenarioFaultsRun, HeartbeatTimeoutDoesNotDependOnTheHostSpeed) {
   ASSERT_NE(text.find(window), std::string::npos);
   text.replace(text.find(window), window.size(), "node_id: 2, start_s: 1.0, end_s: 2.5}");
   Scenario s = ParseScenario(text, path);
+  testing::UseCooperativeClock(s);  // on the virtual clock the host's speed cannot show
   s.expectations.clear();
   s.timing.duration_s = 3.25;
   const double period_s = s.timing.sync_period_s;

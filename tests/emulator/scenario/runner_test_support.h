@@ -29,6 +29,15 @@ inline nlohmann::json ReportWithoutWall(const std::filesystem::path& run_dir) {
   return r;
 }
 
+/// Puts a scenario on the cooperative FW_Status handshake with the emulator producing SYNC
+/// (timing.clock: cooperative), for tests of that mode and of what only it has.
+inline void UseCooperativeClock(Scenario& s) {
+  s.timing.virtual_clock = false;
+  s.timing.clock_named = true;
+  s.timing.firmware_produces_sync = false;
+  s.timing.sync_producer_named = true;
+}
+
 /// Options for a run into `out` with this build's programs and a private userspace bus.
 inline RunOptions BuildTreeRunOptions(const std::filesystem::path& out) {
   RunOptions o;

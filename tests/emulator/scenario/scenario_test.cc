@@ -180,10 +180,17 @@ TEST(ScenarioLoader, ColumnPointsAtTheValue) {
 }
 
 TEST(ScenarioLoader, ClockAndSyncProducer) {
-  // Cooperative handshake with the emulator's SYNC unless asked otherwise.
+  // The virtual clock with the firmware producing SYNC unless asked otherwise (the runner falls
+  // back to the handshake where there can be no virtual clock: ScenarioRun tests).
   const Scenario plain = ParseScenario(Minimal(), kFile);
-  EXPECT_FALSE(plain.timing.virtual_clock);
-  EXPECT_FALSE(plain.timing.firmware_produces_sync);
+  EXPECT_TRUE(plain.timing.virtual_clock);
+  EXPECT_FALSE(plain.timing.clock_named);
+  EXPECT_TRUE(plain.timing.firmware_produces_sync);
+  EXPECT_FALSE(plain.timing.sync_producer_named);
+  const Scenario c = ParseScenario(Minimal("timing: {clock: cooperative}\n"), kFile);
+  EXPECT_FALSE(c.timing.virtual_clock);
+  EXPECT_TRUE(c.timing.clock_named);
+  EXPECT_FALSE(c.timing.firmware_produces_sync);
   // On the virtual clock the firmware produces SYNC unless the scenario says the emulator does.
   const Scenario v = ParseScenario(Minimal("timing: {clock: virtual}\n"), kFile);
   EXPECT_TRUE(v.timing.virtual_clock);
@@ -198,8 +205,12 @@ TEST(ScenarioLoader, ClockAndSyncProducer) {
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
   // The handshake needs the emulator's SYNC; real time does not.
-  EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {sync_producer: firmware}\n"), kFile); },
-              ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
+  EXPECT_THAT(
+      [] {
+        (void)ParseScenario(Minimal("timing: {clock: cooperative, sync_producer: firmware}\n"),
+                            kFile);
+      },
+      ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
   EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
                   .timing.firmware_produces_sync);
 }

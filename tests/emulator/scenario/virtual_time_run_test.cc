@@ -227,7 +227,9 @@ TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
        at = log.find(" 080#", at + 1)) {
     ++in_log;
   }
-  EXPECT_NEAR(static_cast<double>(in_log), syncs, 1.0);  // the last may still be on the wire
+  // `cycles` counts the motion phase's; the log has the start-up's too (under 1 s of them).
+  EXPECT_GE(in_log + 1, static_cast<std::size_t>(syncs));  // the last may still be on the wire
+  EXPECT_LE(in_log, static_cast<std::size_t>(syncs) + 100);
 }
 
 TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
