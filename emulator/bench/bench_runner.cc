@@ -178,7 +178,11 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
       SetPath(report, key, Unavailable(fmt::format("no scenario file scenarios/{}*.yaml yet", s)));
       continue;
     }
-    const LockstepRun r = RunLockstepScenario(o, self_exe, file, "");
+    // The cooperative handshake (FW_Status, the emulator's SYNC), named: it is no longer the
+    // default.
+    const LockstepRun r = RunLockstepScenario(
+        o, self_exe, file, "",
+        {{"timing.clock", "cooperative", 0}, {"timing.sync_producer", "emulator", 0}});
     SetPath(report, key, r.rtf);
     if (r.rtf.is_number()) {
       SetPath(report, fmt::format("lockstep.{}.scenario", s),
@@ -241,12 +245,15 @@ nlohmann::json LockstepOnKernelBus(const BenchOptions& o, const std::string& sel
       if (also_ucan) SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s), Unavailable(why));
       continue;
     }
-    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface);
+    // A kernel interface has no virtual clock: both rows on the handshake.
+    const std::vector<campaign::Override> cooperative = {{"timing.clock", "cooperative", 0},
+                                                         {"timing.sync_producer", "emulator", 0}};
+    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, cooperative);
     SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), k.rtf);
     if (k.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.vcan_sim_s", s), k.sim_s);
     if (also_ucan) {
       SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s),
-              RunLockstepScenario(o, self_exe, file, "").rtf);
+              RunLockstepScenario(o, self_exe, file, "", cooperative).rtf);
     }
   }
   return report;

@@ -87,6 +87,7 @@ VirtualClock::~VirtualClock() {
   for (auto& f : files_) {
     if (f.stat_fd >= 0) ::close(f.stat_fd);
     if (f.schedstat_fd >= 0) ::close(f.schedstat_fd);
+    if (f.syscall_fd >= 0) ::close(f.syscall_fd);
   }
   if (page_ != nullptr) ::munmap(page_, sizeof(vt::Page));
   ::unlink(path_.c_str());
@@ -290,6 +291,7 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
   if (f.tid != tid) {
     if (f.stat_fd >= 0) ::close(f.stat_fd);
     if (f.schedstat_fd >= 0) ::close(f.schedstat_fd);
+    if (f.syscall_fd >= 0) ::close(f.syscall_fd);
     f = ProcFiles{};
     f.tid = tid;
     const std::string dir = fmt::format("/proc/{}/task/{}/", pid, tid);
@@ -382,6 +384,7 @@ bool VirtualClock::Blocked() {
     } else if (f.runs_seen != runs) {
       f.runs_seen = runs;
       blocked = false;  // look again
+      CheckKernelWait(i, pid, tid);
     }
   }
   return blocked && page_->transitions.load() == t0;
@@ -397,6 +400,35 @@ void VirtualClock::WaitForChange(int timeout_us) {
   page_->host_waiting.store(0);
 }
 
+std::string VirtualClock::ThreadName(pid_t pid, pid_t tid) const {
+  std::string name = ReadProcFile(fmt::format("/proc/{}/task/{}/comm", pid, tid));
+  while (!name.empty() && name.back() == '\n') name.pop_back();
+  return name.empty() ? std::string("?") : name;
+}
+
+void VirtualClock::CheckKernelWait(int slot, pid_t pid, pid_t tid) {
+  ProcFiles& f = files_[static_cast<std::size_t>(slot)];
+  if (f.syscall_fd == -1) {
+    // Readable with ptrace access: the firmware is our descendant.
+    f.syscall_fd = ::open(fmt::format("/proc/{}/task/{}/syscall", pid, tid).c_str(),
+                          O_RDONLY | O_CLOEXEC);
+    if (f.syscall_fd < 0) f.syscall_fd = -2;
+  }
+  if (f.syscall_fd < 0) return;
+  const HostClockWait w = ClassifyKernelWait(ReadAt0(f.syscall_fd));
+  if (w.call == nullptr) return;
+  if (std::find(f.calls_reported.begin(), f.calls_reported.end(), w.number) !=
+      f.calls_reported.end()) {
+    return;
+  }
+  f.calls_reported.push_back(w.number);
+  host_clock_waits_.push_back(fmt::format(
+      "thread '{}' (pid {}, tid {}) is in {}, a timed wait that bypassed libwheelhil_vtime.so "
+      "(a raw system call or a libc-internal wait): it ends on the host's clock, so this run may "
+      "not be deterministic (docs/virtual-time.md, \"Limits\")",
+      ThreadName(pid, tid), pid, tid, w.call));
+}
+
 std::vector<std::string> VirtualClock::RunningThreads() {
   std::vector<std::string> out;
   const int threads = page_->threads_used.load();
@@ -406,12 +438,10 @@ std::vector<std::string> VirtualClock::RunningThreads() {
     const pid_t pid = s.pid.load();
     const pid_t tid = s.tid.load();
     if (KernelState(i, pid, tid, nullptr) != Kernel::kRunning) continue;
-    std::string name = ReadProcFile(fmt::format("/proc/{}/task/{}/comm", pid, tid));
-    while (!name.empty() && name.back() == '\n') name.pop_back();
     out.push_back(fmt::format("thread '{}' (pid {}, tid {}) last called {} ({} such calls since "
                               "its last wait)",
-                              name.empty() ? std::string_view("?") : std::string_view(name), pid,
-                              tid, LastCallName(s.last_call.load()), s.calls.load()));
+                              ThreadName(pid, tid), pid, tid, LastCallName(s.last_call.load()),
+                              s.calls.load()));
   }
   return out;
 }
@@ -457,6 +487,48 @@ std::string ResolveOnPath(const std::string& program) {
 }
 
 }  // namespace
+
+HostClockWait ClassifyKernelWait(const std::string& line) {
+  char* end = nullptr;
+  const long nr = std::strtol(line.c_str(), &end, 10);
+  if (end == line.c_str() || nr < 0) return {};
+  std::uint64_t a[6] = {};
+  const char* p = end;
+  for (auto& arg : a) {
+    char* next = nullptr;
+    arg = std::strtoull(p, &next, 16);
+    if (next == p) return {};
+    p = next;
+  }
+  auto timed = [&](bool t, const char* name) { return t ? HostClockWait{nr, name} : HostClockWait{}; };
+  auto as_int = [](std::uint64_t v) { return static_cast<std::int32_t>(v & 0xffffffffu); };
+  switch (nr) {
+    case SYS_nanosleep: return {nr, "nanosleep"};
+    case SYS_clock_nanosleep: return {nr, "clock_nanosleep"};
+    case SYS_futex: {
+      const auto cmd = static_cast<int>(a[1]) & FUTEX_CMD_MASK;
+      const bool waits = cmd == FUTEX_WAIT || cmd == FUTEX_WAIT_BITSET || cmd == FUTEX_LOCK_PI ||
+                         cmd == FUTEX_WAIT_REQUEUE_PI;
+      return timed(waits && a[3] != 0, "futex");
+    }
+    case SYS_poll: return timed(as_int(a[2]) > 0, "poll");
+    case SYS_ppoll: return timed(a[2] != 0, "ppoll");
+    case SYS_select: return timed(a[4] != 0, "select");
+    case SYS_pselect6: return timed(a[4] != 0, "pselect6");
+    case SYS_epoll_wait: return timed(as_int(a[3]) > 0, "epoll_wait");
+    case SYS_epoll_pwait: return timed(as_int(a[3]) > 0, "epoll_pwait");
+#ifdef SYS_epoll_pwait2
+    case SYS_epoll_pwait2: return timed(a[3] != 0, "epoll_pwait2");
+#endif
+    case SYS_rt_sigtimedwait: return timed(a[2] != 0, "rt_sigtimedwait");
+    case SYS_mq_timedreceive: return timed(a[4] != 0, "mq_timedreceive");
+    case SYS_mq_timedsend: return timed(a[4] != 0, "mq_timedsend");
+    case SYS_recvmmsg: return timed(a[4] != 0, "recvmmsg");
+    case SYS_semtimedop: return timed(a[3] != 0, "semtimedop");
+    case SYS_io_getevents: return timed(a[4] != 0, "io_getevents");
+    default: return {};
+  }
+}
 
 std::string WhyNotVirtualClock(const std::string& command) {
   const std::string program = ProgramOf(command);

@@ -71,6 +71,12 @@ class VirtualClock {
   /// The threads that are not blocked: "name (tid N) last called X (K calls since its last
   /// wait)", for the report of a firmware that does not block.
   std::vector<std::string> RunningThreads();
+  /// Timed waits found that bypassed the library (a raw system call, a glibc-internal wait):
+  /// "thread 'NAME' (pid P, tid T) is in nanosleep, a timed wait ...", each thread and call
+  /// once, since the last call. They end on the host's clock, so the run may not be
+  /// deterministic. Found when a thread the library sees running is first seen asleep in the
+  /// kernel (its /proc .../syscall); where that file cannot be read, nothing is found.
+  std::vector<std::string> TakeHostClockWaits() { return std::exchange(host_clock_waits_, {}); }
   /// A process slot still waiting for its library (a static binary, a program that clears
   /// LD_PRELOAD): its pid, else 0.
   pid_t UnregisteredProcess() const;
@@ -81,9 +87,15 @@ class VirtualClock {
     pid_t tid = 0;
     int stat_fd = -1;
     int schedstat_fd = -1;
+    int syscall_fd = -1;
     std::uint64_t runs_seen = UINT64_MAX;  // schedstat timeslices when last seen asleep
+    std::vector<long> calls_reported;      // host-clock waits already reported
   };
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
+  // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
+  // timed wait the library did not see.
+  void CheckKernelWait(int slot, pid_t pid, pid_t tid);
+  std::string ThreadName(pid_t pid, pid_t tid) const;
   // This process's copy of fd `fd` of process `pid` (pidfd_getfd), cached while `tag` (the
   // thread, or the timer's generation) is the same; -1 when copies cannot be had.
   int CopyOfFd(pid_t pid, int fd, std::uint64_t tag);
@@ -108,8 +120,18 @@ class VirtualClock {
   bool fd_copies_work_ = true;
   std::vector<pid_t> signalled_;  // processes a timer signal went to at the current instant
   bool threads_gone_ = false;
+  std::vector<std::string> host_clock_waits_;
   pid_t first_pid_ = 0;
 };
+
+/// A system call a thread is blocked in, as /proc/<pid>/task/<tid>/syscall gives it ("202 0x..
+/// 0x80 ..."), when it is a wait with a timeout (which then runs on the host's clock): its
+/// number and name; call == nullptr for anything else (no timeout, not a wait, running).
+struct HostClockWait {
+  long number = -1;
+  const char* call = nullptr;
+};
+HostClockWait ClassifyKernelWait(const std::string& proc_syscall_line);
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a
 /// statically linked executable, into which no library can be preloaded. Empty when nothing

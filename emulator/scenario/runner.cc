@@ -239,6 +239,12 @@ void Run::SettleFirmware() {
   clock_->SetNow(hub_->now_ns());
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+  for (const std::string& what : clock_->TakeHostClockWaits()) {
+    run_.events.push_back(json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                               {"event", "firmware_host_clock_wait"},
+                               {"detail", what}});
+    fmt::print(stderr, "wheelhil run: warning: {}\n", what);
+  }
 }
 
 void Run::StartFirmwareOnVirtualClock() {

@@ -8,10 +8,12 @@
  *   0x3A1 (8 bytes): theta  int32 little endian, microradians; cycle uint32
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
  *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
- *                         [--fork]
+ *                         [--fork] [--raw-sleep-after-s S]
  * --fork: the work is done by a forked child; the parent only waits for it (a supervisor).
  * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever; --exit-after-s:
- * after S seconds, exit with status 3 (tests of what the emulator reports for such firmware). */
+ * after S seconds, exit with status 3; --raw-sleep-after-s: after S seconds, sleep 1 ms of the
+ * host's clock each cycle through a raw system call, as a Go runtime makes it (tests of what the
+ * emulator reports for such firmware). */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <linux/can.h>
@@ -27,6 +29,7 @@
 #include <sys/epoll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/syscall.h>
 #include <sys/timerfd.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -102,10 +105,25 @@ static void put_i32(uint8_t* p, int32_t v) {
   p[3] = (uint8_t)(u >> 24);
 }
 
+/* nanosleep without any libc symbol: a `syscall` instruction of the program's own. */
+static long raw_nanosleep(const struct timespec* ts) {
+#if defined(__x86_64__)
+  long ret;
+  __asm__ volatile("syscall"
+                   : "=a"(ret)
+                   : "a"((long)SYS_nanosleep), "D"(ts), "S"((const struct timespec*)NULL)
+                   : "rcx", "r11", "memory");
+  return ret;
+#else
+  return syscall(SYS_nanosleep, ts, NULL);
+#endif
+}
+
 int main(int argc, char** argv) {
   const char* iface = NULL;
   int cpr = 2000;
   double radius = 0.075, track = 0.32, spin_after_s = -1, exit_after_s = -1;
+  double raw_sleep_after_s = -1;
   int fork_child = 0;
   int period_ms = 10;
   g_nodes[0].id = 1;
@@ -121,6 +139,7 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--spin-after-s") == 0) spin_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--exit-after-s") == 0) exit_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--fork") == 0) fork_child = atoi(argv[i + 1]);
+    else if (strcmp(argv[i], "--raw-sleep-after-s") == 0) raw_sleep_after_s = atof(argv[i + 1]);
   }
   if (iface == NULL) {
     fprintf(stderr, "usage: %s --can IFACE ...\n", argv[0]);
@@ -190,6 +209,10 @@ int main(int argc, char** argv) {
       for (;;) epoll_wait(ep, &out, 1, 0);  // a firmware bug: it never blocks again
     }
     if (exit_after_s >= 0 && now_s() - t0 > exit_after_s) exit(3);
+    if (raw_sleep_after_s >= 0 && now_s() - t0 > raw_sleep_after_s) {
+      const struct timespec ms = {0, 1000000};
+      raw_nanosleep(&ms);
+    }
     struct epoll_event out;
     const int n = epoll_wait(ep, &out, 1, -1);
     if (n < 0) {

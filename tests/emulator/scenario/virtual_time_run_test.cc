@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "emulator/firmware/virtual_clock.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 #include "tests/emulator/scenario/runner_test_support.h"
@@ -26,6 +27,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
+using ::testing::Not;
 using testing::Slurp;
 
 const std::string kCustomerC =
@@ -113,6 +115,8 @@ std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
   EXPECT_EQ(a.report["verdict"], "pass") << a.report["expectations"].dump(1);
   EXPECT_GE(a.report["metrics"]["pose"]["frames"].get<int>(), 100);
   EXPECT_THAT(log, HasSubstr(" 000#0100"));
+  // Every timed wait was the library's.
+  EXPECT_THAT(Slurp(dir / "a" / "events.jsonl"), Not(HasSubstr("firmware_host_clock_wait")));
   const auto pose = LastPayload(log, id);
   EXPECT_EQ(pose.size(), 8u) << id;
   if (pose.size() == 8u) {
@@ -194,6 +198,52 @@ TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   EXPECT_THAT(events, HasSubstr("\"firmware_not_blocking\""));
   // What was recorded before stays: the start-up and half a second of cycles.
   EXPECT_THAT(Slurp(dir_ / "spin" / "can.log"), HasSubstr(" 3A0#"));
+}
+
+// A raw `nanosleep` (a `syscall` instruction of the firmware's own, as a Go runtime makes it) is
+// not the library's: the run names the thread and the call (an event and a warning), once.
+TEST_F(VirtualTimeRun, ATimedWaitThatBypassesTheLibraryIsNamed) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --raw-sleep-after-s 0.5";
+  s.timing.duration_s = 1.5;
+  s.expectations.clear();
+  (void)RunScenario(s, testing::BuildTreeRunOptions(dir_ / "raw"));
+  const std::string events = Slurp(dir_ / "raw" / "events.jsonl");
+  EXPECT_THAT(events, HasSubstr("\"event\":\"firmware_host_clock_wait\""));
+  EXPECT_THAT(events, HasSubstr("thread 'c_epoll_odometr'"));
+  EXPECT_THAT(events, HasSubstr("is in nanosleep, a timed wait that bypassed"));
+  std::size_t n = 0;
+  for (auto at = events.find("firmware_host_clock_wait"); at != std::string::npos;
+       at = events.find("firmware_host_clock_wait", at + 1)) {
+    ++n;
+  }
+  EXPECT_EQ(n, 1u);  // (without the flag there is none: CustomerCFirmwareIsTheMaster...)
+}
+
+TEST(ClassifyKernelWait, TimedWaitsOnlyFromProcSyscallLines) {
+  auto call = [](const std::string& line) {
+    const firmware::HostClockWait w = firmware::ClassifyKernelWait(line);
+    return w.call == nullptr ? std::string() : std::string(w.call);
+  };
+  const std::string tail = " 0x7ffd1000 0x7f001000";
+  EXPECT_EQ(call("35 0x7ffd0000 0x0 0x0 0x0 0x0 0x0" + tail), "nanosleep");
+  EXPECT_EQ(call("230 0x1 0x1 0x7ffd0000 0x0 0x0 0x0" + tail), "clock_nanosleep");
+  // futex: FUTEX_WAIT_BITSET | PRIVATE with a timeout; without one; a wake.
+  EXPECT_EQ(call("202 0x55550000 0x89 0x0 0x7ffd0000 0x0 0xffffffff" + tail), "futex");
+  EXPECT_EQ(call("202 0x55550000 0x80 0x0 0x0 0x0 0x0" + tail), "");
+  EXPECT_EQ(call("202 0x55550000 0x81 0x1 0x0 0x0 0x0" + tail), "");
+  // poll / epoll_wait: -1 waits forever, a positive timeout is timed.
+  EXPECT_EQ(call("7 0x7ffd0000 0x2 0xffffffff 0x0 0x0 0x0" + tail), "");
+  EXPECT_EQ(call("7 0x7ffd0000 0x2 0x64 0x0 0x0 0x0" + tail), "poll");
+  EXPECT_EQ(call("232 0x5 0x7ffd0000 0x1 0xffffffff 0x0 0x0" + tail), "");
+  EXPECT_EQ(call("232 0x5 0x7ffd0000 0x1 0xa 0x0 0x0" + tail), "epoll_wait");
+  EXPECT_EQ(call("271 0x7ffd0000 0x2 0x0 0x0 0x8 0x0" + tail), "");
+  EXPECT_EQ(call("271 0x7ffd0000 0x2 0x7ffd2000 0x0 0x8 0x0" + tail), "ppoll");
+  // Not in a system call, running, a read, garbage.
+  EXPECT_EQ(call("-1 0x7ffd0000 0x7f001000"), "");
+  EXPECT_EQ(call("running"), "");
+  EXPECT_EQ(call("0 0x3 0x7ffd0000 0x10 0x0 0x0 0x0" + tail), "");
+  EXPECT_EQ(call("35 0x7ffd"), "");
 }
 
 TEST_F(VirtualTimeRun, AFirmwareThatExitsEndsTheRunAtTheSameInstantEveryTime) {
