@@ -334,6 +334,7 @@ struct UcanBroker::Impl {
   std::deque<std::pair<std::uint32_t, std::int64_t>> awaiting_request;  // id, accepted_ns
   UcanBrokerHealth health;
   std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
+  std::uint64_t accepted = 0;         // connections accepted so far
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
   mutable std::mutex mu;
@@ -640,7 +641,8 @@ struct UcanBroker::Impl {
                        " connections to the bus open, the limit per process");
         continue;
       }
-      ++client_progress;  // its request is read and answered by a later pass
+      ++client_progress;  // its request is read and answered by this pass's second look or later
+      ++accepted;
       auto c = std::make_unique<Client>();
       c->fd = Fd(fd);
       c->id = NewClientId();
@@ -1197,31 +1199,38 @@ struct UcanBroker::Impl {
     if (stop_requested) return false;
     pass_start_ns = MonotonicNs();
     // The wait above may predate T0; the level-triggered set is taken again after it.
-    events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
-    int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
-    if (n < 0) n = 0;
-    for (int i = 0; i < n; ++i) {
-      const std::uint64_t tag = events[i].data.u64;
-      if (tag == kListenTag) {
-        AcceptSome();
-        continue;
-      }
-      if (tag == kWakeTag) {
-        std::uint64_t v = 0;
-        [[maybe_unused]] ssize_t r = ::read(wake_fd.get(), &v, sizeof(v));
-        continue;
-      }
-      Client* c = Find(static_cast<std::uint32_t>(tag));
-      if (c == nullptr) continue;
-      if (events[i].events & EPOLLOUT) Flush(c);
-      if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
-        if (c->data) {
-          ReadData(c, kReadBatchesPerPass, pass_start_ns);
-        } else {
-          HandleRequest(c);
+    auto serve_ready = [&] {
+      events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
+      int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
+      if (n < 0) n = 0;
+      for (int i = 0; i < n; ++i) {
+        const std::uint64_t tag = events[i].data.u64;
+        if (tag == kListenTag) {
+          AcceptSome();
+          continue;
+        }
+        if (tag == kWakeTag) {
+          std::uint64_t v = 0;
+          [[maybe_unused]] ssize_t r = ::read(wake_fd.get(), &v, sizeof(v));
+          continue;
+        }
+        Client* c = Find(static_cast<std::uint32_t>(tag));
+        if (c == nullptr) continue;
+        if (events[i].events & EPOLLOUT) Flush(c);
+        if (events[i].events & (EPOLLIN | EPOLLHUP | EPOLLERR)) {
+          if (c->data) {
+            ReadData(c, kReadBatchesPerPass, pass_start_ns);
+          } else {
+            HandleRequest(c);
+          }
         }
       }
-    }
+    };
+    const std::uint64_t accepted_before = accepted;
+    serve_ready();
+    // A client sends its request right after connecting: a second look answers it in this pass
+    // (a pumped broker's owner would otherwise wait for a pass that nothing asks for).
+    if (accepted != accepted_before) serve_ready();
     // Every ring, ready or not: a push that returned before T0 may have found its doorbell
     // already pending (one rung in an earlier pass, not yet read), so readiness says nothing.
     for (std::size_t i = 0; i < ring_clients.size(); ++i) DrainRing(ring_clients[i]);

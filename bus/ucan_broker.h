@@ -128,8 +128,9 @@ class UcanBroker {
   bool ReceiveLocal(int port, CanFrame* frame);
 
   /// Grows with everything that can wake a program blocked on a broker socket: writes to a
-  /// client (frames, doorbells, replies), a connection accepted (answered by a later pass), a
-  /// client dropped. Equal before and after a Pump(): that pass woke no client.
+  /// client (frames, doorbells, replies), a connection accepted (its request answered in the
+  /// same pass when it came with the connection, else by a later one), a client dropped.
+  /// Equal before and after a Pump(): that pass woke no client.
   std::uint64_t client_progress() const;
   /// The receive timestamps' clock (ns; default CLOCK_REALTIME), e.g. a run's virtual clock.
   /// Set it before traffic, or from the thread that pumps.

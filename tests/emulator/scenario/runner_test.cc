@@ -77,6 +77,38 @@ TEST_F(ScenarioRun, SameSeedGivesIdenticalLogAndReport) {
   EXPECT_THAT(Slurp(dir_ / "a" / "report.html"), HasSubstr("<svg"));
 }
 
+// Lockstep is on the virtual clock (the firmware producing SYNC) unless the scenario names the
+// handshake. A kernel interface has no virtual clock: a named `clock: virtual` or a
+// SYNC-producing firmware is refused there before anything starts (an unnamed clock falls back
+// to the handshake: the vcan tests run so).
+TEST_F(ScenarioRun, TheClockIsVirtualByDefaultAndRefusedWhereThereIsNone) {
+  Scenario s = ShortPaper000();
+  s.timing.duration_s = 0.5;
+  ASSERT_EQ(RunScenario(s, Options(dir_ / "v")).failure, "");
+  const std::string events = Slurp(dir_ / "v" / "events.jsonl");
+  EXPECT_THAT(events, HasSubstr("\"clock\":\"virtual\""));
+  EXPECT_THAT(events, HasSubstr("\"sync_producer\":\"firmware\""));
+  Scenario cooperative = s;
+  testing::UseCooperativeClock(cooperative);
+  ASSERT_EQ(RunScenario(cooperative, Options(dir_ / "c")).failure, "");
+  const std::string c_events = Slurp(dir_ / "c" / "events.jsonl");
+  EXPECT_THAT(c_events, HasSubstr("\"clock\":\"cooperative\""));
+  EXPECT_THAT(c_events, HasSubstr("\"sync_producer\":\"emulator\""));
+  RunOptions kernel = Options(dir_ / "k");
+  kernel.can_iface = "vcan0";
+  Scenario named = s;
+  named.timing.clock_named = true;
+  EXPECT_THAT([&] { (void)RunScenario(named, kernel); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("timing.clock: virtual needs the private userspace bus")));
+  Scenario producer = s;
+  producer.timing.sync_producer_named = true;
+  EXPECT_THAT([&] { (void)RunScenario(producer, kernel); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("runs in lockstep only on the virtual clock, which this run does not "
+                            "have (kernel interface vcan0")));
+}
+
 // Lockstep confines the run and its firmware to one CPU (RunOptions::cpu, `wheelhil run --cpu`):
 // the CPU is reported under `wall`, the caller's thread gets its CPU set back, the run does not
 // change, and a CPU this process may not use is an input error naming the option.
