@@ -106,10 +106,10 @@ RunCommand::RunCommand(CLI::App& app) {
                    "CPU (auto: when the run may use more than one CPU; results are identical)")
       ->check(CLI::IsMember({"auto", "on", "off"}));
   run_->add_option("--clock", clock_,
-                   "Lockstep: virtual (the firmware on the emulator's clock, any firmware: "
-                   "docs/virtual-time.md) or cooperative (the FW_Status handshake); overrides "
-                   "timing.clock. virtual makes the firmware the SYNC producer unless "
-                   "--sync-producer emulator")
+                   "Lockstep: virtual (the default: the firmware on the emulator's clock, any "
+                   "firmware, docs/virtual-time.md) or cooperative (the reference firmware's "
+                   "FW_Status handshake); overrides timing.clock. virtual makes the firmware the "
+                   "SYNC producer unless --sync-producer emulator")
       ->check(CLI::IsMember({"virtual", "cooperative"}));
   run_->add_option("--sync-producer", sync_producer_,
                    "firmware or emulator; overrides timing.sync_producer")
