@@ -95,6 +95,10 @@ bool g_agent_started = false;    // this process has its agent (under g_agent_lo
 pthread_mutex_t g_agent_lock = PTHREAD_MUTEX_INITIALIZER;
 thread_local int t_slot = -1;
 thread_local int t_wake_fd = -1;
+// The spin cost (Page::spin_cost_ns): this thread paid it since its last wait of its own, so
+// each further call that does not block costs it at once; set while it sleeps that cost.
+thread_local bool t_spinning = false;
+thread_local bool t_in_spin_sleep = false;
 // The clock of each virtual timerfd (index: timer slot), for absolute settings.
 clockid_t g_timer_clock[vt::kMaxTimers];
 
@@ -191,10 +195,21 @@ vt::ThreadSlot& Self() {
   return g_page->threads[t_slot];
 }
 
+int SleepUntil(std::int64_t deadline);
+
 void NoteCall(vt::LastCall what) {
   vt::ThreadSlot& s = Self();
-  s.calls.fetch_add(1, std::memory_order_relaxed);
+  const std::uint32_t calls = s.calls.fetch_add(1, std::memory_order_relaxed) + 1;
   s.last_call.store(what, std::memory_order_relaxed);
+  // The spin cost: a thread that keeps calling without blocking pays in virtual time, from its
+  // kSpinCallsFree-th such call, then for every one until it waits of its own accord.
+  const std::int64_t cost = g_page->spin_cost_ns.load(std::memory_order_relaxed);
+  if (cost > 0 && (t_spinning || calls >= vt::kSpinCallsFree) && !t_in_spin_sleep) {
+    t_in_spin_sleep = true;
+    SleepUntil(Now() + cost);
+    t_in_spin_sleep = false;
+    t_spinning = true;
+  }
 }
 
 /// True (and counted as a call that did not block) when virtual time is at `deadline` already.
@@ -205,6 +220,7 @@ bool DeadlinePassed(std::int64_t deadline) {
 }
 
 void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
+  if (!t_in_spin_sleep) t_spinning = false;
   s.kind.store(kind);
   s.fired.store(0);
   s.deadline_ns.store(deadline);

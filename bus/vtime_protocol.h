@@ -52,6 +52,9 @@ enum WaitKind : std::uint32_t {
   kFutexWait = 6, ///< A raw futex wait (syscall()): the agent wakes the futex word.
 };
 
+/// Calls without blocking a thread makes for free before the spin cost applies.
+inline constexpr std::uint32_t kSpinCallsFree = 64;
+
 /// The signal that ends a semaphore wait at its deadline (SIGRTMAX; its handler does nothing).
 inline constexpr int kWakeSignal = 64;
 
@@ -129,6 +132,10 @@ struct Page {
   alignas(64) std::atomic<std::int64_t> now_ns{0};
   /// CLOCK_REALTIME = now_ns + realtime_offset_ns.
   std::int64_t realtime_offset_ns = 0;
+  /// Spin cost (0: off): from its kSpinCallsFree-th call that did not block since its last
+  /// wait (a clock read, a zero-timeout poll), each such call of a thread first sleeps this
+  /// many ns of virtual time, so a firmware that polls in a loop moves time on. Host-written.
+  std::atomic<std::int64_t> spin_cost_ns{0};
   /// Bumped on every wait entry and exit (futex word).
   alignas(64) std::atomic<std::uint32_t> transitions{0};
   /// Set by the host before it sleeps on `transitions`; the first transition after takes it

@@ -281,7 +281,8 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
                                            {"event", "firmware_not_blocking"},
                                            {"threads", who}});
       run_.Fail(fmt::format("the firmware did not block within {} s of wall time, so virtual "
-                            "time could not go on: {}",
+                            "time could not go on: {} (a firmware that polls in a loop can run "
+                            "with timing.spin_cost_s: docs/virtual-time.md)",
                             timeout_s, who.empty() ? "no thread seen running" : who));
       return false;
     }

@@ -117,6 +117,10 @@ void VirtualClock::SetFirstProcessPid(pid_t pid) {
   page_->processes[first_process_slot_].pid.compare_exchange_strong(expect, pid);
 }
 
+void VirtualClock::SetSpinCost(std::int64_t ns) {
+  page_->spin_cost_ns.store(std::max<std::int64_t>(0, ns));
+}
+
 void VirtualClock::SetNow(std::int64_t t_ns) {
   const std::int64_t mono = kMonotonicAtStartNs + t_ns;
   if (mono > page_->now_ns.load()) page_->now_ns.store(mono, std::memory_order_release);

@@ -47,6 +47,9 @@ class VirtualClock {
   /// After the start: the pid of that process.
   void SetFirstProcessPid(pid_t pid);
 
+  /// The spin cost (bus/vtime_protocol.h, Page::spin_cost_ns): the virtual time each call that
+  /// does not block costs a thread that keeps making them; 0 (the default) for none.
+  void SetSpinCost(std::int64_t ns);
   /// Moves the firmware's clock to run time t_ns (never backwards).
   void SetNow(std::int64_t t_ns);
   std::int64_t now_ns() const;

@@ -366,7 +366,7 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   if (!n.IsDefined()) return t;
   r.CheckKeys(n, "timing",
               {"mode", "duration_s", "physics_rate_hz", "sync_period_s", "timeout_s", "clock",
-               "sync_producer"});
+               "sync_producer", "spin_cost_s"});
   const std::string mode = r.String(n, "mode", "timing", std::string("lockstep"));
   if (mode == "lockstep") {
     t.lockstep = true;
@@ -392,6 +392,7 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
     r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual or cooperative", clock));
   }
   t.sync_producer_named = n["sync_producer"].IsDefined();
+  t.spin_cost_s = r.Number(n, "spin_cost_s", "timing", 0, 0.01, 0.0);
   const std::string producer = r.String(n, "sync_producer", "timing",
                                         std::string(t.virtual_clock ? "firmware" : "emulator"));
   t.firmware_produces_sync = producer == "firmware";

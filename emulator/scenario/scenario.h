@@ -243,6 +243,10 @@ struct TimingSpec {
   /// Unless named, the firmware exactly when the run is on the virtual clock.
   bool firmware_produces_sync = true;
   bool sync_producer_named = false;
+  /// Virtual clock: what each call that does not block (a clock read, a zero-timeout poll)
+  /// costs a thread after its first 64 since its last wait, s; 0: nothing, and a thread that
+  /// never blocks ends the run (docs/virtual-time.md, "Busy loops").
+  double spin_cost_s = 0;
 };
 
 using Expectation = scoring::Expectation;

@@ -8,8 +8,10 @@
  *   0x3A1 (8 bytes): theta  int32 little endian, microradians; cycle uint32
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
  *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
- *                         [--fork] [--raw-sleep-after-s S]
+ *                         [--fork] [--raw-sleep-after-s S] [--superloop 1]
  * --fork: the work is done by a forked child; the parent only waits for it (a supervisor).
+ * --superloop: the main loop never blocks: it polls its epoll set with a zero timeout, as a
+ * bare-metal super loop ported to Linux does.
  * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever; --exit-after-s:
  * after S seconds, exit with status 3; --raw-sleep-after-s: after S seconds, sleep 1 ms of the
  * host's clock each cycle through a raw system call, as a Go runtime makes it (tests of what the
@@ -125,6 +127,7 @@ int main(int argc, char** argv) {
   double radius = 0.075, track = 0.32, spin_after_s = -1, exit_after_s = -1;
   double raw_sleep_after_s = -1;
   int fork_child = 0;
+  int superloop = 0;
   int period_ms = 10;
   g_nodes[0].id = 1;
   g_nodes[1].id = 2;
@@ -139,6 +142,7 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--spin-after-s") == 0) spin_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--exit-after-s") == 0) exit_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--fork") == 0) fork_child = atoi(argv[i + 1]);
+    else if (strcmp(argv[i], "--superloop") == 0) superloop = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--raw-sleep-after-s") == 0) raw_sleep_after_s = atof(argv[i + 1]);
   }
   if (iface == NULL) {
@@ -214,7 +218,8 @@ int main(int argc, char** argv) {
       raw_nanosleep(&ms);
     }
     struct epoll_event out;
-    const int n = epoll_wait(ep, &out, 1, -1);
+    const int n = epoll_wait(ep, &out, 1, superloop ? 0 : -1);
+    if (n == 0) continue;  /* the super loop: nothing ready yet */
     if (n < 0) {
       if (errno == EINTR) continue;
       perror("c_epoll_odometry: epoll_wait");

@@ -213,6 +213,12 @@ TEST(ScenarioLoader, ClockAndSyncProducer) {
       ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
   EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
                   .timing.firmware_produces_sync);
+  // The spin cost: off unless given, at most 10 ms.
+  EXPECT_EQ(plain.timing.spin_cost_s, 0.0);
+  EXPECT_DOUBLE_EQ(
+      ParseScenario(Minimal("timing: {spin_cost_s: 0.0001}\n"), kFile).timing.spin_cost_s, 1e-4);
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {spin_cost_s: -1}\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("timing.spin_cost_s")));
 }
 
 TEST(ScenarioLoader, UnknownWheelIsRejected) {

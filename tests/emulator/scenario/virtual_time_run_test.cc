@@ -200,6 +200,28 @@ TEST_F(VirtualTimeRun, AFirmwareThatNeverBlocksEndsTheRunWithItsThreadNamed) {
   EXPECT_THAT(Slurp(dir_ / "spin" / "can.log"), HasSubstr(" 3A0#"));
 }
 
+// A super loop (the main thread polls its epoll set with a zero timeout and never blocks) stops
+// virtual time: the run fails naming the thread and the way out. With `timing.spin_cost_s` each
+// empty poll costs that much virtual time: the firmware runs, produces its SYNC every 10 ms
+// (late by at most the cost) and its runs are byte-identical.
+TEST_F(VirtualTimeRun, ASuperLoopFirmwareRunsWithASpinCost) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --superloop 1";
+  s.timing.duration_s = 2.0;
+  s.expectations.clear();
+  Scenario stuck = s;
+  stuck.timing.timeout_s = 1.0;
+  const RunResult r = RunScenario(stuck, testing::BuildTreeRunOptions(dir_ / "stuck"));
+  EXPECT_THAT(r.failure, HasSubstr("zero timeout"));
+  EXPECT_THAT(r.failure, HasSubstr("can run with timing.spin_cost_s"));
+  s.timing.spin_cost_s = 5e-4;
+  const auto [a, log] = RunTwiceSameBytes(s, dir_);
+  ASSERT_EQ(a.failure, "");
+  EXPECT_NEAR(a.report["cycles"].get<double>(), 200.0, 2.0);
+  EXPECT_THAT(log, HasSubstr(" 3A0#"));
+  EXPECT_LT(a.report["metrics"]["pose"]["final_position_error_m"].get<double>(), 0.01);
+}
+
 // A raw `nanosleep` (a `syscall` instruction of the firmware's own, as a Go runtime makes it) is
 // not the library's: the run names the thread and the call (an event and a warning), once.
 TEST_F(VirtualTimeRun, ATimedWaitThatBypassesTheLibraryIsNamed) {
