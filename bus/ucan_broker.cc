@@ -334,7 +334,6 @@ struct UcanBroker::Impl {
   std::deque<std::pair<std::uint32_t, std::int64_t>> awaiting_request;  // id, accepted_ns
   UcanBrokerHealth health;
   std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
-  std::uint64_t accepted = 0;         // connections accepted so far
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
   mutable std::mutex mu;
@@ -601,8 +600,10 @@ struct UcanBroker::Impl {
   }
 
   /// Accepts up to kAcceptsPerPass connections (the rest wait for the next pass: the listen
-  /// fd stays ready). Over a limit or out of fds, the newest connection is refused.
-  void AcceptSome() {
+  /// fd stays ready). Over a limit or out of fds, the newest connection is refused. Returns the
+  /// connections accepted.
+  int AcceptSome() {
+    int accepted = 0;
     for (int i = 0; i < kAcceptsPerPass; ++i) {
       const int fd = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
       if (fd < 0 && (errno == EMFILE || errno == ENFILE)) {
@@ -613,7 +614,7 @@ struct UcanBroker::Impl {
           // ready and the loop spins) until a connection is closed.
           ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, listen_fd.get(), nullptr);
           accept_paused = true;
-          return;
+          return accepted;
         }
         spare_fd.Reset();
         const int refused = ::accept4(listen_fd.get(), nullptr, nullptr, SOCK_CLOEXEC);
@@ -624,7 +625,7 @@ struct UcanBroker::Impl {
         spare_fd = Fd(::open("/dev/null", O_RDONLY | O_CLOEXEC));
         continue;
       }
-      if (fd < 0) return;  // EAGAIN
+      if (fd < 0) return accepted;  // EAGAIN
       ucred cred{};
       socklen_t len = sizeof(cred);
       const pid_t pid =
@@ -659,6 +660,7 @@ struct UcanBroker::Impl {
       awaiting_request.emplace_back(c->id, c->accepted_ns);
       clients[c->id] = std::move(c);
     }
+    return accepted;
   }
 
   Client* Find(std::uint32_t id) {
@@ -1199,14 +1201,16 @@ struct UcanBroker::Impl {
     if (stop_requested) return false;
     pass_start_ns = MonotonicNs();
     // The wait above may predate T0; the level-triggered set is taken again after it.
+    // The connections accepted.
     auto serve_ready = [&] {
+      int accepted = 0;
       events.resize(std::max<std::size_t>(kBatch, clients.size() + 8));
       int n = ::epoll_wait(epoll_fd.get(), events.data(), static_cast<int>(events.size()), 0);
       if (n < 0) n = 0;
       for (int i = 0; i < n; ++i) {
         const std::uint64_t tag = events[i].data.u64;
         if (tag == kListenTag) {
-          AcceptSome();
+          accepted += AcceptSome();
           continue;
         }
         if (tag == kWakeTag) {
@@ -1225,12 +1229,11 @@ struct UcanBroker::Impl {
           }
         }
       }
+      return accepted;
     };
-    const std::uint64_t accepted_before = accepted;
-    serve_ready();
     // A client sends its request right after connecting: a second look answers it in this pass
     // (a pumped broker's owner would otherwise wait for a pass that nothing asks for).
-    if (accepted != accepted_before) serve_ready();
+    if (serve_ready() > 0) serve_ready();
     // Every ring, ready or not: a push that returned before T0 may have found its doorbell
     // already pending (one rung in an earlier pass, not yet read), so readiness says nothing.
     for (std::size_t i = 0; i < ring_clients.size(); ++i) DrainRing(ring_clients[i]);

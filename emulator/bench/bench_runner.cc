@@ -99,6 +99,12 @@ struct LockstepRun {
 /// userspace bus. With --quick the run is a copy of the scenario whose motion phase is cut to
 /// kQuickLockstepSimS (written like a campaign run's). A run that reports a failure (e.g. the
 /// firmware never answered) gives that failure as the reason, never a number.
+/// The cooperative handshake (FW_Status, the emulator's SYNC), named: it is not the run's
+/// default.
+std::vector<campaign::Override> CooperativeClock() {
+  return {{"timing.clock", "cooperative", 0}, {"timing.sync_producer", "emulator", 0}};
+}
+
 LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_exe,
                                 const std::string& file, const std::string& iface,
                                 const std::vector<campaign::Override>& overrides = {}) {
@@ -178,11 +184,7 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
       SetPath(report, key, Unavailable(fmt::format("no scenario file scenarios/{}*.yaml yet", s)));
       continue;
     }
-    // The cooperative handshake (FW_Status, the emulator's SYNC), named: it is no longer the
-    // default.
-    const LockstepRun r = RunLockstepScenario(
-        o, self_exe, file, "",
-        {{"timing.clock", "cooperative", 0}, {"timing.sync_producer", "emulator", 0}});
+    const LockstepRun r = RunLockstepScenario(o, self_exe, file, "", CooperativeClock());
     SetPath(report, key, r.rtf);
     if (r.rtf.is_number()) {
       SetPath(report, fmt::format("lockstep.{}.scenario", s),
@@ -246,14 +248,12 @@ nlohmann::json LockstepOnKernelBus(const BenchOptions& o, const std::string& sel
       continue;
     }
     // A kernel interface has no virtual clock: both rows on the handshake.
-    const std::vector<campaign::Override> cooperative = {{"timing.clock", "cooperative", 0},
-                                                         {"timing.sync_producer", "emulator", 0}};
-    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, cooperative);
+    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, CooperativeClock());
     SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), k.rtf);
     if (k.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.vcan_sim_s", s), k.sim_s);
     if (also_ucan) {
       SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s),
-              RunLockstepScenario(o, self_exe, file, "", cooperative).rtf);
+              RunLockstepScenario(o, self_exe, file, "", CooperativeClock()).rtf);
     }
   }
   return report;

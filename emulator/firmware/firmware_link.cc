@@ -74,7 +74,7 @@ FirmwareLink::~FirmwareLink() { Close(); }
 
 void FirmwareLink::FailExited(const FirmwareProcess& process) {
   run_.Fail(fmt::format("the firmware {} {} (see firmware.log){}", process.ExitDescription(),
-                        FirmwareConnected() || opened_once_ ? std::string("during the run")
+                        opened_once_ || FirmwareConnected() ? std::string("during the run")
                                             : fmt::format("before opening {}", iface_),
                         process.CrashSummary()));
 }
@@ -170,7 +170,7 @@ void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
   }
 }
 
-bool FirmwareLink::FirmwareConnected() const {
+bool FirmwareLink::FirmwareConnected() {
   if (!broker_) return true;
   for (const auto& st : broker_->Stats()) {
     if (st.name == iface_ && st.clients >= 2) return opened_once_ = true;

@@ -71,8 +71,9 @@ class FirmwareLink {
   void KeepAlive(VirtualClock& clock);
   /// Virtual time: the frames' receive stamps are the clock's CLOCK_REALTIME.
   void UseReceiveClock(const VirtualClock& clock);
-  /// The firmware has a socket bound on the private bus.
-  bool FirmwareConnected() const;
+  /// The firmware has a socket bound on the private bus (remembered: FailExited says whether it
+  /// ever had one).
+  bool FirmwareConnected();
   /// Closes the transport and the private bus (its runtime directory goes with it).
   void Close();
 
@@ -98,7 +99,7 @@ class FirmwareLink {
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
-  mutable bool opened_once_ = false;  // FirmwareConnected() was true once
+  bool opened_once_ = false;  // FirmwareConnected() was true once
   std::chrono::steady_clock::time_point last_exit_check_{};
 };
 

@@ -504,7 +504,9 @@ HostClockWait ClassifyKernelWait(const std::string& line) {
     if (next == p) return {};
     p = next;
   }
-  auto timed = [&](bool t, const char* name) { return t ? HostClockWait{nr, name} : HostClockWait{}; };
+  auto timed = [&](bool t, const char* name) {
+    return t ? HostClockWait{nr, name} : HostClockWait{};
+  };
   auto as_int = [](std::uint64_t v) { return static_cast<std::int32_t>(v & 0xffffffffu); };
   switch (nr) {
     case SYS_nanosleep: return {nr, "nanosleep"};

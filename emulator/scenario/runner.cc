@@ -266,26 +266,28 @@ void Run::StartFirmwareOnVirtualClock() {
 
 void Run::ResolveClock() {
   const auto& t = s_.timing;
-  // No virtual clock without a firmware process to put on it, nor on a kernel interface.
-  const bool possible = !s_.firmware.command.empty() && o_.can_iface.empty();
-  virtual_time_ = lockstep_ && t.virtual_clock && (possible || t.clock_named);
-  if (virtual_time_ && !possible && !o_.can_iface.empty()) {
+  const bool kernel_bus = !o_.can_iface.empty();
+  const bool wanted = lockstep_ && t.virtual_clock;
+  if (wanted && t.clock_named && kernel_bus) {
     throw std::invalid_argument(fmt::format(
         "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
         "({}) the firmware's time is the host's (use --realtime, --clock cooperative, or no "
         "--can)",
         s_.source_path, o_.can_iface));
   }
-  if (s_.firmware.command.empty()) virtual_time_ = false;  // an attached firmware: its own clock
+  // No virtual clock on a kernel interface, nor without a firmware process to put on it (an
+  // attached firmware keeps its own clock).
+  virtual_time_ = wanted && !kernel_bus && !s_.firmware.command.empty();
   firmware_sync_ = t.sync_producer_named ? t.firmware_produces_sync : virtual_time_;
   if (firmware_sync_ && lockstep_ && !virtual_time_) {
+    const std::string why = !t.virtual_clock        ? std::string("timing.clock: cooperative")
+                            : kernel_bus            ? "kernel interface " + o_.can_iface
+                                                    : std::string("no firmware.command");
     throw std::invalid_argument(fmt::format(
         "{}: timing.sync_producer: firmware: a firmware that produces SYNC runs in lockstep only "
         "on the virtual clock, which this run does not have ({}; use --realtime, or "
         "sync_producer: emulator)",
-        s_.source_path,
-        s_.firmware.command.empty() ? "no firmware.command"
-                                    : fmt::format("kernel interface {}", o_.can_iface)));
+        s_.source_path, why));
   }
 }
 

@@ -107,6 +107,11 @@ TEST_F(ScenarioRun, TheClockIsVirtualByDefaultAndRefusedWhereThereIsNone) {
               ::testing::ThrowsMessage<std::invalid_argument>(
                   HasSubstr("runs in lockstep only on the virtual clock, which this run does not "
                             "have (kernel interface vcan0")));
+  Scenario cooperative_producer = cooperative;  // as a program may put them together
+  cooperative_producer.timing.firmware_produces_sync = true;
+  EXPECT_THAT([&] { (void)RunScenario(cooperative_producer, Options(dir_ / "cp")); },
+              ::testing::ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("which this run does not have (timing.clock: cooperative;")));
 }
 
 // Lockstep confines the run and its firmware to one CPU (RunOptions::cpu, `wheelhil run --cpu`):

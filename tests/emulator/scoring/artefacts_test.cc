@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 
-#include <cctype>
 #include <string>
 #include <vector>
 
@@ -15,6 +14,7 @@
 
 #include "emulator/scoring/artefacts.h"
 #include "emulator/scoring/metric_format.h"
+#include "tests/emulator/scoring/text_checks.h"
 
 namespace wheelhil::emulator::scoring {
 namespace {
@@ -106,25 +106,12 @@ TEST(MetricFormat, TicksAreOneTwoOrFiveTimesAPowerOfTen) {
   EXPECT_EQ(d.count, 1);
 }
 
-// A number in exponent notation ("1e-05") anywhere in the text. (std::regex would do, but
-// g++ 12 warns inside it under -O2 with ASan.)
-bool HasExponent(const std::string& s) {
-  for (std::size_t i = 1; i + 2 < s.size(); ++i) {
-    if (s[i] == 'e' && (s[i + 1] == '-' || s[i + 1] == '+') &&
-        std::isdigit(static_cast<unsigned char>(s[i - 1])) &&
-        std::isdigit(static_cast<unsigned char>(s[i + 2]))) {
-      return true;
-    }
-  }
-  return false;
-}
-
 TEST(ScenarioArtefacts, PlotsHaveRoundTicksShadedBandsAndEqualAxesWhenAsked) {
   Series s{"truth", "#000", {0.0, 10.0}, {0.0, 0.96}};
   const std::string svg = SvgPlot("t", "x [m]", "y [m]", {s}, {{2.0, 3.5, "slip", "#f00"}});
   EXPECT_NE(svg.find(">0.2</text>"), std::string::npos) << svg;  // y ticks 0, 0.2, ... 1.0
   EXPECT_NE(svg.find(">10</text>"), std::string::npos);
-  EXPECT_FALSE(HasExponent(svg));
+  EXPECT_EQ(testing::FindExponent(svg), std::string::npos) << svg;
   EXPECT_NE(svg.find("class=\"band\""), std::string::npos);
   EXPECT_NE(svg.find(">slip</text>"), std::string::npos);  // its legend entry
   // Equal axes: 10 m across 550 px, so the 0.96 m drift spans about 53 px, not the full height.
