@@ -267,6 +267,7 @@ struct Bus {
   std::string name;
   int ifindex = 0;
   std::vector<Client*> members;
+  std::uint64_t binds = 0;  // sockets ever bound, in-process ports included
   std::uint64_t frames = 0;
   std::uint64_t drops = 0;
   std::uint64_t bad_messages = 0;
@@ -745,6 +746,7 @@ struct UcanBroker::Impl {
         if (bus != nullptr) {
           c->bus = bus;
           bus->members.push_back(c);
+          ++bus->binds;
           reply.ifindex = bus->ifindex;
           CopyName(reply.name, bus->name);
         } else {
@@ -1279,6 +1281,7 @@ struct UcanBroker::Impl {
       s.ifindex = bus->ifindex;
       s.clients = static_cast<std::size_t>(std::count_if(bus->members.begin(), bus->members.end(),
                                                          [](const Client* c) { return !c->dead; }));
+      s.binds = bus->binds;
       s.frames = bus->frames;
       s.drops = bus->drops;
       s.bad_messages = bus->bad_messages;
@@ -1348,6 +1351,7 @@ int UcanBroker::OpenLocalPort(const std::string& bus_name) {
   c->filters.push_back(Normalize(can_filter{0, 0}));  // a new socket receives everything
   c->bus = it->second.get();
   c->bus->members.push_back(c.get());
+  ++c->bus->binds;
   const int id = static_cast<int>(c->id);
   impl_->clients[c->id] = std::move(c);
   return id;

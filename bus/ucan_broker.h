@@ -77,6 +77,7 @@ struct UcanBusStats {
   std::string name;
   int ifindex = 0;
   std::size_t clients = 0;         ///< Sockets bound to this bus.
+  std::uint64_t binds = 0;         ///< Sockets ever bound to it (this broker's Stats() only).
   std::uint64_t frames = 0;        ///< Frames accepted.
   std::uint64_t drops = 0;         ///< Deliveries dropped (a reader's queue was full).
   std::uint64_t bad_messages = 0;  ///< Rejected client messages (bad size or frame).

@@ -31,6 +31,7 @@
 #include <sys/syscall.h>
 #include <sys/time.h>
 #include <sys/timerfd.h>
+#include <sys/timex.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -64,7 +65,15 @@ REAL_FN(timerfd_create, int, (int, int))
 REAL_FN(timerfd_settime, int, (int, int, const itimerspec*, itimerspec*))
 REAL_FN(timerfd_gettime, int, (int, itimerspec*))
 REAL_FN(close, int, (int))
+REAL_FN(close_range, int, (unsigned, unsigned, int))
+REAL_FN(dup2, int, (int, int))
+REAL_FN(dup3, int, (int, int, int))
 REAL_FN(fork, pid_t, ())
+REAL_FN(execve, int, (const char*, char* const[], char* const[]))
+REAL_FN(execv, int, (const char*, char* const[]))
+REAL_FN(execvp, int, (const char*, char* const[]))
+REAL_FN(execvpe, int, (const char*, char* const[], char* const[]))
+REAL_FN(fexecve, int, (int, char* const[], char* const[]))
 REAL_FN(pthread_create, int, (pthread_t*, const pthread_attr_t*, void* (*)(void*), void*))
 REAL_FN_V(pthread_cond_wait, int, (pthread_cond_t*, pthread_mutex_t*), "GLIBC_2.3.2")
 REAL_FN_V(pthread_cond_timedwait, int, (pthread_cond_t*, pthread_mutex_t*, const timespec*),
@@ -73,6 +82,14 @@ REAL_FN(pthread_cond_clockwait, int,
         (pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*))
 REAL_FN(syscall, long, (long, ...))
 REAL_FN(alarm, unsigned, (unsigned))
+REAL_FN(clock_settime, int, (clockid_t, const timespec*))
+REAL_FN(settimeofday, int, (const timeval*, const struct timezone*))
+REAL_FN(adjtimex, int, (timex*))
+REAL_FN(ntp_adjtime, int, (timex*))
+REAL_FN(clock_adjtime, int, (clockid_t, timex*))
+REAL_FN(adjtime, int, (const timeval*, timeval*))
+REAL_FN_V(stime, int, (const time_t*), "GLIBC_2.2.5")
+REAL_FN(closefrom, void, (int))
 REAL_FN(setitimer, int, (int, const itimerval*, itimerval*))
 REAL_FN(getitimer, int, (int, itimerval*))
 REAL_FN(timer_create, int, (clockid_t, sigevent*, timer_t*))
@@ -94,7 +111,21 @@ pthread_key_t g_thread_key;      // frees a thread's slot when it exits
 bool g_agent_started = false;    // this process has its agent (under g_agent_lock)
 pthread_mutex_t g_agent_lock = PTHREAD_MUTEX_INITIALIZER;
 thread_local int t_slot = -1;
-thread_local int t_wake_fd = -1;
+// Each thread's wake eventfd, by thread slot, as fd + 1 (0: none): the library's own
+// descriptors, which the program's close/close_range/closefrom/dup2 must not take.
+std::atomic<int> g_wake_fd_plus1[vt::kMaxThreads];
+// Waits interrupted by a signal handler's own wait (a sleep in a SIGALRM handler during a
+// condition wait): saved while the handler's wait has the slot, handed back after it, as the
+// kernel's waits nest. Deeper nesting than kMaxNestedWaits is not saved.
+constexpr int kMaxNestedWaits = 8;
+struct SavedWait {
+  std::uint32_t kind;
+  std::int64_t deadline_ns;
+  std::int32_t wake_fd;
+  std::uint64_t cond, mutex;
+};
+thread_local int t_wait_depth = 0;  // waits this thread is in, interrupted ones included
+thread_local SavedWait t_saved_waits[kMaxNestedWaits];
 // The spin cost (Page::spin_cost_ns): this thread paid it since its last wait of its own, so
 // each further call that does not block costs it at once; set while it sleeps that cost.
 thread_local bool t_spinning = false;
@@ -121,16 +152,17 @@ bool IsRealtimeClock(clockid_t c) {
          c == CLOCK_REALTIME_ALARM;
 }
 
-std::int64_t NowOn(clockid_t c) {
-  return Now() + (IsRealtimeClock(c) ? g_page->realtime_offset_ns : 0);
-}
-/// An absolute time on clock c as a virtual monotonic deadline.
+std::int64_t RealtimeOffset() { return g_page->realtime_offset_ns.load(std::memory_order_relaxed); }
+std::int64_t NowOn(clockid_t c) { return Now() + (IsRealtimeClock(c) ? RealtimeOffset() : 0); }
+/// An absolute time on clock c as a virtual monotonic deadline (saturated: a time beyond the
+/// range of ns is no deadline).
 std::int64_t DeadlineFromAbs(clockid_t c, const timespec& ts) {
-  return vt::ToNs(ts.tv_sec, ts.tv_nsec) - (IsRealtimeClock(c) ? g_page->realtime_offset_ns : 0);
+  const std::int64_t abs = vt::ToNs(ts.tv_sec, ts.tv_nsec);
+  return IsRealtimeClock(c) ? vt::AddNs(abs, -RealtimeOffset()) : abs;
 }
-std::int64_t DeadlineIn(std::int64_t ns) {
-  const std::int64_t now = Now();
-  return ns >= vt::kNoDeadline - now ? vt::kNoDeadline : now + ns;
+std::int64_t DeadlineIn(std::int64_t ns) { return vt::AddNs(Now(), ns); }
+bool ValidTimespec(const timespec& ts) {
+  return ts.tv_sec >= 0 && ts.tv_nsec >= 0 && ts.tv_nsec < 1000000000;
 }
 timespec ToTimespec(std::int64_t ns) {
   if (ns < 0) ns = 0;
@@ -219,10 +251,32 @@ bool DeadlinePassed(std::int64_t deadline) {
   return true;
 }
 
-void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
+/// What a wait needs besides its kind and deadline (process-local; see ThreadSlot).
+struct WaitTarget {
+  std::int32_t wake_fd = -1;  ///< kFdWait
+  std::uint64_t cond = 0;     ///< kCondWait, kFutexWait
+  std::uint64_t mutex = 0;
+};
+
+/// Publishes this thread's wait. A wait begun while the thread is in another (a signal
+/// handler's, or the spin cost's sleep) saves the one it interrupts; EndWait hands it back.
+void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
+               WaitTarget target = {}) {
+  const int depth = t_wait_depth;
+  // Counted before the slot is written: a handler that runs from here on saves and restores
+  // what it finds, and this wait then finishes writing its own.
+  t_wait_depth = depth + 1;
+  if (depth > 0 && depth <= kMaxNestedWaits) {
+    t_saved_waits[depth - 1] = SavedWait{s.kind.load(), s.deadline_ns.load(), s.wake_fd, s.cond,
+                                         s.mutex};
+  }
   if (!t_in_spin_sleep) t_spinning = false;
+  s.wake_fd = target.wake_fd;
+  s.cond = target.cond;
+  s.mutex = target.mutex;
   s.kind.store(kind);
   s.fired.store(0);
+  s.resumed.store(0);
   s.deadline_ns.store(deadline);
   s.calls.store(0, std::memory_order_relaxed);
   s.state.store(vt::kWaiting);
@@ -230,8 +284,26 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline) {
 }
 
 void EndWait(vt::ThreadSlot& s) {
+  const int depth = --t_wait_depth;
+  if (depth > 0 && depth <= kMaxNestedWaits) {
+    // Back into the wait this one interrupted: the slot is that wait's again (a deadline it
+    // passed meanwhile is ended by the host once more). `resumed`: the thread may be on its
+    // way out of it, so the host asks the kernel before it takes the thread for blocked.
+    const SavedWait& w = t_saved_waits[depth - 1];
+    s.wake_fd = w.wake_fd;
+    s.cond = w.cond;
+    s.mutex = w.mutex;
+    s.kind.store(w.kind);
+    s.fired.store(0);
+    s.resumed.store(1);
+    s.deadline_ns.store(w.deadline_ns);
+    s.state.store(vt::kWaiting);
+    Transition(true);
+    return;
+  }
   s.state.store(vt::kRunning);
   s.deadline_ns.store(vt::kNoDeadline);
+  s.resumed.store(0);
   Transition();
 }
 
@@ -354,15 +426,61 @@ void EnsureAgent() {
   pthread_mutex_unlock(&g_agent_lock);
 }
 
-int WakeFd() {
-  if (t_wake_fd < 0) {
-    t_wake_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-    if (t_wake_fd < 0) {
-      ::fprintf(stderr, "wheelhil vtime: eventfd: %s\n", strerror(errno));
-      ::abort();
+/// The wake signal's handler: nothing; it only makes the wait it interrupts return EINTR.
+void OnWakeSignal(int) {}
+
+void EnsureWakeSignal() {
+  static bool installed = false;  // under g_agent_lock
+  pthread_mutex_lock(&g_agent_lock);
+  if (!installed) {
+    struct sigaction old {};
+    sigaction(vt::kWakeSignal, nullptr, &old);
+    // A program with its own handler for it keeps it (that handler then sees the wake-ups).
+    if (old.sa_handler == SIG_DFL) {
+      struct sigaction sa {};
+      sa.sa_handler = OnWakeSignal;
+      sigemptyset(&sa.sa_mask);
+      sa.sa_flags = 0;  // no SA_RESTART: the wait returns EINTR
+      sigaction(vt::kWakeSignal, &sa, nullptr);
     }
+    installed = true;
   }
-  return t_wake_fd;
+  pthread_mutex_unlock(&g_agent_lock);
+}
+
+bool IsLibraryFd(int fd) {
+  if (fd < 0 || g_page == nullptr) return false;
+  const int used = g_page->threads_used.load();
+  for (int i = 0; i < used; ++i) {
+    if (g_wake_fd_plus1[i].load(std::memory_order_relaxed) == fd + 1) return true;
+  }
+  return false;
+}
+
+/// This thread's wake eventfd (made at its first timed fd wait), -1 when none can be made (the
+/// fd table is full): its timed fd waits are then ended by the wake signal (PollUntil).
+int WakeFd() {
+  const int fd = g_wake_fd_plus1[t_slot].load() - 1;
+  if (fd >= 0) return fd;
+  const int made = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (made < 0) {
+    static bool told = false;  // once per process is enough for firmware.log
+    if (!__atomic_exchange_n(&told, true, __ATOMIC_RELAXED)) {
+      ::fprintf(stderr,
+                "wheelhil vtime: no file descriptor for a thread's wake-up (eventfd: %s): its "
+                "timed waits on file descriptors are ended by signal %d instead\n",
+                strerror(errno), vt::kWakeSignal);
+    }
+    return -1;
+  }
+  g_wake_fd_plus1[t_slot].store(made + 1);
+  return made;
+}
+
+/// Closes the wake eventfd of thread slot i (its thread has gone).
+void CloseWakeFd(int i) {
+  const int fd = g_wake_fd_plus1[i].exchange(0) - 1;
+  if (fd >= 0) real_close()(fd);
 }
 
 // ---- waits ----
@@ -385,6 +503,34 @@ int SleepUntil(std::int64_t deadline) {
   return rc;
 }
 
+/// poll() until a descriptor is ready or virtual `deadline` passed, for a thread without a
+/// wake eventfd: the host ends the wait with the wake signal, which is blocked outside it and
+/// let through only by ppoll's own mask (no wake-up is lost between the two).
+int PollUntilSignalled(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask) {
+  vt::ThreadSlot& s = Self();
+  EnsureWakeSignal();
+  sigset_t wake, old, during;
+  sigemptyset(&wake);
+  sigaddset(&wake, vt::kWakeSignal);
+  pthread_sigmask(SIG_BLOCK, &wake, &old);
+  during = mask != nullptr ? *mask : old;
+  sigdelset(&during, vt::kWakeSignal);
+  BeginWait(s, vt::kSignalWait, deadline);
+  int rc = real_ppoll()(fds, n, nullptr, &during);
+  int err = errno;
+  EndWait(s);
+  // EINTR before the deadline is a signal of the program's own: poll reports it, as the
+  // kernel's does.
+  if (rc < 0 && err == EINTR && Now() >= deadline) {
+    rc = 0;
+    err = 0;
+    for (nfds_t i = 0; i < n; ++i) fds[i].revents = 0;
+  }
+  pthread_sigmask(SIG_SETMASK, &old, nullptr);
+  errno = err;
+  return rc;
+}
+
 /// poll() on `fds` until one is ready or virtual `deadline` (kNoDeadline: none) passed.
 int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask) {
   vt::ThreadSlot& s = Self();
@@ -397,7 +543,8 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
     return rc;
   }
   EnsureAgent();
-  const int wake = WakeFd();
+  int wake = WakeFd();
+  if (wake < 0) return PollUntilSignalled(fds, n, deadline, mask);
   pollfd stack[33];
   pollfd* all = n + 1 <= 33 ? stack : static_cast<pollfd*>(::malloc((n + 1) * sizeof(pollfd)));
   if (all == nullptr) {
@@ -407,15 +554,32 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
   for (;;) {
     std::memcpy(all, fds, n * sizeof(pollfd));
     all[n] = pollfd{wake, POLLIN, 0};
-    s.wake_fd = wake;
-    BeginWait(s, vt::kFdWait, deadline);
+    WaitTarget target;
+    target.wake_fd = wake;
+    BeginWait(s, vt::kFdWait, deadline, target);
     const int rc = real_ppoll()(all, n + 1, nullptr, mask);
     const int err = errno;
     EndWait(s);
+    if (rc < 0 && err == EINTR && g_wake_fd_plus1[t_slot].load() != wake + 1) {
+      wake = g_wake_fd_plus1[t_slot].load() - 1;  // moved away from a dup2 (MoveLibraryFd)
+      if (wake < 0) wake = WakeFd();
+      if (wake >= 0) continue;
+    }
     if (rc < 0) {
       if (all != stack) ::free(all);
       errno = err;
       return rc;
+    }
+    if (all[n].revents & POLLNVAL) {
+      // The wake eventfd was closed behind the library's back (a raw close system call): a new
+      // one, and the wait again.
+      g_wake_fd_plus1[t_slot].store(0);
+      wake = WakeFd();
+      if (wake < 0) {
+        if (all != stack) ::free(all);
+        return PollUntilSignalled(fds, n, deadline, mask);
+      }
+      continue;
     }
     if (all[n].revents != 0) {
       eventfd_t v = 0;
@@ -442,35 +606,14 @@ int CondWaitUntil(pthread_cond_t* c, pthread_mutex_t* m, std::int64_t deadline) 
     if (DeadlinePassed(deadline)) return ETIMEDOUT;
     EnsureAgent();
   }
-  s.cond = reinterpret_cast<std::uintptr_t>(c);
-  s.mutex = reinterpret_cast<std::uintptr_t>(m);
-  BeginWait(s, vt::kCondWait, deadline);
+  WaitTarget target;
+  target.cond = reinterpret_cast<std::uintptr_t>(c);
+  target.mutex = reinterpret_cast<std::uintptr_t>(m);
+  BeginWait(s, vt::kCondWait, deadline, target);
   const int rc = real_pthread_cond_wait()(c, m);
   EndWait(s);
   if (rc == 0 && deadline != vt::kNoDeadline && Now() >= deadline) return ETIMEDOUT;
   return rc;
-}
-
-/// The wake signal's handler: nothing; it only makes sem_wait return EINTR.
-void OnWakeSignal(int) {}
-
-void EnsureWakeSignal() {
-  static bool installed = false;  // under g_agent_lock
-  pthread_mutex_lock(&g_agent_lock);
-  if (!installed) {
-    struct sigaction old {};
-    sigaction(vt::kWakeSignal, nullptr, &old);
-    // A program with its own handler for it keeps it (that handler then sees the wake-ups).
-    if (old.sa_handler == SIG_DFL) {
-      struct sigaction sa {};
-      sa.sa_handler = OnWakeSignal;
-      sigemptyset(&sa.sa_mask);
-      sa.sa_flags = 0;  // no SA_RESTART: sem_wait returns EINTR
-      sigaction(vt::kWakeSignal, &sa, nullptr);
-    }
-    installed = true;
-  }
-  pthread_mutex_unlock(&g_agent_lock);
 }
 
 /// sem_wait until virtual `deadline`: 0, or -1 with errno ETIMEDOUT (or EINTR for a signal of
@@ -487,7 +630,7 @@ int SemWaitUntil(sem_t* sem, std::int64_t deadline) {
   sigemptyset(&wake);
   sigaddset(&wake, vt::kWakeSignal);
   pthread_sigmask(SIG_UNBLOCK, &wake, &old);
-  BeginWait(s, vt::kSemWait, deadline);
+  BeginWait(s, vt::kSignalWait, deadline);
   int rc = real_sem_wait()(sem);
   int err = errno;
   EndWait(s);
@@ -602,7 +745,8 @@ int TimerOf(int fd) {
 itimerspec TimerValue(const vt::TimerSlot& t) {
   itimerspec v{};
   const std::int64_t next = t.next_ns.load();
-  if (t.state.load() == vt::kTimerArmed && next != vt::kNoDeadline) {
+  if (t.state.load() == vt::kTimerArmed) {
+    // (Armed for longer than ns can count: the most there is, as the kernel's KTIME_MAX.)
     v.it_value = ToTimespec(next - Now());
     if (v.it_value.tv_sec == 0 && v.it_value.tv_nsec == 0) v.it_value.tv_nsec = 1;
   }
@@ -671,7 +815,9 @@ void RegisterProcess() {
 
 void OnThreadExit(void* value) {
   const int slot = static_cast<int>(reinterpret_cast<std::intptr_t>(value)) - 1;
-  if (slot >= 0 && g_page != nullptr) FreeThreadSlot(slot);
+  if (slot < 0 || g_page == nullptr) return;
+  CloseWakeFd(slot);
+  FreeThreadSlot(slot);
 }
 
 __attribute__((constructor)) void Init() {
@@ -750,11 +896,130 @@ VTIME_EXPORT int timespec_get(timespec* ts, int base) {
   return clock_gettime(CLOCK_REALTIME, ts) == 0 ? base : 0;
 }
 
+// ---- setting the clock: the firmware's own CLOCK_REALTIME, never the host's ----
+//
+// A firmware may set its clock (from GPS, NTP, its RTC): every call that would set or adjust
+// the host's clock moves the virtual CLOCK_REALTIME of all the firmware's processes instead,
+// whatever the firmware's privileges. A virtual clock has no rate to discipline: adjustments
+// (adjtime, adjtimex offsets) are applied at once; frequency and status are kept and read back.
+
+namespace {
+
+void StepRealtime(std::int64_t delta_ns) { g_page->realtime_offset_ns.fetch_add(delta_ns); }
+
+void SetRealtime(std::int64_t realtime_ns) {
+  g_page->realtime_offset_ns.store(realtime_ns - Now());
+}
+
+int Fail(int err) {
+  errno = err;
+  return -1;
+}
+
+// What adjtimex keeps besides the time (process-wide, as the kernel's is system-wide).
+long g_ntp_freq = 0, g_ntp_maxerror = 0, g_ntp_esterror = 0, g_ntp_constant = 0;
+long g_ntp_tick = 10000;
+int g_ntp_status = 0;
+
+int AdjustVirtualClock(timex* tx) {
+  if (tx == nullptr) return Fail(EFAULT);
+  const unsigned modes = tx->modes;
+  if (modes == ADJ_OFFSET_SINGLESHOT) {
+    StepRealtime(std::int64_t{tx->offset} * 1000);  // adjtime(): microseconds
+  } else if (modes != ADJ_OFFSET_SS_READ) {
+    const bool nano = (modes & ADJ_NANO) || ((g_ntp_status & STA_NANO) && !(modes & ADJ_MICRO));
+    if (modes & ADJ_SETOFFSET) {
+      const long sub = tx->time.tv_usec;
+      if (sub < 0 || sub >= (nano ? 1000000000L : 1000000L)) return Fail(EINVAL);
+      StepRealtime(vt::ToNs(tx->time.tv_sec, nano ? sub : sub * 1000));
+    }
+    if (modes & ADJ_OFFSET) StepRealtime(nano ? tx->offset : std::int64_t{tx->offset} * 1000);
+    if (modes & ADJ_FREQUENCY) g_ntp_freq = tx->freq;
+    if (modes & ADJ_MAXERROR) g_ntp_maxerror = tx->maxerror;
+    if (modes & ADJ_ESTERROR) g_ntp_esterror = tx->esterror;
+    if (modes & ADJ_TIMECONST) g_ntp_constant = tx->constant;
+    if (modes & ADJ_TICK) g_ntp_tick = tx->tick;
+    if (modes & ADJ_STATUS) g_ntp_status = tx->status;
+    if (modes & ADJ_NANO) g_ntp_status |= STA_NANO;
+    if (modes & ADJ_MICRO) g_ntp_status &= ~STA_NANO;
+  }
+  const std::int64_t now = NowOn(CLOCK_REALTIME);
+  const bool nano = (g_ntp_status & STA_NANO) != 0;
+  tx->offset = 0;  // nothing left to slew
+  tx->freq = g_ntp_freq;
+  tx->maxerror = g_ntp_maxerror;
+  tx->esterror = g_ntp_esterror;
+  tx->status = g_ntp_status;
+  tx->constant = g_ntp_constant;
+  tx->precision = 1;
+  tx->tolerance = 500L << 16;  // 500 ppm, as the kernel's MAXFREQ
+  tx->tick = g_ntp_tick;
+  tx->time.tv_sec = static_cast<time_t>(now / 1000000000);
+  tx->time.tv_usec = static_cast<suseconds_t>(nano ? now % 1000000000 : now % 1000000000 / 1000);
+  return TIME_OK;
+}
+
+}  // namespace
+
+VTIME_EXPORT int clock_settime(clockid_t c, const timespec* ts) {
+  if (g_page == nullptr) return real_clock_settime()(c, ts);
+  // Only CLOCK_REALTIME can be set (the kernel's EINVAL for the others); CPU-time and dynamic
+  // clocks (a /dev/ptp device: host hardware) are refused.
+  if (c != CLOCK_REALTIME) return Fail(IsVirtualClock(c) ? EINVAL : EPERM);
+  if (!ValidTimespec(*ts)) return Fail(EINVAL);
+  SetRealtime(vt::ToNs(ts->tv_sec, ts->tv_nsec));
+  return 0;
+}
+
+VTIME_EXPORT int settimeofday(const timeval* tv, const struct timezone* tz) {
+  if (g_page == nullptr) return real_settimeofday()(tv, tz);
+  // The time zone (tz) is the host's: ignored.
+  if (tv == nullptr) return 0;
+  if (tv->tv_sec < 0 || tv->tv_usec < 0 || tv->tv_usec >= 1000000) return Fail(EINVAL);
+  SetRealtime(vt::ToNs(tv->tv_sec, std::int64_t{tv->tv_usec} * 1000));
+  return 0;
+}
+
+VTIME_EXPORT int adjtimex(timex* tx) {
+  if (g_page == nullptr) return real_adjtimex()(tx);
+  return AdjustVirtualClock(tx);
+}
+
+VTIME_EXPORT int ntp_adjtime(timex* tx) {
+  if (g_page == nullptr) return real_ntp_adjtime()(tx);
+  return AdjustVirtualClock(tx);
+}
+
+VTIME_EXPORT int clock_adjtime(clockid_t c, timex* tx) {
+  if (g_page == nullptr) return real_clock_adjtime()(c, tx);
+  if (c != CLOCK_REALTIME) return Fail(IsVirtualClock(c) ? EOPNOTSUPP : EPERM);
+  return AdjustVirtualClock(tx);
+}
+
+VTIME_EXPORT int adjtime(const timeval* delta, timeval* olddelta) {
+  if (g_page == nullptr) return real_adjtime()(delta, olddelta);
+  if (delta != nullptr) StepRealtime(vt::ToNs(delta->tv_sec, std::int64_t{delta->tv_usec} * 1000));
+  if (olddelta != nullptr) *olddelta = timeval{0, 0};
+  return 0;
+}
+
+// Gone from glibc's headers, still in its ABI (stime@GLIBC_2.2.5) for old binaries.
+VTIME_EXPORT int stime(const time_t* t) {
+  if (g_page == nullptr) {
+    if (auto real = real_stime()) return real(t);
+    return Fail(ENOSYS);
+  }
+  if (t == nullptr) return Fail(EFAULT);
+  SetRealtime(vt::ToNs(*t, 0));
+  return 0;
+}
+
 // ---- sleeps ----
 
 VTIME_EXPORT int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) {
   if (g_page == nullptr || !IsVirtualClock(c)) return real_clock_nanosleep()(c, flags, req, rem);
-  if (req == nullptr || req->tv_nsec < 0 || req->tv_nsec >= 1000000000) return EINVAL;
+  if (req == nullptr) return EFAULT;
+  if (!ValidTimespec(*req)) return EINVAL;
   const std::int64_t deadline = (flags & TIMER_ABSTIME) ? DeadlineFromAbs(c, *req)
                                                         : DeadlineIn(vt::ToNs(req->tv_sec, req->tv_nsec));
   const int rc = SleepUntil(deadline);
@@ -786,6 +1051,10 @@ VTIME_EXPORT unsigned sleep(unsigned s) {
 VTIME_EXPORT int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
   if (g_page == nullptr) return real_ppoll()(fds, n, tmo, mask);
   static const timespec kZero{0, 0};
+  if (tmo != nullptr && !ValidTimespec(*tmo)) {
+    errno = EINVAL;
+    return -1;
+  }
   if (tmo != nullptr && tmo->tv_sec == 0 && tmo->tv_nsec == 0) {
     const int rc = real_ppoll()(fds, n, &kZero, mask);
     if (rc == 0) NoteCall(vt::kCallPollZero);
@@ -938,15 +1207,114 @@ VTIME_EXPORT int timerfd_settime(int fd, int flags, const itimerspec* nv, itimer
   return 0;
 }
 
-VTIME_EXPORT int close(int fd) {
-  if (g_page != nullptr) {
-    const int i = TimerOf(fd);
-    if (i >= 0) {
-      g_page->timers[i].state.store(vt::kTimerFree);
-      g_page->timers[i].pid.store(0);
+// ---- descriptors: the library keeps its own ----
+
+namespace {
+
+void FreeTimerSlot(int i) {
+  g_page->timers[i].state.store(vt::kTimerFree);
+  g_page->timers[i].pid.store(0);
+}
+
+/// The virtual timerfds of this process numbered first..last are closed.
+void FreeTimersIn(unsigned first, unsigned last) {
+  const int used = g_page->timers_used.load();
+  const pid_t me = getpid();
+  for (int i = 0; i < used; ++i) {
+    const vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() != vt::kTimerFree && t.pid.load() == me && t.fd >= 0 &&
+        static_cast<unsigned>(t.fd) >= first && static_cast<unsigned>(t.fd) <= last) {
+      FreeTimerSlot(i);
     }
   }
+}
+
+/// The program is about to put another file on number `fd`, which is a wake eventfd of the
+/// library's: that eventfd moves to a free number first. -1 (errno) when there is none.
+int MoveLibraryFd(int fd) {
+  const int used = g_page->threads_used.load();
+  for (int i = 0; i < used; ++i) {
+    if (g_wake_fd_plus1[i].load() != fd + 1) continue;
+    const int moved = ::fcntl(fd, F_DUPFD_CLOEXEC, 0);
+    if (moved < 0) return -1;
+    // The slot's copy first: a waiting thread's ppoll holds the file, not the number, and the
+    // host or agent writes whichever number it reads.
+    vt::ThreadSlot& s = g_page->threads[i];
+    if (s.wake_fd == fd) s.wake_fd = moved;
+    g_wake_fd_plus1[i].store(moved + 1);
+    // A thread polling the old number would look at the program's new file there from its
+    // next wake-up on (poll resolves numbers each time): the wake signal sends it round again.
+    if (i != t_slot && s.state.load() == vt::kWaiting && s.kind.load() == vt::kFdWait) {
+      EnsureWakeSignal();
+      real_syscall()(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
+    }
+    return 0;
+  }
+  return 0;
+}
+
+}  // namespace
+
+VTIME_EXPORT int close(int fd) {
+  if (g_page != nullptr) {
+    // Not the program's descriptor: the kernel's answer for a number it never opened.
+    if (IsLibraryFd(fd)) {
+      errno = EBADF;
+      return -1;
+    }
+    const int i = TimerOf(fd);
+    if (i >= 0) FreeTimerSlot(i);
+  }
   return real_close()(fd);
+}
+
+VTIME_EXPORT int close_range(unsigned first, unsigned last, int flags) {
+  if (g_page == nullptr || first > last || (flags & CLOSE_RANGE_CLOEXEC)) {
+    // (The library's descriptors are close-on-exec already.)
+    return real_close_range()(first, last, flags);
+  }
+  // The range in pieces around the library's descriptors.
+  int keep[vt::kMaxThreads];
+  int n = 0;
+  const int used = g_page->threads_used.load();
+  for (int i = 0; i < used; ++i) {
+    const int fd = g_wake_fd_plus1[i].load() - 1;
+    if (fd >= 0 && static_cast<unsigned>(fd) >= first && static_cast<unsigned>(fd) <= last) {
+      keep[n++] = fd;
+    }
+  }
+  std::sort(keep, keep + n);
+  unsigned from = first;
+  for (int k = 0; k < n; ++k) {
+    const auto fd = static_cast<unsigned>(keep[k]);
+    if (fd > from && real_close_range()(from, fd - 1, flags) != 0) return -1;
+    from = fd + 1;
+  }
+  if (from <= last && real_close_range()(from, last, flags) != 0) return -1;
+  FreeTimersIn(first, last);
+  return 0;
+}
+
+VTIME_EXPORT void closefrom(int low) {
+  if (g_page == nullptr) {
+    real_closefrom()(low);
+    return;
+  }
+  const unsigned first = low < 0 ? 0u : static_cast<unsigned>(low);
+  if (close_range(first, ~0u, 0) == 0) return;
+  // No close_range in this kernel: one by one, up to the descriptor limit.
+  const long max = ::sysconf(_SC_OPEN_MAX);
+  for (long fd = first; fd < (max > 0 ? max : 1024); ++fd) close(static_cast<int>(fd));
+}
+
+VTIME_EXPORT int dup2(int fd, int fd2) {
+  if (g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  return real_dup2()(fd, fd2);
+}
+
+VTIME_EXPORT int dup3(int fd, int fd2, int flags) {
+  if (g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  return real_dup3()(fd, fd2, flags);
 }
 
 // ---- threads, condition variables, processes ----
@@ -996,8 +1364,10 @@ VTIME_EXPORT pid_t fork() {
   const int slot = ClaimProcessSlot(vt::kProcStarting, 0);
   const pid_t pid = real_fork()();
   if (pid == 0) {
+    // The parent's wake eventfds are copies here, of threads this process does not have.
+    for (int i = 0; i < vt::kMaxThreads; ++i) CloseWakeFd(i);
+    t_wait_depth = 0;
     t_slot = ClaimThreadSlot(Tid());
-    t_wake_fd = -1;
     g_agent_started = false;
     g_agent_lock = PTHREAD_MUTEX_INITIALIZER;
     g_proc = slot;
@@ -1010,6 +1380,106 @@ VTIME_EXPORT pid_t fork() {
     g_page->processes[slot].state.store(vt::kProcFree);
   }
   return pid;
+}
+
+// An exec replaces the program: until the new one's library registers it, the process is
+// starting again, so a program without the library (LD_PRELOAD cleared, a static binary) is
+// never taken for blocked and is named when the run gives up on it.
+namespace {
+
+void BeforeExec() {
+  if (g_page != nullptr && g_proc >= 0) {
+    g_page->processes[g_proc].state.store(vt::kProcStarting);
+    Transition();
+  }
+}
+
+int AfterFailedExec(int rc) {
+  const int err = errno;
+  if (g_page != nullptr && g_proc >= 0) g_page->processes[g_proc].state.store(vt::kProcAlive);
+  errno = err;
+  return rc;
+}
+
+/// The arguments of an execl-style call after `arg`, up to the NULL (and, for execle, the
+/// environment after it). Returns a malloc'ed argv (nullptr: ENOMEM).
+char** CollectArgs(const char* arg, va_list ap, char* const** envp) {
+  va_list count;
+  va_copy(count, ap);
+  std::size_t n = 1;
+  if (arg != nullptr) {
+    while (va_arg(count, const char*) != nullptr) ++n;
+  }
+  va_end(count);
+  auto** argv = static_cast<char**>(::malloc((n + 1) * sizeof(char*)));
+  if (argv == nullptr) return nullptr;
+  argv[0] = const_cast<char*>(arg);
+  for (std::size_t i = 1; i < n; ++i) argv[i] = va_arg(ap, char*);
+  argv[n] = nullptr;
+  if (arg != nullptr) (void)va_arg(ap, char*);  // the terminating NULL
+  if (envp != nullptr) *envp = va_arg(ap, char* const*);
+  return argv;
+}
+
+}  // namespace
+
+VTIME_EXPORT int execve(const char* path, char* const argv[], char* const envp[]) {
+  BeforeExec();
+  return AfterFailedExec(real_execve()(path, argv, envp));
+}
+
+VTIME_EXPORT int execv(const char* path, char* const argv[]) {
+  BeforeExec();
+  return AfterFailedExec(real_execv()(path, argv));
+}
+
+VTIME_EXPORT int execvp(const char* file, char* const argv[]) {
+  BeforeExec();
+  return AfterFailedExec(real_execvp()(file, argv));
+}
+
+VTIME_EXPORT int execvpe(const char* file, char* const argv[], char* const envp[]) {
+  BeforeExec();
+  return AfterFailedExec(real_execvpe()(file, argv, envp));
+}
+
+VTIME_EXPORT int fexecve(int fd, char* const argv[], char* const envp[]) {
+  BeforeExec();
+  return AfterFailedExec(real_fexecve()(fd, argv, envp));
+}
+
+VTIME_EXPORT int execl(const char* path, const char* arg, ...) {
+  va_list ap;
+  va_start(ap, arg);
+  char** argv = CollectArgs(arg, ap, nullptr);
+  va_end(ap);
+  if (argv == nullptr) return Fail(ENOMEM);
+  const int rc = execv(path, argv);
+  ::free(argv);
+  return rc;
+}
+
+VTIME_EXPORT int execlp(const char* file, const char* arg, ...) {
+  va_list ap;
+  va_start(ap, arg);
+  char** argv = CollectArgs(arg, ap, nullptr);
+  va_end(ap);
+  if (argv == nullptr) return Fail(ENOMEM);
+  const int rc = execvp(file, argv);
+  ::free(argv);
+  return rc;
+}
+
+VTIME_EXPORT int execle(const char* path, const char* arg, ...) {
+  va_list ap;
+  va_start(ap, arg);
+  char* const* envp = nullptr;
+  char** argv = CollectArgs(arg, ap, &envp);
+  va_end(ap);
+  if (argv == nullptr) return Fail(ENOMEM);
+  const int rc = execve(path, argv, envp);
+  ::free(argv);
+  return rc;
 }
 
 // ---- semaphores, timed mutexes ----
@@ -1063,9 +1533,10 @@ long FutexWaitUntil(std::uint32_t* addr, int op, std::uint32_t val, std::int64_t
   }
   EnsureAgent();
   vt::ThreadSlot& s = Self();
-  s.cond = reinterpret_cast<std::uintptr_t>(addr);
-  s.mutex = static_cast<std::uint64_t>(op & FUTEX_PRIVATE_FLAG);
-  BeginWait(s, vt::kFutexWait, deadline);
+  WaitTarget target;
+  target.cond = reinterpret_cast<std::uintptr_t>(addr);
+  target.mutex = static_cast<std::uint64_t>(op & FUTEX_PRIVATE_FLAG);
+  BeginWait(s, vt::kFutexWait, deadline, target);
   const long rc = real_syscall()(SYS_futex, addr, FUTEX_WAIT_BITSET | (op & FUTEX_PRIVATE_FLAG),
                                  val, nullptr, nullptr, bitset);
   const int err = errno;
@@ -1104,6 +1575,28 @@ VTIME_EXPORT long syscall(long number, ...) {
         errno = rc;
         return -1;
       }
+      case SYS_clock_settime:
+        if (a2 == 0) return Fail(EFAULT);
+        return clock_settime(static_cast<clockid_t>(a1), reinterpret_cast<const timespec*>(a2));
+      case SYS_settimeofday:
+        return settimeofday(reinterpret_cast<const timeval*>(a1),
+                            reinterpret_cast<const struct timezone*>(a2));
+      case SYS_adjtimex:
+        return adjtimex(reinterpret_cast<timex*>(a1));
+      case SYS_clock_adjtime:
+        return clock_adjtime(static_cast<clockid_t>(a1), reinterpret_cast<timex*>(a2));
+      case SYS_close:
+        return close(static_cast<int>(a1));
+      case SYS_close_range:
+        return close_range(static_cast<unsigned>(a1), static_cast<unsigned>(a2),
+                           static_cast<int>(a3));
+      case SYS_dup2:
+        return dup2(static_cast<int>(a1), static_cast<int>(a2));
+      case SYS_dup3:
+        return dup3(static_cast<int>(a1), static_cast<int>(a2), static_cast<int>(a3));
+      case SYS_execve:
+        return execve(reinterpret_cast<const char*>(a1), reinterpret_cast<char* const*>(a2),
+                      reinterpret_cast<char* const*>(a3));
       case SYS_futex: {
         const int op = static_cast<int>(a2);
         const int cmd = op & FUTEX_CMD_MASK;

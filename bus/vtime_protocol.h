@@ -48,7 +48,8 @@ enum WaitKind : std::uint32_t {
   kFdWait = 2,    ///< poll/select/epoll on the thread's fds + its eventfd.
   kCondWait = 3,  ///< A condition variable (the agent broadcasts it at the deadline).
   kAgent = 4,     ///< The process's agent, idle: only the host ends it.
-  kSemWait = 5,   ///< sem_wait: the host ends it with kWakeSignal to the thread (EINTR).
+  kSignalWait = 5,  ///< sem_wait, or an fd wait without a wake eventfd (none could be made):
+                    ///< the host ends it with kWakeSignal to the thread (EINTR).
   kFutexWait = 6, ///< A raw futex wait (syscall()): the agent wakes the futex word.
 };
 
@@ -88,7 +89,11 @@ struct alignas(64) ThreadSlot {
   std::atomic<std::int32_t> pid{0};
   std::atomic<std::int32_t> tid{0};     ///< 0: created, not started yet.
   std::atomic<std::uint64_t> calls{0};  ///< Non-blocking calls since its last wait.
-  std::atomic<std::uint32_t> last_call{kCallNone};
+  std::atomic<std::uint16_t> last_call{kCallNone};
+  /// 1 while the slot holds a wait that a signal handler's own wait interrupted and handed back:
+  /// the thread may be running on its way out of it, so the host asks the kernel (as for fd
+  /// waits) even for a kSleep.
+  std::atomic<std::uint16_t> resumed{0};
   // Process-local, written by the thread before it waits, read by its process's agent.
   std::int32_t wake_fd = -1;  ///< kFdWait: the thread's eventfd.
   std::uint64_t cond = 0;     ///< kCondWait: pthread_cond_t*
@@ -130,8 +135,9 @@ struct Page {
   std::uint32_t size = 0;  ///< sizeof(Page), checked by the library.
   /// Virtual CLOCK_MONOTONIC (and BOOTTIME), ns. Only the host writes it.
   alignas(64) std::atomic<std::int64_t> now_ns{0};
-  /// CLOCK_REALTIME = now_ns + realtime_offset_ns.
-  std::int64_t realtime_offset_ns = 0;
+  /// CLOCK_REALTIME = now_ns + realtime_offset_ns. The host sets it at the start; the firmware
+  /// moves it when it sets its clock (clock_settime, settimeofday, adjtimex, ...).
+  std::atomic<std::int64_t> realtime_offset_ns{0};
   /// Spin cost (0: off): from its kSpinCallsFree-th call that did not block since its last
   /// wait (a clock read, a zero-timeout poll), each such call of a thread first sleeps this
   /// many ns of virtual time, so a firmware that polls in a loop moves time on. Host-written.
@@ -149,7 +155,23 @@ struct Page {
   TimerSlot timers[kMaxTimers];
 };
 
-inline std::int64_t ToNs(std::int64_t sec, std::int64_t nsec) { return sec * 1000000000 + nsec; }
+/// sec + nsec as ns, saturated: a time beyond the int64 range of ns ("sleep forever" as
+/// tv_sec = LONG_MAX) is kNoDeadline, one before it -kNoDeadline. nsec in [0, 1e9).
+inline std::int64_t ToNs(std::int64_t sec, std::int64_t nsec) {
+  constexpr std::int64_t kMaxSec = kNoDeadline / 1000000000 - 1;
+  if (sec > kMaxSec) return kNoDeadline;
+  if (sec < -kMaxSec) return -kNoDeadline;
+  return sec * 1000000000 + nsec;
+}
+
+/// a + b, saturated to [-kNoDeadline, kNoDeadline]; kNoDeadline stays kNoDeadline.
+inline std::int64_t AddNs(std::int64_t a, std::int64_t b) {
+  if (a == kNoDeadline || b == kNoDeadline) return kNoDeadline;
+  std::int64_t sum = 0;
+  if (__builtin_add_overflow(a, b, &sum)) return b > 0 ? kNoDeadline : -kNoDeadline;
+  if (sum > kNoDeadline - 1) return kNoDeadline;
+  return sum < -kNoDeadline ? -kNoDeadline : sum;
+}
 
 /// A timer whose next_ns is at or before `now` expires: returns the expirations since then
 /// (what a read of the timerfd returns), keeps all but one as its overrun (timer_getoverrun)
@@ -159,9 +181,12 @@ inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
   const std::int64_t next = t.next_ns.load();
   const std::int64_t interval = t.interval_ns.load();
   std::uint64_t expirations = 1;
-  if (interval > 0) {
+  if (interval > 0 && interval != kNoDeadline) {
     expirations += static_cast<std::uint64_t>((now - next) / interval);
-    t.next_ns.store(next + static_cast<std::int64_t>(expirations) * interval);
+    std::int64_t step = 0;
+    const bool overflow =
+        __builtin_mul_overflow(static_cast<std::int64_t>(expirations), interval, &step);
+    t.next_ns.store(overflow ? kNoDeadline : AddNs(next, step));
   } else {
     t.next_ns.store(kNoDeadline);
     t.state.store(kTimerDisarmed);
@@ -171,6 +196,8 @@ inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
 }
 
 static_assert(std::atomic<std::int64_t>::is_always_lock_free);
+static_assert(std::atomic<std::uint16_t>::is_always_lock_free);
+static_assert(sizeof(ThreadSlot) == 64, "a thread's slot is one cache line");
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 
 }  // namespace wheelhil::bus::vtime

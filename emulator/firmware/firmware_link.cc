@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -73,9 +74,10 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, Pacing pacing, sim::Run
 FirmwareLink::~FirmwareLink() { Close(); }
 
 void FirmwareLink::FailExited(const FirmwareProcess& process) {
+  FirmwareConnected();  // brings opened_once_ up to date
   run_.Fail(fmt::format("the firmware {} {} (see firmware.log){}", process.ExitDescription(),
-                        opened_once_ || FirmwareConnected() ? std::string("during the run")
-                                            : fmt::format("before opening {}", iface_),
+                        opened_once_ ? std::string("during the run")
+                                     : fmt::format("before opening {}", iface_),
                         process.CrashSummary()));
 }
 
@@ -83,6 +85,13 @@ void FirmwareLink::Close() {
   if (broker_) {
     can_.reset();
     broker_.reset();
+  }
+  // The broker removes only what it made; the directory is the run's, with whatever else is
+  // in it (the clock page, files a firmware wrote there).
+  if (!runtime_dir_.empty()) {
+    std::error_code ec;
+    std::filesystem::remove_all(runtime_dir_, ec);
+    runtime_dir_.clear();
   }
 }
 
@@ -120,8 +129,10 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
   while (WallSeconds(t0) < timeout_s) {
     if (FirmwareConnected()) return true;
     if (auto code = process.Exited()) {
-      why = fmt::format("the firmware {} before opening {} (see firmware.log){}",
-                        process.ExitDescription(), iface_, process.CrashSummary());
+      // (FirmwareConnected remembers a socket bound and gone since its last look.)
+      why = fmt::format("the firmware {} {} {} (see firmware.log){}", process.ExitDescription(),
+                        opened_once_ ? "right after opening" : "before opening", iface_,
+                        process.CrashSummary());
       return false;
     }
     if (pumped_) {
@@ -172,10 +183,15 @@ void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
 
 bool FirmwareLink::FirmwareConnected() {
   if (!broker_) return true;
+  bool connected = false;
   for (const auto& st : broker_->Stats()) {
-    if (st.name == iface_ && st.clients >= 2) return opened_once_ = true;
+    if (st.name != iface_) continue;
+    connected = st.clients >= 2;
+    // The run's own port is one bind, any other the firmware's: a socket bound and gone
+    // between two looks (a firmware that opened the bus and died at once) still opened it.
+    if (st.binds >= 2) opened_once_ = true;
   }
-  return false;
+  return connected;
 }
 
 void FirmwareLink::KeepAlive(VirtualClock& clock) {
@@ -190,9 +206,7 @@ void FirmwareLink::KeepAlive(VirtualClock& clock) {
 
 void FirmwareLink::UseReceiveClock(const VirtualClock& clock) {
   if (!broker_) return;
-  broker_->SetReceiveClock([&clock] {
-    return VirtualClock::kRealtimeAtStartNs + clock.now_ns();
-  });
+  broker_->SetReceiveClock([&clock] { return clock.RealtimeNs(); });
 }
 
 bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess& process,
@@ -272,10 +286,11 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     }
     if (wall > timeout_s) {
       std::string who = running_threads();
-      if (const pid_t p = clock.UnregisteredProcess(); who.empty() && p != 0) {
-        who = fmt::format("process {} never loaded libwheelhil_vtime.so (a static binary, or "
-                          "LD_PRELOAD cleared: see docs/virtual-time.md)",
-                          p);
+      if (const pid_t p = clock.UnregisteredProcess(); p != 0) {
+        who += fmt::format("{}process {} is not on the virtual clock: it never loaded "
+                           "libwheelhil_vtime.so, or exec'd a program without it (a static "
+                           "binary, or LD_PRELOAD cleared: see docs/virtual-time.md)",
+                           who.empty() ? "" : "; ", p);
       }
       run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
                                            {"event", "firmware_not_blocking"},

@@ -99,7 +99,7 @@ class FirmwareLink {
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
-  bool opened_once_ = false;  // FirmwareConnected() was true once
+  bool opened_once_ = false;  // the firmware bound a socket once (FirmwareConnected)
   std::chrono::steady_clock::time_point last_exit_check_{};
 };
 

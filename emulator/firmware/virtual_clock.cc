@@ -77,7 +77,7 @@ VirtualClock::VirtualClock(const std::string& dir) : path_(dir + "/" + vt::kPage
   page_ = new (p) vt::Page();
   page_->size = sizeof(vt::Page);
   page_->now_ns.store(kMonotonicAtStartNs);
-  page_->realtime_offset_ns = kRealtimeAtStartNs - kMonotonicAtStartNs;
+  page_->realtime_offset_ns.store(kRealtimeAtStartNs - kMonotonicAtStartNs);
   files_.resize(vt::kMaxThreads);
 }
 
@@ -127,6 +127,10 @@ void VirtualClock::SetNow(std::int64_t t_ns) {
 }
 
 std::int64_t VirtualClock::now_ns() const { return page_->now_ns.load() - kMonotonicAtStartNs; }
+
+std::int64_t VirtualClock::RealtimeNs() const {
+  return page_->now_ns.load() + page_->realtime_offset_ns.load();
+}
 
 std::int64_t VirtualClock::NextDeadlineNs() const {
   std::int64_t next = vt::kNoDeadline;
@@ -194,7 +198,7 @@ int VirtualClock::WakeDue() {
       // A condition variable or a futex word of the firmware's memory: its agent wakes it.
       s.fired.store(1);
       need_agent(s.pid.load());
-    } else if (kind == vt::kSemWait) {
+    } else if (kind == vt::kSignalWait) {
       ::syscall(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
     } else {
       s.wake.fetch_add(1);
@@ -361,7 +365,7 @@ bool VirtualClock::Blocked() {
     if (st == vt::kWaiting) {
       const std::uint32_t kind = s.kind.load();
       // Only WakeDue ends these, unless it sent a signal to their process at this instant.
-      if ((kind == vt::kSleep || kind == vt::kAgent) &&
+      if ((kind == vt::kSleep || kind == vt::kAgent) && s.resumed.load() == 0 &&
           (signalled_.empty() ||
            std::find(signalled_.begin(), signalled_.end(), pid) == signalled_.end())) {
         continue;

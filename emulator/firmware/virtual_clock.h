@@ -8,7 +8,8 @@
 /// can end, or asleep in the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition
 /// of any thread while it looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
 /// kMonotonicAtStartNs + run ns and its CLOCK_REALTIME kRealtimeAtStartNs + run ns, whatever
-/// the host's clocks say, so a run is the same on every machine.
+/// the host's clocks say, so a run is the same on every machine (until the firmware sets its
+/// own CLOCK_REALTIME, which moves only its virtual one: RealtimeNs).
 /// Thread-compatible: the run's thread only.
 
 #include <sys/types.h>
@@ -53,6 +54,8 @@ class VirtualClock {
   /// Moves the firmware's clock to run time t_ns (never backwards).
   void SetNow(std::int64_t t_ns);
   std::int64_t now_ns() const;
+  /// The firmware's CLOCK_REALTIME now, ns since the epoch (it may have set it).
+  std::int64_t RealtimeNs() const;
   /// The earliest deadline of a waiting thread or an armed timer, in run ns (at least now);
   /// INT64_MAX when there is none.
   std::int64_t NextDeadlineNs() const;

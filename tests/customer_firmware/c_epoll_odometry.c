@@ -9,13 +9,16 @@
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
  *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
  *                         [--fork] [--raw-sleep-after-s S] [--superloop 1]
+ *                         [--abort-after-bind 1] [--reexec-without LIB]
  * --fork: the work is done by a forked child; the parent only waits for it (a supervisor).
  * --superloop: the main loop never blocks: it polls its epoll set with a zero timeout, as a
  * bare-metal super loop ported to Linux does.
  * --spin-after-s: after S seconds, busy-wait on epoll with a zero timeout forever; --exit-after-s:
  * after S seconds, exit with status 3; --raw-sleep-after-s: after S seconds, sleep 1 ms of the
  * host's clock each cycle through a raw system call, as a Go runtime makes it (tests of what the
- * emulator reports for such firmware). */
+ * emulator reports for such firmware); --abort-after-bind: abort() as soon as the bus is open;
+ * --reexec-without LIB: first exec itself again with every LD_PRELOAD entry naming LIB dropped,
+ * as a launcher that cleans its environment does. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <linux/can.h>
@@ -128,6 +131,8 @@ int main(int argc, char** argv) {
   double raw_sleep_after_s = -1;
   int fork_child = 0;
   int superloop = 0;
+  int abort_after_bind = 0;
+  const char* reexec_without = NULL;
   int period_ms = 10;
   g_nodes[0].id = 1;
   g_nodes[1].id = 2;
@@ -144,6 +149,33 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--fork") == 0) fork_child = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--superloop") == 0) superloop = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--raw-sleep-after-s") == 0) raw_sleep_after_s = atof(argv[i + 1]);
+    else if (strcmp(argv[i], "--abort-after-bind") == 0) abort_after_bind = atoi(argv[i + 1]);
+    else if (strcmp(argv[i], "--reexec-without") == 0) reexec_without = argv[i + 1];
+  }
+  if (reexec_without != NULL) {
+    /* LD_PRELOAD without the entries naming the library; the same arguments but this pair. */
+    const char* old = getenv("LD_PRELOAD");
+    char kept[4096] = "";
+    char* list = strdup(old != NULL ? old : "");
+    for (char* save = NULL, *e = strtok_r(list, ": ", &save); e != NULL; e = strtok_r(NULL, ": ", &save)) {
+      if (strstr(e, reexec_without) != NULL || strlen(kept) + strlen(e) + 2 > sizeof(kept)) continue;
+      if (kept[0] != '\0') strcat(kept, ":");
+      strcat(kept, e);
+    }
+    free(list);
+    setenv("LD_PRELOAD", kept, 1);
+    char** args = calloc((size_t)argc + 1, sizeof(char*));
+    int n = 0;
+    for (int i = 0; i < argc; ++i) {
+      if (strcmp(argv[i], "--reexec-without") == 0) {
+        ++i;
+        continue;
+      }
+      args[n++] = argv[i];
+    }
+    execv("/proc/self/exe", args);
+    perror("c_epoll_odometry: exec");
+    return 1;
   }
   if (iface == NULL) {
     fprintf(stderr, "usage: %s --can IFACE ...\n", argv[0]);
@@ -184,6 +216,7 @@ int main(int argc, char** argv) {
     perror("c_epoll_odometry: bind");
     return 1;
   }
+  if (abort_after_bind) abort();
   pthread_t rx;
   pthread_create(&rx, NULL, reader, NULL);
 

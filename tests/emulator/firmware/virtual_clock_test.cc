@@ -4,7 +4,9 @@
 // is blocked, straight to its next deadline, so each wait must end exactly at its virtual
 // deadline, and 30 s of sleep must take far less than 30 s of wall time.
 #include <fcntl.h>
+#include <linux/capability.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -38,6 +40,8 @@ struct ProbeRun {
   double wall_s = 0;
   std::int64_t virtual_ns = 0;  // the clock when it exited
   std::vector<std::string> running;  // RunningThreads() when it did not block
+  pid_t unregistered = 0;
+  pid_t pid = 0;  // a process UnregisteredProcess() named while it ran
   std::map<std::string, std::pair<std::int64_t, long>> waits;  // label -> (elapsed ns, result)
   std::string out;
 };
@@ -52,6 +56,9 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
     const std::string out_path = dir + "/out.txt";
     const pid_t pid = ::fork();
     if (pid == 0) {
+      // The probe sets the clock: without CAP_SYS_TIME a call that reached the kernel fails
+      // (EPERM) instead of setting the host's clock (the tests run as root).
+      (void)::prctl(PR_CAPBSET_DROP, CAP_SYS_TIME, 0, 0, 0);
       const int fd = ::open(out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
       ::dup2(fd, 1);
       for (const auto& [k, v] : clock.ChildEnvironment(kLib)) ::setenv(k.c_str(), v.c_str(), 1);
@@ -62,6 +69,8 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
       ::_exit(127);
     }
     clock.SetFirstProcessPid(pid);
+    r.pid = pid;
+    bool registered = false;
     const auto t0 = Clock::now();
     int status = 0;
     for (;;) {
@@ -78,6 +87,12 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
         break;
       }
       clock.WakeDue();
+      // (Unregistered again once it had registered: not its start.)
+      if (const pid_t u = clock.UnregisteredProcess(); u > 0 && registered) {
+        r.unregistered = u;
+      } else if (u == 0) {
+        registered = true;
+      }
       if (!clock.Blocked()) {
         clock.WaitForChange(200);
         continue;
@@ -203,6 +218,90 @@ TEST(VirtualClock, AThreadThatNeverBlocksIsNamedWithItsLastCall) {
   ASSERT_EQ(r.running.size(), 1u) << r.out;
   EXPECT_THAT(r.running[0], ::testing::HasSubstr("thread 'vtime_probe'"));
   EXPECT_THAT(r.running[0], ::testing::HasSubstr("last called a clock read"));
+}
+
+// Setting the clock (a firmware that takes its time from GPS or NTP) moves the firmware's own
+// CLOCK_REALTIME, never the host's: the probe runs without CAP_SYS_TIME, so a call that
+// reached the kernel would fail.
+TEST(VirtualClock, SettingTheClockMovesOnlyTheVirtualRealtimeClock) {
+  timespec host_before{};
+  ::clock_gettime(CLOCK_REALTIME, &host_before);
+  const ProbeRun r = RunProbe("settime");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("clock_settime").second, 1900000000L);
+  EXPECT_EQ(r.waits.at("settimeofday").second, 2000000000L);
+  EXPECT_EQ(r.waits.at("adjtimex_setoffset").second, 2000000005L);
+  EXPECT_EQ(r.waits.at("adjtime").second, 2000000015L);
+  EXPECT_EQ(r.waits.at("adjtimex_read_freq").second, 1234L);
+  EXPECT_EQ(r.waits.at("adjtimex_read_time").second, 2000000015L);
+  EXPECT_EQ(r.waits.at("stime").second, 2100000000L);
+  EXPECT_EQ(r.waits.at("syscall_settime").second, 2200000000L);
+  EXPECT_EQ(r.waits.at("settime_monotonic").second, 1L);
+  // The set clock runs on with virtual time; the monotonic clock never jumped.
+  EXPECT_EQ(r.waits.at("after_sleep"), std::make_pair(2000 * kMs, 2200000002L));
+  timespec host_after{};
+  ::clock_gettime(CLOCK_REALTIME, &host_after);
+  EXPECT_LT(host_after.tv_sec - host_before.tv_sec, 60);  // the host's clock untouched
+  EXPECT_LT(host_before.tv_sec, 1900000000L);
+}
+
+// tv_sec = LONG_MAX means "forever" to the kernel: such waits never end (they ended at once
+// when the conversion to ns overflowed into the past).
+TEST(VirtualClock, WaitsWithTheLargestTimeoutsSleepForever) {
+  const ProbeRun r = RunProbe("forever");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("forever_ended"), std::make_pair(50 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("timerfd_far").second, 1L);
+}
+
+// A wait in a signal handler nests inside the wait the signal interrupted, as the kernel's do:
+// the interrupted condition wait still ends at its deadline.
+TEST(VirtualClock, AWaitInASignalHandlerNestsInTheInterruptedWait) {
+  const ProbeRun r = RunProbe("nested");
+  ASSERT_TRUE(r.finished) << r.out;
+  ASSERT_EQ(r.exit_status, 0) << r.out;
+  ASSERT_EQ(r.waits.count("handler_slept"), 1u) << r.out;
+  EXPECT_EQ(r.waits.at("handler_slept"), std::make_pair(15 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("interrupted_cond"), std::make_pair(50 * kMs, 1L));
+}
+
+// close_range, closefrom, a close-everything loop and dup2 onto its descriptors do not take
+// the library's wake-ups from it (its own or another thread's); timers still work after.
+TEST(VirtualClock, ClosingEveryDescriptorLeavesTheLibraryItsOwn) {
+  const ProbeRun r = RunProbe("closefds");
+  ASSERT_TRUE(r.finished) << r.out << (r.running.empty() ? "" : r.running[0]);
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("close_range"), std::make_pair(6 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("after_close_range"), std::make_pair(11 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("after_closefrom"), std::make_pair(16 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("after_close_loop"), std::make_pair(21 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("dup2_onto").second, 1L);
+  EXPECT_EQ(r.waits.at("after_dup2"), std::make_pair(26 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("timerfd_after"), std::make_pair(29 * kMs, 1L));
+  EXPECT_EQ(r.waits.at("thread_poll3"), std::make_pair(35 * kMs, 0L));
+}
+
+// A thread whose first timed wait finds the descriptor table full still waits on the virtual
+// clock (the library's wake-up by signal), and the library says so in the firmware's log.
+TEST(VirtualClock, ATimedWaitWithTheDescriptorTableFullStillEndsOnTime) {
+  const ProbeRun r = RunProbe("fdfull");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.waits.at("fd_table_full").second, 1L);
+  EXPECT_EQ(r.waits.at("nofd_poll"), std::make_pair(7 * kMs, 0L));
+  EXPECT_EQ(r.waits.at("nofd_select"), std::make_pair(12 * kMs, 0L));
+}
+
+// A process that re-execs itself without the library is starting again from its exec on: it
+// is never taken for blocked, and the run can name it.
+TEST(VirtualClock, AProcessThatExecsWithoutTheLibraryIsNamed) {
+  const ProbeRun r = RunProbe("reexec");
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  EXPECT_EQ(r.unregistered, r.pid);
+  EXPECT_EQ(r.virtual_ns, kMs);  // its host-clock sleep did not move virtual time
 }
 
 TEST(VirtualClock, AStaticBinaryIsRefusedWithTheReason) {

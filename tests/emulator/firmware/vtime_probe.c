@@ -15,10 +15,16 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <dirent.h>
+#include <dlfcn.h>
+#include <fcntl.h>
+#include <limits.h>
 #include <sys/epoll.h>
+#include <sys/resource.h>
 #include <sys/select.h>
 #include <sys/time.h>
 #include <sys/timerfd.h>
+#include <sys/timex.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -96,6 +102,110 @@ static void on_alarm(int sig) {
 static sem_t g_fired;
 static void on_timer_thread(union sigval v) {
   if (v.sival_int == 42) sem_post(&g_fired);
+}
+
+static int64_t realtime_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec;
+}
+
+/* Waits that must never end ("forever": tv_sec = LONG_MAX); each sets its flag if it does. */
+static volatile int g_ended[6];
+static void* sleep_forever(void* arg) {
+  (void)arg;
+  struct timespec req = {LONG_MAX, 999999999};
+  nanosleep(&req, NULL);
+  g_ended[0] = 1;
+  return NULL;
+}
+static void* abs_sleep_forever(void* arg) {
+  (void)arg;
+  struct timespec abs = {LONG_MAX, 0};
+  clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &abs, NULL);
+  g_ended[1] = 1;
+  return NULL;
+}
+static void* cond_forever(void* arg) {
+  (void)arg;
+  pthread_mutex_t m = PTHREAD_MUTEX_INITIALIZER;
+  pthread_cond_t c = PTHREAD_COND_INITIALIZER;
+  struct timespec abs = {LONG_MAX, 0};
+  pthread_mutex_lock(&m);
+  int rc;
+  do rc = pthread_cond_timedwait(&c, &m, &abs);
+  while (rc == 0);
+  g_ended[2] = 1;
+  return NULL;
+}
+static void* ppoll_forever(void* arg) {
+  (void)arg;
+  struct timespec t = {LONG_MAX, 0};
+  ppoll(NULL, 0, &t, NULL);
+  g_ended[3] = 1;
+  return NULL;
+}
+static void* select_forever(void* arg) {
+  (void)arg;
+  struct timeval tv = {LONG_MAX, 0};
+  select(0, NULL, NULL, NULL, &tv);
+  g_ended[4] = 1;
+  return NULL;
+}
+static void* sem_forever(void* arg) {
+  (void)arg;
+  sem_t s;
+  sem_init(&s, 0, 0);
+  struct timespec abs = {LONG_MAX, 0};
+  sem_timedwait(&s, &abs);
+  g_ended[5] = 1;
+  return NULL;
+}
+
+/* A SIGALRM handler that sleeps: its wait nests inside the one it interrupted. */
+static void on_alarm_sleeping(int sig) {
+  (void)sig;
+  usleep(5000);
+  report("handler_slept", 0);
+}
+
+/* A thread that waits with timeouts while another closes every descriptor it did not open. */
+static void* timed_polls(void* arg) {
+  (void)arg;
+  for (int i = 0; i < 3; ++i) report(i == 0 ? "thread_poll1" : i == 1 ? "thread_poll2" : "thread_poll3",
+                                     poll(NULL, 0, 10));
+  return NULL;
+}
+
+/* Puts a pipe on every eventfd number of this process (the library's wake-ups among them). */
+static int dup2_onto_eventfds(void) {
+  int p[2], n = 0;
+  if (pipe(p) != 0) return -1;
+  DIR* d = opendir("/proc/self/fd");
+  if (d == NULL) return -1;
+  int fds[64], count = 0;
+  struct dirent* e;
+  while ((e = readdir(d)) != NULL && count < 64) {
+    char path[300], target[64];
+    snprintf(path, sizeof(path), "/proc/self/fd/%s", e->d_name);
+    const ssize_t len = readlink(path, target, sizeof(target) - 1);
+    if (len <= 0) continue;
+    target[len] = '\0';
+    if (strstr(target, "eventfd") != NULL) fds[count++] = atoi(e->d_name);
+  }
+  closedir(d);
+  for (int i = 0; i < count; ++i) {
+    if (dup2(p[0], fds[i]) == fds[i]) ++n;
+  }
+  return n;
+}
+
+static void* first_wait_without_fds(void* arg) {
+  (void)arg;
+  report("nofd_poll", poll(NULL, 0, 7));
+  struct timeval tv = {0, 5000};
+  report("nofd_select", select(0, NULL, NULL, NULL, &tv));
+  return NULL;
 }
 
 int main(int argc, char** argv) {
@@ -270,6 +380,107 @@ int main(int argc, char** argv) {
     setitimer(ITIMER_REAL, &it, NULL);
     while (g_alarms == 0) pause();
     report("setitimer", g_alarms);
+  } else if (strcmp(what, "settime") == 0) {
+    /* Every way to set the clock moves the virtual CLOCK_REALTIME (the test drops CAP_SYS_TIME:
+     * a call that reached the kernel would fail with EPERM). */
+    struct timespec ts = {1900000000, 0};
+    report("clock_settime", clock_settime(CLOCK_REALTIME, &ts) == 0 ? realtime_s() : -errno);
+    struct timeval tv = {2000000000, 0};
+    report("settimeofday", settimeofday(&tv, NULL) == 0 ? realtime_s() : -errno);
+    struct timex tx;
+    memset(&tx, 0, sizeof(tx));
+    tx.modes = ADJ_SETOFFSET;
+    tx.time.tv_sec = 5;
+    report("adjtimex_setoffset", adjtimex(&tx) == TIME_OK ? realtime_s() : -errno);
+    struct timeval delta = {10, 0};
+    report("adjtime", adjtime(&delta, NULL) == 0 ? realtime_s() : -errno);
+    memset(&tx, 0, sizeof(tx));
+    tx.modes = ADJ_FREQUENCY;
+    tx.freq = 1234;
+    adjtimex(&tx);
+    memset(&tx, 0, sizeof(tx));
+    report("adjtimex_read_freq", adjtimex(&tx) == TIME_OK ? tx.freq : -errno);
+    report("adjtimex_read_time", tx.time.tv_sec);
+    int (*stime_fn)(const time_t*) = (int (*)(const time_t*))dlsym(RTLD_DEFAULT, "stime");
+    time_t t = 2100000000;
+    report("stime", stime_fn != NULL && stime_fn(&t) == 0 ? realtime_s() : -1);
+    ts.tv_sec = 2200000000;
+    report("syscall_settime", syscall(SYS_clock_settime, CLOCK_REALTIME, &ts) == 0 ? realtime_s() : -errno);
+    report("settime_monotonic", clock_settime(CLOCK_MONOTONIC, &ts) == -1 && errno == EINVAL);
+    sleep(2);
+    report("after_sleep", realtime_s());
+  } else if (strcmp(what, "forever") == 0) {
+    void* (*fns[6])(void*) = {sleep_forever, abs_sleep_forever, cond_forever, ppoll_forever,
+                              select_forever, sem_forever};
+    for (int i = 0; i < 6; ++i) {
+      pthread_t th;
+      pthread_create(&th, NULL, fns[i], NULL);
+      pthread_detach(th);
+    }
+    int tfd = timerfd_create(CLOCK_MONOTONIC, 0);
+    struct itimerspec far = {.it_interval = {LONG_MAX, 0}, .it_value = {LONG_MAX, 0}};
+    timerfd_settime(tfd, 0, &far, NULL);
+    struct itimerspec cur;
+    timerfd_gettime(tfd, &cur);
+    usleep(50000);
+    int ended = 0;
+    for (int i = 0; i < 6; ++i) ended += g_ended[i];
+    report("forever_ended", ended);
+    report("timerfd_far", cur.it_value.tv_sec > 1000000000L);
+    fflush(stdout);
+    _exit(0); /* the waiting threads go with the process */
+  } else if (strcmp(what, "nested") == 0) {
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_alarm_sleeping;
+    sa.sa_flags = SA_RESTART;
+    sigaction(SIGALRM, &sa, NULL);
+    struct itimerval it = {.it_interval = {0, 0}, .it_value = {0, 10000}};
+    setitimer(ITIMER_REAL, &it, NULL);
+    pthread_mutex_lock(&g_m);
+    struct timespec abs = in_ms(CLOCK_REALTIME, 50);
+    int rc;
+    do rc = pthread_cond_timedwait(&g_c, &g_m, &abs);
+    while (rc == 0);
+    pthread_mutex_unlock(&g_m);
+    report("interrupted_cond", rc == ETIMEDOUT);
+  } else if (strcmp(what, "closefds") == 0) {
+    report("poll", poll(NULL, 0, 5));  /* the main thread's wake-up exists */
+    pthread_t th;
+    pthread_create(&th, NULL, timed_polls, NULL);
+    usleep(1000);
+    report("close_range", close_range(3, ~0U, 0));
+    report("after_close_range", poll(NULL, 0, 5));
+    closefrom(3);
+    report("after_closefrom", poll(NULL, 0, 5));
+    for (int fd = 3; fd < 64; ++fd) close(fd); /* a daemon's loop */
+    report("after_close_loop", poll(NULL, 0, 5));
+    report("dup2_onto", dup2_onto_eventfds() >= 1);
+    report("after_dup2", poll(NULL, 0, 5));
+    const int tfd = timerfd_create(CLOCK_MONOTONIC, 0);
+    struct itimerspec once = {.it_interval = {0, 0}, .it_value = {0, 3000000}};
+    timerfd_settime(tfd, 0, &once, NULL);
+    uint64_t n = 0;
+    report("timerfd_after", read(tfd, &n, sizeof(n)) == sizeof(n) ? (long)n : -1);
+    pthread_join(th, NULL);
+  } else if (strcmp(what, "fdfull") == 0) {
+    struct rlimit rl = {32, 32};
+    setrlimit(RLIMIT_NOFILE, &rl);
+    while (open("/dev/null", O_RDONLY) >= 0) {
+    }
+    report("fd_table_full", errno == EMFILE);
+    pthread_t th;
+    pthread_create(&th, NULL, first_wait_without_fds, NULL);
+    pthread_join(th, NULL);
+  } else if (strcmp(what, "reexec") == 0) {
+    /* Re-exec itself without the clock library (LD_PRELOAD cleared), as some launchers do. */
+    usleep(1000); /* on the clock first */
+    unsetenv("LD_PRELOAD");
+    execl(argv[0], argv[0], "reexec-child", (char*)NULL);
+    return 1;
+  } else if (strcmp(what, "reexec-child") == 0) {
+    struct timespec req = {0, 300000000};
+    nanosleep(&req, NULL); /* the host's clock */
   } else if (strcmp(what, "spin") == 0) {
     report("start", 0);
     for (;;) mono();

@@ -278,6 +278,51 @@ TEST_F(VirtualTimeRun, AFirmwareThatExitsEndsTheRunAtTheSameInstantEveryTime) {
   EXPECT_EQ(Slurp(dir_ / "a" / "events.jsonl"), Slurp(dir_ / "b" / "events.jsonl"));
 }
 
+// A firmware that dies as soon as it opened the bus is said to have, not to have died before
+// opening it.
+TEST_F(VirtualTimeRun, AFirmwareThatDiesRightAfterOpeningTheBusIsSaidToHaveOpenedIt) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --abort-after-bind 1";
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "abort"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("killed by signal 6 (SIGABRT) during the run"));
+}
+
+// A firmware that execs itself again without the clock library (keeping the bus library) is
+// named in the failure: it runs on the host's clock, so the run cannot be the run's.
+TEST_F(VirtualTimeRun, AFirmwareThatExecsWithoutTheClockLibraryIsNamed) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.firmware.command += " --reexec-without libwheelhil_vtime";
+  s.timing.timeout_s = 1.0;
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "reexec"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.failure, HasSubstr("is not on the virtual clock"));
+  EXPECT_THAT(r.failure, HasSubstr("exec'd a program without it"));
+}
+
+// A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
+// page and whatever the firmware put there go with it.
+TEST_F(VirtualTimeRun, ARunLeavesNothingInTheTemporaryDirectory) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.timing.duration_s = 0.5;
+  s.expectations.clear();
+  const fs::path tmp = dir_ / "tmp";
+  fs::create_directories(tmp);
+  const char* old = std::getenv("TMPDIR");
+  const std::string saved = old != nullptr ? old : "";
+  ::setenv("TMPDIR", tmp.c_str(), 1);
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "out"));
+  if (old != nullptr) {
+    ::setenv("TMPDIR", saved.c_str(), 1);
+  } else {
+    ::unsetenv("TMPDIR");
+  }
+  EXPECT_EQ(r.failure, "");
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(tmp)) left.push_back(e.path().filename().string());
+  EXPECT_THAT(left, ::testing::IsEmpty());
+}
+
 // The same firmware and scenario in real time (`--realtime`): nothing preloaded but the bus, the
 // firmware on the host's clock, and still the only SYNC producer.
 TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
