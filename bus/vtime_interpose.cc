@@ -457,6 +457,12 @@ bool IsLibraryFd(int fd) {
   return false;
 }
 
+// A vfork child (a shell's or posix_spawn's way to run a command) shares its parent's memory,
+// the library's records included, but not its descriptor table: it must leave them alone.
+bool InVforkChild() {
+  return g_proc >= 0 && g_page->processes[g_proc].pid.load() != getpid();
+}
+
 /// This thread's wake eventfd (made at its first timed fd wait), -1 when none can be made (the
 /// fd table is full): its timed fd waits are then ended by the wake signal (PollUntil).
 int WakeFd() {
@@ -775,6 +781,7 @@ int ClaimProcessSlot(vt::ProcessState state, pid_t pid) {
     if (p.state.compare_exchange_strong(expect, vt::kProcStarting)) {
       p.pid.store(pid);
       p.agent.store(-1);
+      p.exec_pending.store(0);
       p.state.store(state);
       return i;
     }
@@ -806,6 +813,7 @@ void RegisterProcess() {
   FreeStaleSlots(me, t_slot);
   if (g_proc >= 0) {
     g_page->processes[g_proc].agent.store(-1);
+    g_page->processes[g_proc].exec_pending.store(0);
     g_page->processes[g_proc].state.store(vt::kProcAlive);
   } else {
     g_proc = ClaimProcessSlot(vt::kProcAlive, me);
@@ -1258,7 +1266,7 @@ int MoveLibraryFd(int fd) {
 VTIME_EXPORT int close(int fd) {
   if (g_page != nullptr) {
     // Not the program's descriptor: the kernel's answer for a number it never opened.
-    if (IsLibraryFd(fd)) {
+    if (IsLibraryFd(fd) && !InVforkChild()) {
       errno = EBADF;
       return -1;
     }
@@ -1307,13 +1315,21 @@ VTIME_EXPORT void closefrom(int low) {
   for (long fd = first; fd < (max > 0 ? max : 1024); ++fd) close(static_cast<int>(fd));
 }
 
+namespace {
+
+bool KeepLibraryFd(int fd, int fd2) {
+  return g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && !InVforkChild();
+}
+
+}  // namespace
+
 VTIME_EXPORT int dup2(int fd, int fd2) {
-  if (g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  if (KeepLibraryFd(fd, fd2) && MoveLibraryFd(fd2) != 0) return -1;
   return real_dup2()(fd, fd2);
 }
 
 VTIME_EXPORT int dup3(int fd, int fd2, int flags) {
-  if (g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  if (KeepLibraryFd(fd, fd2) && MoveLibraryFd(fd2) != 0) return -1;
   return real_dup3()(fd, fd2, flags);
 }
 
@@ -1387,8 +1403,15 @@ VTIME_EXPORT pid_t fork() {
 // never taken for blocked and is named when the run gives up on it.
 namespace {
 
+// The exec of a vfork child (InVforkChild) is not its parent's: the new program registers
+// itself.
+bool ExecIsThisProcess() {
+  return g_page != nullptr && g_proc >= 0 && g_page->processes[g_proc].pid.load() == getpid();
+}
+
 void BeforeExec() {
-  if (g_page != nullptr && g_proc >= 0) {
+  if (ExecIsThisProcess()) {
+    g_page->processes[g_proc].exec_pending.store(1);
     g_page->processes[g_proc].state.store(vt::kProcStarting);
     Transition();
   }
@@ -1396,7 +1419,10 @@ void BeforeExec() {
 
 int AfterFailedExec(int rc) {
   const int err = errno;
-  if (g_page != nullptr && g_proc >= 0) g_page->processes[g_proc].state.store(vt::kProcAlive);
+  if (ExecIsThisProcess()) {
+    g_page->processes[g_proc].state.store(vt::kProcAlive);
+    g_page->processes[g_proc].exec_pending.store(0);
+  }
   errno = err;
   return rc;
 }

@@ -71,13 +71,19 @@ enum ProcessState : std::uint32_t {
   kProcFree = 0,
   kProcStarting = 1,  ///< Forked or spawned; its library has not registered it yet.
   kProcAlive = 2,
+  /// Host-only: it exec'd a program without the library (LD_PRELOAD cleared, a static binary):
+  /// on the host's clock; its threads count as blocked while asleep in the kernel. A later
+  /// exec of a program with the library registers it again.
+  kProcOutside = 3,
 };
 
 struct ProcessSlot {
   std::atomic<std::uint32_t> state{kProcFree};
   std::atomic<std::int32_t> pid{0};  ///< 0 while a fork is in progress.
   std::atomic<std::int32_t> agent{-1};  ///< Thread slot of its agent (-1: none yet).
-  std::uint32_t reserved = 0;
+  /// 1 from an exec* call of a registered process until the new program's library registers
+  /// it (kProcStarting meanwhile): the host may then find it is a program without the library.
+  std::atomic<std::uint32_t> exec_pending{0};
 };
 
 struct alignas(64) ThreadSlot {

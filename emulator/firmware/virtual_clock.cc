@@ -103,6 +103,7 @@ void VirtualClock::ExpectFirstProcess() {
     vt::ProcessSlot& p = page_->processes[i];
     std::uint32_t expect = vt::kProcFree;
     if (p.state.compare_exchange_strong(expect, vt::kProcStarting)) {
+      p.exec_pending.store(0);
       p.pid.store(vt::kFirstProcessPid);
       first_process_slot_ = i;
       return;
@@ -180,31 +181,8 @@ int VirtualClock::WakeDue() {
   auto need_agent = [&](pid_t pid) {
     if (std::find(agents, agents + n_agents, pid) == agents + n_agents) agents[n_agents++] = pid;
   };
-  const int threads = page_->threads_used.load();
-  for (int i = 0; i < threads; ++i) {
-    vt::ThreadSlot& s = page_->threads[i];
-    if (s.state.load() != vt::kWaiting || s.deadline_ns.load() > now) continue;
-    std::uint32_t expect = vt::kWaiting;
-    if (!s.state.compare_exchange_strong(expect, vt::kRunning)) continue;  // it woke itself
-    ++ended;
-    const std::uint32_t kind = s.kind.load();
-    if (kind == vt::kFdWait) {
-      // Its eventfd written here saves the hop through the agent.
-      const int copy = s.wake_fd >= 0 ? CopyOfFd(s.pid.load(), s.wake_fd, s.tid.load()) : -1;
-      if (copy >= 0 && eventfd_write(copy, 1) == 0) continue;
-      s.fired.store(1);
-      need_agent(s.pid.load());
-    } else if (kind == vt::kCondWait || kind == vt::kFutexWait) {
-      // A condition variable or a futex word of the firmware's memory: its agent wakes it.
-      s.fired.store(1);
-      need_agent(s.pid.load());
-    } else if (kind == vt::kSignalWait) {
-      ::syscall(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
-    } else {
-      s.wake.fetch_add(1);
-      FutexWake(&s.wake);
-    }
-  }
+  // Timers first: a thread whose wait ends at this instant must find every timer of the
+  // instant already fired (a super loop's next look at its timerfd), whichever CPU it wakes on.
   const int timers = page_->timers_used.load();
   for (int i = 0; i < timers; ++i) {
     vt::TimerSlot& t = page_->timers[i];
@@ -236,6 +214,31 @@ int VirtualClock::WakeDue() {
     }
     t.fired.store(1);
     need_agent(pid);
+  }
+  const int threads = page_->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = page_->threads[i];
+    if (s.state.load() != vt::kWaiting || s.deadline_ns.load() > now) continue;
+    std::uint32_t expect = vt::kWaiting;
+    if (!s.state.compare_exchange_strong(expect, vt::kRunning)) continue;  // it woke itself
+    ++ended;
+    const std::uint32_t kind = s.kind.load();
+    if (kind == vt::kFdWait) {
+      // Its eventfd written here saves the hop through the agent.
+      const int copy = s.wake_fd >= 0 ? CopyOfFd(s.pid.load(), s.wake_fd, s.tid.load()) : -1;
+      if (copy >= 0 && eventfd_write(copy, 1) == 0) continue;
+      s.fired.store(1);
+      need_agent(s.pid.load());
+    } else if (kind == vt::kCondWait || kind == vt::kFutexWait) {
+      // A condition variable or a futex word of the firmware's memory: its agent wakes it.
+      s.fired.store(1);
+      need_agent(s.pid.load());
+    } else if (kind == vt::kSignalWait) {
+      ::syscall(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
+    } else {
+      s.wake.fetch_add(1);
+      FutexWake(&s.wake);
+    }
   }
   for (int a = 0; a < n_agents; ++a) {
     for (int p = 0; p < vt::kMaxProcesses; ++p) {
@@ -345,9 +348,15 @@ bool VirtualClock::Blocked() {
     const std::uint32_t st = proc.state.load();
     if (st == vt::kProcFree) continue;
     const pid_t pid = proc.pid.load();
-    if (st == vt::kProcStarting) {
+    if (st == vt::kProcStarting || st == vt::kProcOutside) {
       if (pid > 0 && !ProcessAlive(pid)) {
         proc.state.store(vt::kProcFree);
+        continue;
+      }
+      if (st == vt::kProcOutside) continue;  // its threads' slots say whether it is blocked
+      if (pid > 0 && proc.exec_pending.load() != 0 && FoundOffTheClock(pid)) {
+        std::uint32_t expect = vt::kProcStarting;
+        proc.state.compare_exchange_strong(expect, vt::kProcOutside);
         continue;
       }
       return false;  // forked or started, its library not there yet
@@ -455,11 +464,61 @@ std::vector<std::string> VirtualClock::RunningThreads() {
 }
 
 pid_t VirtualClock::UnregisteredProcess() const {
+  pid_t outside = 0;
   for (int p = 0; p < vt::kMaxProcesses; ++p) {
     const vt::ProcessSlot& proc = page_->processes[p];
     if (proc.state.load() == vt::kProcStarting) return proc.pid.load();
+    if (proc.state.load() == vt::kProcOutside && outside == 0) outside = proc.pid.load();
   }
-  return 0;
+  return outside;
+}
+
+bool VirtualClock::FoundOffTheClock(pid_t pid) {
+  // Until its exec is done the process has the old program's environment, which has the
+  // library; after it, a program that has it registers soon, one without it never does.
+  const std::string env = ReadProcFile(fmt::format("/proc/{}/environ", pid));
+  std::string preload;
+  bool page = false;
+  for (std::size_t at = 0; at < env.size();) {
+    const std::size_t end = std::min(env.find('\0', at), env.size());
+    const std::string_view var(env.data() + at, end - at);
+    if (var.substr(0, 11) == "LD_PRELOAD=") preload = std::string(var.substr(11));
+    if (var.substr(0, std::strlen(vt::kPageEnv) + 1) == std::string(vt::kPageEnv) + "=") page = true;
+    at = end + 1;
+  }
+  // (An empty environment is one: `env -i`; but so reads a process in the middle of its exec,
+  // whose new program's memory has no environment yet.)
+  std::string why;
+  if (!page || preload.find("libwheelhil_vtime") == std::string::npos) {
+    why = "its LD_PRELOAD no longer has it";
+  } else if (IsStaticExecutable(fmt::format("/proc/{}/exe", pid))) {
+    why = "a statically linked executable, into which nothing can be preloaded";
+  } else {
+    return false;
+  }
+  // Judged only once it waits: asleep in the kernel twice without running in between, which a
+  // program whose library is on its way to register it does not do (exec, loading and the
+  // library's start-up do not sleep).
+  const std::string sched = ReadProcFile(fmt::format("/proc/{}/schedstat", pid));
+  const auto last_space = sched.rfind(' ');
+  const std::uint64_t runs = last_space == std::string::npos
+                                 ? 0
+                                 : std::strtoull(sched.c_str() + last_space + 1, nullptr, 10);
+  const bool asleep = TaskState(ReadProcFile(fmt::format("/proc/{}/stat", pid))) == 'S';
+  auto seen = std::find_if(starting_asleep_.begin(), starting_asleep_.end(),
+                           [pid](const auto& p) { return p.first == pid; });
+  if (!asleep || seen == starting_asleep_.end() || seen->second != runs) {
+    if (seen != starting_asleep_.end()) starting_asleep_.erase(seen);
+    if (asleep) starting_asleep_.emplace_back(pid, runs);
+    return false;
+  }
+  starting_asleep_.erase(seen);
+  off_the_clock_.push_back(fmt::format(
+      "process {} ('{}') exec'd a program without libwheelhil_vtime.so ({}): it runs on the "
+      "host's clock, so this run may not be deterministic (docs/virtual-time.md, \"Reading a "
+      "run that does not advance\")",
+      pid, ThreadName(pid, pid), why));
+  return true;
 }
 
 namespace {
@@ -540,12 +599,9 @@ HostClockWait ClassifyKernelWait(const std::string& line) {
   }
 }
 
-std::string WhyNotVirtualClock(const std::string& command) {
-  const std::string program = ProgramOf(command);
-  const std::string file = program.empty() ? std::string() : ResolveOnPath(program);
-  if (file.empty()) return {};
+bool IsStaticExecutable(const std::string& file) {
   const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return {};
+  if (fd < 0) return false;
   Elf64_Ehdr eh{};
   bool is_static = false;
   if (::pread(fd, &eh, sizeof(eh), 0) == static_cast<ssize_t>(sizeof(eh)) &&
@@ -563,7 +619,13 @@ std::string WhyNotVirtualClock(const std::string& command) {
     }
   }
   ::close(fd);
-  if (!is_static) return {};
+  return is_static;
+}
+
+std::string WhyNotVirtualClock(const std::string& command) {
+  const std::string program = ProgramOf(command);
+  const std::string file = program.empty() ? std::string() : ResolveOnPath(program);
+  if (file.empty() || !IsStaticExecutable(file)) return {};
   return fmt::format("{} is a statically linked executable: no library can be preloaded into it, "
                      "so its clock cannot be the run's (link it dynamically, or run it with "
                      "--realtime)",

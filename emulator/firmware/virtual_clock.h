@@ -83,8 +83,15 @@ class VirtualClock {
   /// deterministic. Found when a thread the library sees running is first seen asleep in the
   /// kernel (its /proc .../syscall); where that file cannot be read, nothing is found.
   std::vector<std::string> TakeHostClockWaits() { return std::exchange(host_clock_waits_, {}); }
-  /// A process slot still waiting for its library (a static binary, a program that clears
-  /// LD_PRELOAD): its pid, else 0.
+  /// Processes found running without the library since the last call (an exec of a program
+  /// without it: LD_PRELOAD cleared, a static binary): "process P (NAME) exec'd a program
+  /// without libwheelhil_vtime.so: ...", each once. They run on the host's clock, so the run
+  /// may not be deterministic; their threads count as blocked while asleep in the kernel.
+  std::vector<std::string> TakeProcessesOffTheClock() {
+    return std::exchange(off_the_clock_, {});
+  }
+  /// A process not on the clock: one whose library has not registered it yet (the run cannot
+  /// go on while it starts), else one found running without the library; its pid, else 0.
   pid_t UnregisteredProcess() const;
 
  private:
@@ -127,6 +134,12 @@ class VirtualClock {
   std::vector<pid_t> signalled_;  // processes a timer signal went to at the current instant
   bool threads_gone_ = false;
   std::vector<std::string> host_clock_waits_;
+  std::vector<std::string> off_the_clock_;
+  // A starting process (pid) that is a program without the library: its slot becomes
+  // kProcOutside and it is reported.
+  bool FoundOffTheClock(pid_t pid);
+  // Starting processes seen asleep in the kernel, with their timeslice count then.
+  std::vector<std::pair<pid_t, std::uint64_t>> starting_asleep_;
   pid_t first_pid_ = 0;
 };
 
@@ -138,6 +151,9 @@ struct HostClockWait {
   const char* call = nullptr;
 };
 HostClockWait ClassifyKernelWait(const std::string& proc_syscall_line);
+
+/// `file` is an ELF executable without an interpreter (nothing can be preloaded into it).
+bool IsStaticExecutable(const std::string& file);
 
 /// Why `command` (a shell command line) cannot run on the virtual clock: its program is a
 /// statically linked executable, into which no library can be preloaded. Empty when nothing

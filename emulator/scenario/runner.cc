@@ -239,12 +239,16 @@ void Run::SettleFirmware() {
   clock_->SetNow(hub_->now_ns());
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
-  for (const std::string& what : clock_->TakeHostClockWaits()) {
-    run_.events.push_back(json{{"t_s", run_.MotionSeconds(run_.now_ns)},
-                               {"event", "firmware_host_clock_wait"},
-                               {"detail", what}});
-    fmt::print(stderr, "wheelhil run: warning: {}\n", what);
-  }
+  // What runs on the host's clock: the run goes on, but may not be deterministic.
+  auto warn = [this](const char* event, const std::vector<std::string>& found) {
+    for (const std::string& what : found) {
+      run_.events.push_back(
+          json{{"t_s", run_.MotionSeconds(run_.now_ns)}, {"event", event}, {"detail", what}});
+      fmt::print(stderr, "wheelhil run: warning: {}\n", what);
+    }
+  };
+  warn("firmware_host_clock_wait", clock_->TakeHostClockWaits());
+  warn("firmware_off_the_clock", clock_->TakeProcessesOffTheClock());
 }
 
 void Run::StartFirmwareOnVirtualClock() {
