@@ -924,12 +924,24 @@ int Fail(int err) {
   return -1;
 }
 
-// What adjtimex keeps besides the time (process-wide, as the kernel's is system-wide).
+// What adjtimex keeps besides the time (process-wide, as the kernel's is system-wide; under
+// g_ntp_lock).
 long g_ntp_freq = 0, g_ntp_maxerror = 0, g_ntp_esterror = 0, g_ntp_constant = 0;
 long g_ntp_tick = 10000;
 int g_ntp_status = 0;
 
+int AdjustVirtualClockLocked(timex* tx);
+
+pthread_mutex_t g_ntp_lock = PTHREAD_MUTEX_INITIALIZER;
+
 int AdjustVirtualClock(timex* tx) {
+  pthread_mutex_lock(&g_ntp_lock);
+  const int rc = AdjustVirtualClockLocked(tx);
+  pthread_mutex_unlock(&g_ntp_lock);
+  return rc;
+}
+
+int AdjustVirtualClockLocked(timex* tx) {
   if (tx == nullptr) return Fail(EFAULT);
   const unsigned modes = tx->modes;
   if (modes == ADJ_OFFSET_SINGLESHOT) {
@@ -1474,15 +1486,26 @@ VTIME_EXPORT int fexecve(int fd, char* const argv[], char* const envp[]) {
   return AfterFailedExec(real_fexecve()(fd, argv, envp));
 }
 
+namespace {
+
+/// Runs `exec(argv)` for an argv CollectArgs made (nullptr: ENOMEM), then frees it (an exec
+/// that returns failed).
+template <typename Exec>
+int ExecCollected(char** argv, Exec exec) {
+  if (argv == nullptr) return Fail(ENOMEM);
+  const int rc = exec(argv);
+  ::free(argv);
+  return rc;
+}
+
+}  // namespace
+
 VTIME_EXPORT int execl(const char* path, const char* arg, ...) {
   va_list ap;
   va_start(ap, arg);
   char** argv = CollectArgs(arg, ap, nullptr);
   va_end(ap);
-  if (argv == nullptr) return Fail(ENOMEM);
-  const int rc = execv(path, argv);
-  ::free(argv);
-  return rc;
+  return ExecCollected(argv, [path](char** a) { return execv(path, a); });
 }
 
 VTIME_EXPORT int execlp(const char* file, const char* arg, ...) {
@@ -1490,10 +1513,7 @@ VTIME_EXPORT int execlp(const char* file, const char* arg, ...) {
   va_start(ap, arg);
   char** argv = CollectArgs(arg, ap, nullptr);
   va_end(ap);
-  if (argv == nullptr) return Fail(ENOMEM);
-  const int rc = execvp(file, argv);
-  ::free(argv);
-  return rc;
+  return ExecCollected(argv, [file](char** a) { return execvp(file, a); });
 }
 
 VTIME_EXPORT int execle(const char* path, const char* arg, ...) {
@@ -1502,10 +1522,7 @@ VTIME_EXPORT int execle(const char* path, const char* arg, ...) {
   char* const* envp = nullptr;
   char** argv = CollectArgs(arg, ap, &envp);
   va_end(ap);
-  if (argv == nullptr) return Fail(ENOMEM);
-  const int rc = execve(path, argv, envp);
-  ::free(argv);
-  return rc;
+  return ExecCollected(argv, [path, envp](char** a) { return execve(path, a, envp); });
 }
 
 // ---- semaphores, timed mutexes ----
