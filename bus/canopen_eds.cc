@@ -3,11 +3,12 @@
 #include <algorithm>
 #include <cctype>
 #include <charconv>
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
+#include <unordered_map>
 
 #include <fmt/format.h>
+
+#include "bus/internal/input_file.h"
 
 namespace wheelhil::bus {
 
@@ -110,17 +111,18 @@ int EdsFile::IntegerSize(std::uint16_t data_type) {
 }
 
 EdsFile EdsFile::LoadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument(fmt::format("{}:0: cannot open EDS file", path));
-  std::ostringstream text;
-  text << in.rdbuf();
-  return Parse(text.str(), path);
+  return Parse(
+      internal::ReadInputFile(path, "EDS", kMaxFileBytes, "a device's EDS is at most a few MiB"),
+      path);
 }
 
 EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
+  // A leading byte-order mark (Windows tools write one) is not part of the first line.
+  text = internal::SkipUtf8Bom(text);
   EdsFile eds;
   eds.source_ = source_name;
   std::vector<Section> sections;
+  std::unordered_map<std::string, int> section_lines;  // a file may have 10^4 sections
   int line_no = 0;
   std::size_t pos = 0;
   auto fail = [&](int line, const std::string& problem) {
@@ -141,10 +143,9 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
       Section s;
       s.name = Lower(Trim(line.substr(1, line.size() - 2)));
       s.line = line_no;
-      for (const Section& other : sections) {
-        if (other.name == s.name) {
-          fail(line_no, fmt::format("[{}] appears twice (first at line {})", s.name, other.line));
-        }
+      const auto [first, inserted] = section_lines.emplace(s.name, line_no);
+      if (!inserted) {
+        fail(line_no, fmt::format("[{}] appears twice (first at line {})", s.name, first->second));
       }
       sections.push_back(std::move(s));
     } else {

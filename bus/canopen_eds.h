@@ -9,9 +9,11 @@
 /// PDOMapping, SubNumber. Integer values are decimal, 0x hexadecimal or 0-prefixed octal, and may
 /// add or subtract $NODEID ("$NODEID+0x180"), which is resolved with the node id given when the
 /// value is read. CompactSubObj and [DynamicChannels] are refused as not supported; comments
-/// (';') and unknown keys are skipped. Errors throw std::invalid_argument
-/// "file:line: [section] key: problem". Immutable once loaded; thread-safe to share.
+/// (';') and unknown keys are skipped, so is a leading UTF-8 byte-order mark. Errors throw
+/// std::invalid_argument "file:line: [section] key: problem". Immutable once loaded; thread-safe
+/// to share.
 
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -40,6 +42,10 @@ struct EdsEntry {
 
 class EdsFile {
  public:
+  /// Largest file LoadFile reads (a device's EDS is at most a few MiB).
+  static constexpr std::size_t kMaxFileBytes = std::size_t{16} << 20;
+  /// Reads and parses `path`: a regular file ("path:0: is a directory, not an EDS file", "... is
+  /// not a regular file (a device or a pipe?)") of at most kMaxFileBytes.
   static EdsFile LoadFile(const std::string& path);
   static EdsFile Parse(std::string_view text, const std::string& source_name);
 

@@ -8,10 +8,11 @@
 #include <bitset>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <set>
-#include <sstream>
 #include <stdexcept>
+#include <unordered_map>
+
+#include "bus/internal/input_file.h"
 
 namespace wheelhil::bus {
 namespace {
@@ -44,7 +45,9 @@ int MotorolaLinear(int sawtooth_bit) { return (sawtooth_bit / 8) * 8 + 7 - sawto
 // beyond the friend declaration.
 class DbcParser {
  public:
-  DbcParser(std::string_view text, const std::string& source) : s_(text), source_(source) {}
+  // A leading byte-order mark (Windows tools write one) is not part of the text.
+  DbcParser(std::string_view text, const std::string& source)
+      : s_(internal::SkipUtf8Bom(text)), source_(source) {}
 
   DbcDatabase Run() {
     for (;;) {
@@ -273,13 +276,14 @@ class DbcParser {
 
   // --- messages and signals -------------------------------------------------------------
 
+  // Indexed: a large database has 10^5 messages, each named again by its CM_, BA_, VAL_.
+  static std::uint64_t IdKey(std::uint32_t id, bool extended) {
+    return static_cast<std::uint64_t>(id) | (extended ? (1ULL << 32) : 0);
+  }
   DbcMessage* MessageById(std::uint32_t raw_id) {
-    for (auto& m : db_.messages_) {
-      if (m.id == (raw_id & 0x1FFFFFFFu) && m.extended == ((raw_id & kExtendedIdFlag) != 0)) {
-        return &m;
-      }
-    }
-    return nullptr;
+    const auto it =
+        message_by_id_.find(IdKey(raw_id & 0x1FFFFFFFu, (raw_id & kExtendedIdFlag) != 0));
+    return it == message_by_id_.end() ? nullptr : &db_.messages_[it->second];
   }
   DbcMessage& RequireMessage(std::uint32_t raw_id) {
     DbcMessage* m = MessageById(raw_id);
@@ -288,10 +292,12 @@ class DbcParser {
   }
   DbcSignal& RequireSignal(std::uint32_t raw_id, std::string_view name) {
     DbcMessage& m = RequireMessage(raw_id);
-    for (auto& sig : m.signals) {
-      if (sig.name == name) return sig;
+    const std::size_t i = static_cast<std::size_t>(&m - db_.messages_.data());
+    const auto it = signal_by_name_[i].find(std::string(name));
+    if (it == signal_by_name_[i].end()) {
+      Fail(fmt::format("message {} has no signal '{}'", m.name, name));
     }
-    Fail(fmt::format("message {} has no signal '{}'", m.name, name));
+    return m.signals[it->second];
   }
 
   void Message() {
@@ -317,9 +323,12 @@ class DbcParser {
       Fail(fmt::format("message {}: length {} must be 0..64 bytes", name, length));
     }
     if (MessageById(raw)) Fail(fmt::format("message {}: id {} defined twice", name, raw));
-    for (const auto& m : db_.messages_) {
-      if (m.name == name) Fail(fmt::format("message name '{}' defined twice", name));
+    if (!message_names_.insert(name).second) {
+      Fail(fmt::format("message name '{}' defined twice", name));
     }
+    message_by_id_.emplace(IdKey(id, extended), db_.messages_.size());
+    signal_by_name_.emplace_back();
+    has_multiplexer_.push_back(false);
     DbcMessage m;
     m.id = id;
     m.extended = extended;
@@ -409,14 +418,16 @@ class DbcParser {
                        sig.start_bit, sig.length, order, m.name, m.length));
     }
     (void)first;
-    for (const auto& other : m.signals) {
-      if (other.name == sig.name) {
-        Fail(fmt::format("signal {} defined twice in message {}", sig.name, m.name));
-      }
-      if (sig.is_multiplexer && other.is_multiplexer) {
+    const auto current = static_cast<std::size_t>(current_message_);
+    if (!signal_by_name_[current].emplace(sig.name, m.signals.size()).second) {
+      Fail(fmt::format("signal {} defined twice in message {}", sig.name, m.name));
+    }
+    if (sig.is_multiplexer) {
+      if (has_multiplexer_[current]) {
         Fail(fmt::format("message {}: second multiplexer switch {} (only one is supported)", m.name,
                          sig.name));
       }
+      has_multiplexer_[current] = true;
     }
     m.signals.push_back(std::move(sig));
   }
@@ -662,24 +673,49 @@ class DbcParser {
     return bits;
   }
 
-  // Two signals that can be in one frame (not multiplexed apart) must not share a bit.
+  // Two signals that can be in one frame (not multiplexed apart) must not share a bit. Each
+  // bit's owner is kept, so that a message with thousands of multiplexed signals is checked in
+  // one pass rather than pair by pair.
   void CheckOverlaps(const DbcMessage& m, int line) const {
-    std::vector<std::bitset<512>> bits;
-    for (const auto& sig : m.signals) bits.push_back(SignalBits(sig));
-    for (std::size_t a = 0; a < m.signals.size(); ++a) {
-      for (std::size_t b = a + 1; b < m.signals.size(); ++b) {
-        const DbcSignal& sa = m.signals[a];
-        const DbcSignal& sb = m.signals[b];
-        if (sa.multiplex_value && sb.multiplex_value && *sa.multiplex_value != *sb.multiplex_value) {
-          continue;
+    auto report = [&](std::size_t a, std::size_t b) {
+      if (b < a) std::swap(a, b);
+      const DbcSignal& sa = m.signals[a];
+      const DbcSignal& sb = m.signals[b];
+      const std::bitset<512> common = SignalBits(sa) & SignalBits(sb);
+      std::size_t first = 0;
+      while (!common.test(first)) ++first;
+      FailAt(line, fmt::format("message {}: signals {} and {} overlap (both use bit {}, "
+                               "{} bits in common)",
+                               m.name, sa.name, sb.name, first, common.count()));
+    };
+    constexpr std::size_t kNone = static_cast<std::size_t>(-1);
+    // Signals in every frame (the switch included) first, then each multiplexer value's.
+    std::vector<std::size_t> in_every_frame(512, kNone);
+    std::map<int, std::vector<std::size_t>> by_value;
+    for (std::size_t i = 0; i < m.signals.size(); ++i) {
+      const DbcSignal& sig = m.signals[i];
+      if (sig.multiplex_value) {
+        by_value[*sig.multiplex_value].push_back(i);
+        continue;
+      }
+      const std::bitset<512> bits = SignalBits(sig);
+      for (std::size_t b = 0; b < 512; ++b) {
+        if (!bits.test(b)) continue;
+        if (in_every_frame[b] != kNone) report(in_every_frame[b], i);
+        in_every_frame[b] = i;
+      }
+    }
+    std::vector<std::size_t> in_this_value(512, kNone);
+    for (const auto& [value, signals] : by_value) {
+      std::fill(in_this_value.begin(), in_this_value.end(), kNone);
+      for (const std::size_t i : signals) {
+        const std::bitset<512> bits = SignalBits(m.signals[i]);
+        for (std::size_t b = 0; b < 512; ++b) {
+          if (!bits.test(b)) continue;
+          if (in_every_frame[b] != kNone) report(in_every_frame[b], i);
+          if (in_this_value[b] != kNone) report(in_this_value[b], i);
+          in_this_value[b] = i;
         }
-        const std::bitset<512> common = bits[a] & bits[b];
-        if (common.none()) continue;
-        std::size_t first = 0;
-        while (!common.test(first)) ++first;
-        FailAt(line, fmt::format("message {}: signals {} and {} overlap (both use bit {}, "
-                                 "{} bits in common)",
-                                 m.name, sa.name, sb.name, first, common.count()));
       }
     }
   }
@@ -694,6 +730,10 @@ class DbcParser {
   int current_message_ = -1;
   bool skipping_message_ = false;
   std::vector<int> message_lines_;
+  std::unordered_map<std::uint64_t, std::size_t> message_by_id_;
+  std::set<std::string, std::less<>> message_names_;
+  std::vector<std::unordered_map<std::string, std::size_t>> signal_by_name_;  // per message
+  std::vector<bool> has_multiplexer_;                                         // per message
   std::map<std::string, AttributeDef> attribute_defs_;
   DbcDatabase db_;
 };
@@ -727,11 +767,9 @@ DbcDatabase DbcDatabase::Parse(std::string_view text, const std::string& source_
 }
 
 DbcDatabase DbcDatabase::LoadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument(fmt::format("{}:0: cannot open DBC file", path));
-  std::ostringstream text;
-  text << in.rdbuf();
-  return Parse(text.str(), path);
+  return Parse(
+      internal::ReadInputFile(path, "DBC", kMaxFileBytes, "the largest real ones are tens of MiB"),
+      path);
 }
 
 const DbcMessage* DbcDatabase::FindMessage(std::uint32_t id, bool extended) const {

@@ -12,10 +12,11 @@
 /// Loading validates what the codec relies on: every signal lies inside its message's length,
 /// lengths are 1..64 bits (32/64 for float signals), factors are finite and non-zero, names are
 /// unique, `m<n>` signals have a multiplexer, no two signals that can be in one frame share a
-/// bit. Errors throw std::invalid_argument reading
+/// bit. A leading UTF-8 byte-order mark is skipped. Errors throw std::invalid_argument reading
 /// "<file>:<line>: <problem>". A loaded database is immutable and safe to share between threads.
 /// Encoding and decoding live in bus/dbc_codec.h.
 
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -85,7 +86,12 @@ struct DbcMessage {
 
 class DbcDatabase {
  public:
-  /// Reads and parses `path`; throws std::invalid_argument ("path:line: problem").
+  /// Largest DBC file LoadFile reads: the largest real ones are tens of MiB; a generated 100 MB
+  /// one loads in a few seconds.
+  static constexpr std::size_t kMaxFileBytes = std::size_t{128} << 20;
+  /// Reads and parses `path`; throws std::invalid_argument ("path:line: problem"), also for a
+  /// path that is not a regular file ("path:0: is a directory, not a DBC file", "... is not a
+  /// regular file (a device or a pipe?)") or larger than kMaxFileBytes.
   static DbcDatabase LoadFile(const std::string& path);
   /// Parses DBC text; `source_name` prefixes error messages.
   static DbcDatabase Parse(std::string_view text, const std::string& source_name);

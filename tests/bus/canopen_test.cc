@@ -1,9 +1,17 @@
 // The CiA 301 numbers of bus/canopen.h against the values the standard gives (and the project's
-// golden traces use), and the COB-ID helpers at the edges of each function's id range.
+// golden traces use), and the COB-ID helpers at the edges of each function's id range. The EDS
+// reader (bus/canopen_eds.h) against paths that are not regular files.
 
 #include "bus/canopen.h"
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <stdexcept>
+#include <string>
+
+#include "bus/canopen_eds.h"
+#include "tests/bus/input_file_test_util.h"
 
 namespace wheelhil::bus::canopen {
 namespace {
@@ -102,6 +110,42 @@ TEST(CanopenSdo, AbortCodesInUseHaveTheStandardValues) {
   EXPECT_EQ(sdo::kAbortLength, 0x06070010u);
   EXPECT_EQ(sdo::kAbortNoSubindex, 0x06090011u);
   EXPECT_EQ(sdo::kAbortValue, 0x06090030u);
+}
+
+// --- EDS files --------------------------------------------------------------------------------
+
+using ::testing::HasSubstr;
+using ::testing::ThrowsMessage;
+
+const std::string kEdsData = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/eds/";
+
+// A FIFO hung the load, a directory read as an empty file, a byte-order mark was a syntax error.
+TEST(EdsFile, OnlyRegularFilesOfAtMostTheLimitAndABomIsSkipped) {
+  const testing::ScratchDir dir;
+  auto error = [](const std::string& path) -> std::string {
+    try {
+      (void)EdsFile::LoadFile(path);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "(loaded without an error)";
+  };
+  const std::string fifo = dir.Fifo("fifo.eds");
+  EXPECT_EQ(testing::LoadErrorOfFifo(fifo, [&] { (void)EdsFile::LoadFile(fifo); }),
+            fifo + ":0: is not a regular file (a device or a pipe?)");
+  EXPECT_EQ(error(dir.Path("")), dir.Path("") + ":0: is a directory, not an EDS file");
+  EXPECT_EQ(error(dir.Path("none.eds")),
+            dir.Path("none.eds") + ":0: cannot open EDS file (No such file or directory)");
+  const std::string big = dir.Sparse("big.eds", EdsFile::kMaxFileBytes + 1);
+  EXPECT_EQ(error(big), big +
+                            ":0: is larger than 16 MiB, the limit for an EDS file; a device's "
+                            "EDS is at most a few MiB");
+  const EdsFile bom = EdsFile::LoadFile(kEdsData + "utf8_bom_encoder.eds");
+  const EdsFile plain = EdsFile::LoadFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                          "/scenarios/own_hardware/encoder_cia406.eds");
+  EXPECT_EQ(bom.entries().size(), plain.entries().size());
+  EXPECT_EQ(bom.Integer(0x6001, 0, 5), plain.Integer(0x6001, 0, 5));
+  EXPECT_EQ(bom.device_info().at("ProductName"), "Example incremental encoder");
 }
 
 }  // namespace

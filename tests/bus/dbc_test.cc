@@ -1,5 +1,6 @@
 #include "bus/dbc.h"
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -14,6 +15,7 @@
 #include <stdexcept>
 
 #include "bus/dbc_codec.h"
+#include "tests/bus/input_file_test_util.h"
 
 namespace wheelhil::bus {
 namespace {
@@ -408,6 +410,101 @@ TEST(DbcParseTest, ErrorsNameFileAndLine) {
           HasSubstr("bad.dbc:4: signal F: SIG_VALTYPE_ 1 needs a 32-bit")));
   EXPECT_THAT([&] { DbcDatabase::LoadFile("/nonexistent/x.dbc"); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("/nonexistent/x.dbc")));
+}
+
+// The index of messages and signals that made loading linear: every lookup finds its own, and
+// each name or id given twice is still refused.
+TEST(DbcParseTest, ManyMessagesAreFoundByIdAndNameAndDuplicatesRefused) {
+  std::string text = "BU_: A\n";
+  for (int i = 0; i < 3000; ++i) {
+    text += fmt::format("BO_ {} M{}: 8 A\n SG_ S{} : 0|8@1+ (1,0) [0|0] \"\" A\n",
+                        0x80000000u + static_cast<unsigned>(i) * 7, i, i);
+  }
+  for (int i = 2999; i >= 0; --i) {
+    text += fmt::format("CM_ SG_ {} S{} \"signal {}\";\n",
+                        0x80000000u + static_cast<unsigned>(i) * 7, i, i);
+  }
+  const auto db = DbcDatabase::Parse(text, "many.dbc");
+  ASSERT_EQ(db.messages().size(), 3000u);
+  for (int i = 0; i < 3000; i += 499) {
+    const DbcMessage* m = db.FindMessage(static_cast<std::uint32_t>(i) * 7, true);
+    ASSERT_NE(m, nullptr) << i;
+    EXPECT_EQ(m->name, fmt::format("M{}", i));
+    EXPECT_EQ(m->signals[0].comment, fmt::format("signal {}", i));
+    EXPECT_EQ(db.FindMessage(m->name), m);
+  }
+  auto throws = [&](const std::string& more, const std::string& what) {
+    EXPECT_THAT([&] { (void)DbcDatabase::Parse(text + more, "many.dbc"); },
+                ThrowsMessage<std::invalid_argument>(HasSubstr(what)));
+  };
+  throws("BO_ 5 M17: 1 A\n", "many.dbc:9002: message name 'M17' defined twice");
+  throws("BO_ 2147483662 X: 1 A\n", "many.dbc:9002: message X: id 2147483662 defined twice");
+  throws("BO_ 5 X: 1 A\n SG_ T : 0|1@1+ (1,0) [0|0] \"\" A\n SG_ T : 1|1@1+ (1,0) [0|0] \"\" A\n",
+         "many.dbc:9004: signal T defined twice in message X");
+  throws(
+      "BO_ 5 X: 2 A\n SG_ T M : 0|1@1+ (1,0) [0|0] \"\" A\n SG_ U M : 8|1@1+ (1,0) [0|0] \"\" A\n",
+      "many.dbc:9004: message X: second multiplexer switch U");
+  throws("CM_ SG_ 2147483662 S3 \"x\";\n", "many.dbc:9002: message M2 has no signal 'S3'");
+  throws("CM_ BO_ 2147483663 \"x\";\n", "many.dbc:9002: message id 2147483663 is not defined");
+}
+
+// Many multiplexed signals in one message are checked for overlaps value by value: the bits of
+// one value's signals may repeat another value's, never the switch's or their own value's.
+TEST(DbcParseTest, OverlapsAmongManyMultiplexedSignals) {
+  std::string text = "BU_: A\nBO_ 1 M: 8 A\n SG_ S M : 0|16@1+ (1,0) [0|0] \"\" A\n";
+  for (int v = 0; v < 2000; ++v) {
+    text += fmt::format(" SG_ P{} m{} : 16|16@1+ (1,0) [0|0] \"\" A\n", v, v);
+    text += fmt::format(" SG_ Q{} m{} : 32|32@1+ (1,0) [0|0] \"\" A\n", v, v);
+  }
+  EXPECT_EQ(DbcDatabase::Parse(text, "mux.dbc").messages()[0].signals.size(), 4001u);
+  EXPECT_THAT(
+      [&] {
+        (void)DbcDatabase::Parse(text + " SG_ R m7 : 40|4@1+ (1,0) [0|0] \"\" A\n", "mux.dbc");
+      },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("mux.dbc:2: message M: signals Q7 and R overlap (both use bit 40, 4 bits")));
+  EXPECT_THAT(
+      [&] {
+        (void)DbcDatabase::Parse(text + " SG_ R m9 : 12|8@1+ (1,0) [0|0] \"\" A\n", "mux.dbc");
+      },
+      ThrowsMessage<std::invalid_argument>(
+          HasSubstr("mux.dbc:2: message M: signals S and R overlap (both use bit 12, 4 bits")));
+  EXPECT_NO_THROW(
+      (void)DbcDatabase::Parse(text + " SG_ R m2000 : 16|48@1+ (1,0) [0|0] \"\" A\n", "mux.dbc"));
+}
+
+// LoadFile reads regular files only, says why not, and a byte-order mark is no syntax error.
+TEST(DbcLoadFileTest, OnlyRegularFilesOfAtMostTheLimitAndABomIsSkipped) {
+  using testing::ScratchDir;
+  const ScratchDir dir;
+  auto error = [](const std::string& path) -> std::string {
+    try {
+      (void)DbcDatabase::LoadFile(path);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "(loaded without an error)";
+  };
+  // It waited for a writer forever.
+  const std::string fifo = dir.Fifo("fifo.dbc");
+  EXPECT_EQ(testing::LoadErrorOfFifo(fifo, [&] { (void)DbcDatabase::LoadFile(fifo); }),
+            fifo + ":0: is not a regular file (a device or a pipe?)");
+  EXPECT_EQ(error(dir.Path("")), dir.Path("") + ":0: is a directory, not a DBC file");
+  EXPECT_EQ(error("/dev/zero"), "/dev/zero:0: is not a regular file (a device or a pipe?)");
+  EXPECT_EQ(error(dir.Path("none.dbc")),
+            dir.Path("none.dbc") + ":0: cannot open DBC file (No such file or directory)");
+  const std::string big = dir.Sparse("big.dbc", DbcDatabase::kMaxFileBytes + 1);
+  EXPECT_EQ(error(big), big +
+                            ":0: is larger than 128 MiB, the limit for a DBC file; the largest "
+                            "real ones are tens of MiB");
+  // Written by a Windows tool: EF BB BF before VERSION.
+  const auto db = DbcDatabase::LoadFile(std::string(WHEELHIL_SOURCE_DIR) +
+                                        "/tests/data/dbc/utf8_bom_motor_controller.dbc");
+  ASSERT_NE(db.FindMessage("MC_Command"), nullptr);
+  EXPECT_EQ(db.version(), "1.0");
+  // Only at the start.
+  EXPECT_THAT([] { (void)DbcDatabase::Parse("BU_: A\n\xEF\xBB\xBF", "bom.dbc"); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("bom.dbc:2: unexpected character")));
 }
 
 // Random truncations and byte mutations of every project file must parse or throw
