@@ -44,14 +44,23 @@ std::optional<std::uint64_t> ParseUnsigned(std::string_view s) {
   return v;
 }
 
+// The value of an integer expression: 128 bits, so that no sum of 64-bit terms overflows
+// before it is compared with its data type's range.
+struct Evaluated {
+  enum Status { kOk, kNotAnInteger, kBeyond64Bits } status = kNotAnInteger;
+  __int128 value = 0;
+};
+
 // "$NODEID+0x180", "0x180+$NODEID", "-5", "12": terms joined by + or -.
-std::optional<std::int64_t> EvaluateValue(std::string_view text, int node_id) {
+Evaluated EvaluateValue(std::string_view text, int node_id) {
   std::string s;
   for (char c : text) {
     if (std::isspace(static_cast<unsigned char>(c)) == 0) s.push_back(c);
   }
-  if (s.empty()) return std::nullopt;
-  std::int64_t total = 0;
+  if (s.empty()) return {};
+  // Any partial sum beyond this is out of every data type's range (and far from overflowing).
+  constexpr __int128 kLimit = static_cast<__int128>(1) << 66;
+  __int128 total = 0;
   std::size_t i = 0;
   int sign = 1;
   if (s[0] == '-' || s[0] == '+') {
@@ -62,20 +71,96 @@ std::optional<std::int64_t> EvaluateValue(std::string_view text, int node_id) {
     std::size_t j = i;
     while (j < s.size() && s[j] != '+' && s[j] != '-') ++j;
     const std::string_view term(s.data() + i, j - i);
-    std::int64_t v = 0;
+    __int128 v = 0;
     if (Lower(term) == "$nodeid") {
       v = node_id;
     } else if (const auto u = ParseUnsigned(term)) {
-      v = static_cast<std::int64_t>(*u);
+      v = static_cast<__int128>(*u);
     } else {
-      return std::nullopt;
+      return {};
     }
     total += sign * v;
+    if (total > kLimit || total < -kLimit) return {Evaluated::kBeyond64Bits, 0};
     if (j == s.size()) break;
     sign = s[j] == '-' ? -1 : 1;
     i = j + 1;
   }
-  return total;
+  return {Evaluated::kOk, total};
+}
+
+struct IntegerRange {
+  std::string_view type;
+  __int128 min = 0;
+  __int128 max = 0;
+};
+
+// The integer data types of CiA 301 (7.1.6) this reader knows.
+std::optional<IntegerRange> RangeOf(std::uint16_t data_type) {
+  auto u = [](std::string_view name, int bits) {
+    return IntegerRange{name, 0, (static_cast<__int128>(1) << bits) - 1};
+  };
+  auto i = [](std::string_view name, int bits) {
+    return IntegerRange{name, -(static_cast<__int128>(1) << (bits - 1)),
+                        (static_cast<__int128>(1) << (bits - 1)) - 1};
+  };
+  switch (data_type) {
+    case 0x0001:
+      return u("BOOLEAN", 1);
+    case 0x0002:
+      return i("INTEGER8", 8);
+    case 0x0003:
+      return i("INTEGER16", 16);
+    case 0x0004:
+      return i("INTEGER32", 32);
+    case 0x0005:
+      return u("UNSIGNED8", 8);
+    case 0x0006:
+      return u("UNSIGNED16", 16);
+    case 0x0007:
+      return u("UNSIGNED32", 32);
+    case 0x0010:
+      return i("INTEGER24", 24);
+    case 0x0015:
+      return i("INTEGER64", 64);
+    case 0x0016:
+      return u("UNSIGNED24", 24);
+    case 0x001B:
+      return u("UNSIGNED64", 64);
+    default:
+      return std::nullopt;
+  }
+}
+
+std::string Decimal(__int128 v) {
+  if (v == 0) return "0";
+  const bool negative = v < 0;
+  unsigned __int128 m =
+      negative ? -static_cast<unsigned __int128>(v) : static_cast<unsigned __int128>(v);
+  std::string digits;
+  for (; m != 0; m /= 10) digits.insert(digits.begin(), static_cast<char>('0' + m % 10));
+  return negative ? "-" + digits : digits;
+}
+
+// Empty when `e`'s value is an integer of its data type's range with this node id; otherwise
+// what is wrong, for "file:line: [1017] DefaultValue: <problem>".
+std::string ValueProblem(const EdsEntry& e, int node_id, bool with_node_id) {
+  const Evaluated v = EvaluateValue(e.default_value, node_id);
+  if (v.status == Evaluated::kNotAnInteger) {
+    return fmt::format("'{}' is not an integer (decimal, 0x.., or with $NODEID)", e.default_value);
+  }
+  const auto range = RangeOf(e.data_type);
+  if (!range) return {};
+  // Silently truncated to the object's size before: a heartbeat of 70000 ms became 4464.
+  const std::string node = with_node_id ? fmt::format(" with node id {}", node_id) : std::string();
+  if (v.status == Evaluated::kBeyond64Bits) {
+    return fmt::format("'{}'{} is beyond 64 bits, outside {}'s range {}..{}", e.default_value, node,
+                       range->type, Decimal(range->min), Decimal(range->max));
+  }
+  if (v.value < range->min || v.value > range->max) {
+    return fmt::format("'{}' is {}{}, outside {}'s range {}..{}", e.default_value, Decimal(v.value),
+                       node, range->type, Decimal(range->min), Decimal(range->max));
+  }
+  return {};
 }
 
 struct Section {
@@ -241,23 +326,23 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
                                        "rww, const",
                                        n, access->first));
     }
-    if (const auto* v = key(s, "defaultvalue")) e.default_value = v->first;
+    e.value_line = s.line;
+    if (const auto* v = key(s, "defaultvalue")) {
+      e.default_value = v->first;
+      e.value_line = v->second;
+    }
     if (const auto* v = key(s, "parametervalue"); v != nullptr && !v->first.empty()) {
       e.default_value = v->first;
+      e.value_key = "ParameterValue";
+      e.value_line = v->second;
     }
     if (const auto* v = key(s, "pdomapping")) e.pdo_mapping = Trim(v->first) == "1";
-    // An integer value must read as one now (with a node id of 1): a typo is a load error.
-    if (IntegerSize(e.data_type) > 0 && !e.default_value.empty() &&
-        !EvaluateValue(e.default_value, 1)) {
-      const auto* v =
-          key(s, "parametervalue") != nullptr && !key(s, "parametervalue")->first.empty()
-              ? key(s, "parametervalue")
-              : key(s, "defaultvalue");
-      fail(v->second,
-           fmt::format("[{}] {}: '{}' is not an integer (decimal, 0x.., or with "
-                       "$NODEID)",
-                       n, v == key(s, "defaultvalue") ? "DefaultValue" : "ParameterValue",
-                       e.default_value));
+    // An integer value must read as one now, and fit its type (with a node id of 1; the
+    // node's own is checked when it is read): a typo is a load error.
+    if (IntegerSize(e.data_type) > 0 && !e.default_value.empty()) {
+      if (const std::string why = ValueProblem(e, 1, false); !why.empty()) {
+        fail(e.value_line, fmt::format("[{}] {}: {}", n, e.value_key, why));
+      }
     }
     eds.entries_[{e.index, e.sub}] = std::move(e);
   }
@@ -289,14 +374,13 @@ std::uint64_t EdsFile::Integer(std::uint16_t index, std::uint8_t sub, int node_i
     throw std::invalid_argument(
         fmt::format("{}: object 0x{:04X} sub {} is not in the file", source_, index, sub));
   }
-  const auto v = EvaluateValue(e->default_value, node_id);
-  if (!v) {
-    throw std::invalid_argument(fmt::format(
-        "{}:{}: [{:04X}{}] DefaultValue: '{}' is not an "
-        "integer",
-        source_, e->line, index, sub != 0 ? fmt::format("sub{}", sub) : "", e->default_value));
+  if (const std::string why = ValueProblem(*e, node_id, true); !why.empty()) {
+    throw std::invalid_argument(fmt::format("{}:{}: [{:04X}{}] {}: {}", source_, e->value_line,
+                                            index, sub != 0 ? fmt::format("sub{}", sub) : "",
+                                            e->value_key, why));
   }
-  return static_cast<std::uint64_t>(*v);
+  // In range: a negative value of a signed type is its two's complement.
+  return static_cast<std::uint64_t>(EvaluateValue(e->default_value, node_id).value);
 }
 
 }  // namespace wheelhil::bus

@@ -9,7 +9,9 @@
 /// PDOMapping, SubNumber. Integer values are decimal, 0x hexadecimal or 0-prefixed octal, and may
 /// add or subtract $NODEID ("$NODEID+0x180"), which is resolved with the node id given when the
 /// value is read. CompactSubObj and [DynamicChannels] are refused as not supported; comments
-/// (';') and unknown keys are skipped, so is a leading UTF-8 byte-order mark. Errors throw
+/// (';') and unknown keys are skipped, so is a leading UTF-8 byte-order mark. The value of an
+/// integer object must be inside its DataType's range (UNSIGNED16: 0..65535), with a node id of
+/// 1 when the file is read and with the node's when Integer() reads it. Errors throw
 /// std::invalid_argument "file:line: [section] key: problem". Immutable once loaded; thread-safe
 /// to share.
 
@@ -32,6 +34,8 @@ struct EdsEntry {
   std::uint16_t data_type = 0;
   std::string access;         ///< Lower case: ro, wo, rw, rwr, rww, const.
   std::string default_value;  ///< As written (ParameterValue of a DCF wins).
+  std::string value_key = "DefaultValue";  ///< Or "ParameterValue": which one gave it.
+  int value_line = 0;                      ///< Of that key (its section's when absent).
   bool pdo_mapping = false;
   int line = 0;  ///< Of its section header.
 
@@ -64,9 +68,11 @@ class EdsFile {
   }
   const EdsEntry* Find(std::uint16_t index, std::uint8_t sub) const;
 
-  /// The entry's integer value with $NODEID = node_id; throws std::invalid_argument
-  /// "file:line: [section] DefaultValue: problem" for a value that is not an integer (or a
-  /// missing entry: "object 0x1017 sub 0 is not in the file").
+  /// The entry's integer value with $NODEID = node_id (a negative one of a signed type as its
+  /// two's complement); throws std::invalid_argument "file:line: [section] DefaultValue:
+  /// problem" for a value that is not an integer or is outside its DataType's range ("'$NODEID+
+  /// 0xFFFF' is 65540 with node id 5, outside UNSIGNED16's range 0..65535"), or a missing
+  /// entry ("object 0x1017 sub 0 is not in the file").
   std::uint64_t Integer(std::uint16_t index, std::uint8_t sub, int node_id) const;
   /// Bytes of an integer data type (BOOLEAN .. UNSIGNED64), 0 for the others.
   static int IntegerSize(std::uint16_t data_type);

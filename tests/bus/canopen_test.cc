@@ -1,6 +1,7 @@
 // The CiA 301 numbers of bus/canopen.h against the values the standard gives (and the project's
 // golden traces use), and the COB-ID helpers at the edges of each function's id range. The EDS
-// reader (bus/canopen_eds.h) against paths that are not regular files.
+// reader (bus/canopen_eds.h) against values outside their data type and paths that are not
+// regular files.
 
 #include "bus/canopen.h"
 
@@ -118,6 +119,65 @@ using ::testing::HasSubstr;
 using ::testing::ThrowsMessage;
 
 const std::string kEdsData = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/eds/";
+
+// A value its DataType cannot hold used to be cut to the object's size when the node was built
+// (a heartbeat of 70000 ms became 4464 ms); a sum beyond 64 bits was signed overflow.
+TEST(EdsFile, ValuesOutsideTheirDataTypeAreRefusedNamingObjectAndRange) {
+  const std::string heartbeat = kEdsData + "heartbeat_out_of_range.eds";
+  EXPECT_THAT([&] { (void)EdsFile::LoadFile(heartbeat); },
+              ThrowsMessage<std::invalid_argument>(
+                  heartbeat + ":15: [1017] DefaultValue: '70000' is 70000, outside UNSIGNED16's "
+                              "range 0..65535"));
+  const std::string sum = kEdsData + "sum_beyond_64_bits.eds";
+  EXPECT_THAT([&] { (void)EdsFile::LoadFile(sum); },
+              ThrowsMessage<std::invalid_argument>(
+                  sum + ":15: [2000] DefaultValue: '0xFFFFFFFFFFFFFFFF + 0x2' is "
+                        "18446744073709551617, outside UNSIGNED64's range "
+                        "0..18446744073709551615"));
+  auto throws = [](const std::string& text, const std::string& what) {
+    EXPECT_THAT([&] { (void)EdsFile::Parse(text, "bad.eds"); },
+                ThrowsMessage<std::invalid_argument>(HasSubstr(what)))
+        << text;
+  };
+  const std::string head = "[6001]\nAccessType=rw\n";
+  throws(head + "DataType=0x0005\nDefaultValue=-1\n",
+         "bad.eds:4: [6001] DefaultValue: '-1' is -1, outside UNSIGNED8's range 0..255");
+  throws(head + "DataType=0x0002\nDefaultValue=-129\n", "outside INTEGER8's range -128..127");
+  throws(head + "DataType=0x0001\nDefaultValue=2\n", "outside BOOLEAN's range 0..1");
+  throws(head + "DataType=0x0016\nDefaultValue=0x1000000\n",
+         "'0x1000000' is 16777216, outside UNSIGNED24's range 0..16777215");
+  throws(head + "DataType=0x0015\nDefaultValue=0x7FFFFFFFFFFFFFFF+0x7FFFFFFFFFFFFFFF\n",
+         "is 18446744073709551614, outside INTEGER64's range -9223372036854775808..");
+  throws(head +
+             "DataType=0x001B\nDefaultValue=0xFFFFFFFFFFFFFFFF+0xFFFFFFFFFFFFFFFF+"
+             "0xFFFFFFFFFFFFFFFF+0xFFFFFFFFFFFFFFFF+0xFFFFFFFFFFFFFFFF\n",
+         "is beyond 64 bits, outside UNSIGNED64's range");
+  // A DCF's configured value is named as such.
+  throws("[1017]\nDataType=0x0006\nAccessType=rw\nDefaultValue=100\nParameterValue=0x10000\n",
+         "bad.eds:5: [1017] ParameterValue: '0x10000' is 65536, outside UNSIGNED16's range");
+  // The edges fit.
+  const EdsFile edges = EdsFile::Parse(
+      "[6001]\nDataType=0x0002\nAccessType=ro\nDefaultValue=-128\n"
+      "[6002]\nDataType=0x0015\nAccessType=ro\nDefaultValue=-0x8000000000000000\n"
+      "[6003]\nDataType=0x001B\nAccessType=ro\nDefaultValue=0xFFFFFFFFFFFFFFFF\n"
+      "[6004]\nDataType=0x0006\nAccessType=ro\nDefaultValue=0x10000-$NODEID\n",
+      "edges.eds");
+  EXPECT_EQ(edges.Integer(0x6001, 0, 1), static_cast<std::uint64_t>(-128));
+  EXPECT_EQ(edges.Integer(0x6002, 0, 1), 0x8000000000000000u);
+  EXPECT_EQ(edges.Integer(0x6003, 0, 1), 0xFFFFFFFFFFFFFFFFu);
+  EXPECT_EQ(edges.Integer(0x6004, 0, 1), 0xFFFFu);
+}
+
+// A $NODEID value may fit with one node id and not another: checked with the node's own.
+TEST(EdsFile, ANodeIdValueIsCheckedWithTheNodesId) {
+  const std::string path = kEdsData + "nodeid_out_of_range.eds";
+  const EdsFile eds = EdsFile::LoadFile(path);
+  EXPECT_EQ(eds.Integer(0x1800, 5, 63), 0xFFFFu);
+  EXPECT_THAT([&] { (void)eds.Integer(0x1800, 5, 64); },
+              ThrowsMessage<std::invalid_argument>(
+                  path + ":27: [1800sub5] DefaultValue: '$NODEID+0xFFC0' is 65536 with node id "
+                         "64, outside UNSIGNED16's range 0..65535"));
+}
 
 // A FIFO hung the load, a directory read as an empty file, a byte-order mark was a syntax error.
 TEST(EdsFile, OnlyRegularFilesOfAtMostTheLimitAndABomIsSkipped) {
