@@ -233,6 +233,7 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
                                       b.message, node, b.signal));
     }
   }
+  for (Message& m : messages_) SplitByMultiplexerValue(m);
   if (config_.setpoint_timeout_s < 0) {
     Fail(config_.field + ".setpoint_timeout_ms", "must be >= 0");
   }
@@ -250,6 +251,39 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
 }
 
 DbcDevice::~DbcDevice() = default;
+
+// A frame carries one multiplexer value's signals; bound signals of two values in one frame
+// would put one value's bits under the other's switch. So each bound value gets its own frame,
+// and the switch is the device's to set.
+void DbcDevice::SplitByMultiplexerValue(Message& m) {
+  const bus::DbcSignal* mux = m.msg->multiplexer();
+  if (mux == nullptr) return;
+  const Bound* mux_binding = nullptr;
+  for (const std::vector<Bound>* bound : {&m.values, &m.counters, &m.checksums}) {
+    for (const Bound& b : *bound) {
+      if (b.signal->multiplex_value) m.mux_values.push_back(*b.signal->multiplex_value);
+      if (b.signal == mux) mux_binding = &b;
+    }
+  }
+  std::sort(m.mux_values.begin(), m.mux_values.end());
+  m.mux_values.erase(std::unique(m.mux_values.begin(), m.mux_values.end()), m.mux_values.end());
+  if (m.mux_values.empty()) return;
+  if (mux_binding != nullptr) {
+    Fail(mux_binding->binding->field,
+         fmt::format("{} is the multiplexer switch of {}, whose m{} signals are bound: the device "
+                     "sends one frame per bound multiplexer value and sets the switch itself; "
+                     "do not bind it",
+                     mux->name, m.msg->name, fmt::join(m.mux_values, ", m")));
+  }
+  const int value_bits = mux->is_signed ? mux->length - 1 : mux->length;
+  const auto largest = value_bits >= 63 ? std::numeric_limits<std::int64_t>::max()
+                                        : (std::int64_t{1} << value_bits) - 1;
+  if (m.mux_values.back() > largest) {
+    Fail(config_.field + ".signals",
+         fmt::format("{}: multiplexer value m{} does not fit the {}-bit switch {}", m.msg->name,
+                     m.mux_values.back(), mux->length, mux->name));
+  }
+}
 
 DbcDevice::Channel& DbcDevice::ChannelOf(std::size_t wheel) {
   for (Channel& c : channels_) {
@@ -324,9 +358,12 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
       }
       return;
     }
-    const std::span<const std::uint8_t> payload(frame.data.data(), frame.len);
+    // A multiplexed message's signals are in the frames of their multiplexer value only.
+    std::size_t present = 0;
     for (const Bound& b : r.values) {
-      const double v = bus::DecodeSignal(*b.signal, payload);
+      double v = 0;
+      if (!bus::DecodeSignalIfPresent(*r.msg, *b.signal, frame, &v)) continue;
+      ++present;
       if (!std::isfinite(v)) continue;
       Channel& c = ChannelOf(b.binding->wheel_index);
       if (b.binding->quantity == DbcQuantity::kWheelSpeedSetpoint) {
@@ -347,6 +384,7 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
         c.enabled = v != 0.0;
       }
     }
+    if (present == 0) return;
     ++setpoint_frames_;
     last_setpoint_ns_ = t_ns;
     setpoint_timed_out_ = false;
@@ -391,14 +429,24 @@ void DbcDevice::ArmFaults(DeviceFaults faults) {
   imu_->ArmFaults(faults);
 }
 
-void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out) {
+void DbcDevice::Encode(Message& m, std::optional<int> mux_value, const Sample& s,
+                       const DeviceWorld& world, bus::CanFrame& out) {
   out = bus::CanFrame{};
   out.id = m.msg->id;
   out.extended = m.msg->extended;
   out.len = static_cast<std::uint8_t>(m.msg->length);
   const std::span<std::uint8_t> payload(out.data.data(), out.len);
-  for (const auto& [sig, raw] : m.start_values) bus::InsertRaw(*sig, raw, payload);
+  // Only the signals of the frame's multiplexer value (and those of every frame) are written.
+  const bus::DbcSignal* mux = m.msg->multiplexer();
+  auto in_frame = [&](const bus::DbcSignal& sig) {
+    return !sig.multiplex_value || (mux_value && *sig.multiplex_value == *mux_value);
+  };
+  for (const auto& [sig, raw] : m.start_values) {
+    if (in_frame(*sig)) bus::InsertRaw(*sig, raw, payload);
+  }
+  if (mux_value) bus::InsertRaw(*mux, static_cast<std::uint64_t>(*mux_value), payload);
   for (const Bound& b : m.values) {
+    if (!in_frame(*b.signal)) continue;
     const DbcSignalBinding& cfg = *b.binding;
     double si = 0;
     switch (cfg.quantity) {
@@ -439,7 +487,21 @@ void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bu
     }
     if (!bus::EncodeSignal(sig, v, payload)) ++clamped_;
   }
+  if (mux != nullptr && !mux_value) {
+    // No multiplexed signal is bound: the switch says what its start value (or binding) says,
+    // and that value's signals carry their start values.
+    std::int64_t raw = 0;
+    if (bus::ExtractRawSigned(*mux, payload, raw)) {
+      for (const auto& [sig, start] : m.start_values) {
+        if (sig->multiplex_value && *sig->multiplex_value == raw) {
+          bus::InsertRaw(*sig, start, payload);
+        }
+      }
+      mux_value = static_cast<int>(raw);
+    }
+  }
   for (Bound& b : m.counters) {
+    if (!in_frame(*b.signal)) continue;
     const DbcSignalBinding& cfg = *b.binding;
     const std::uint64_t value = (cfg.counter_shared ? shared_counter_ : b.counter) % b.modulo;
     bus::InsertRaw(*b.signal, value, payload);
@@ -447,7 +509,9 @@ void DbcDevice::Encode(Message& m, const Sample& s, const DeviceWorld& world, bu
     b.counter = static_cast<std::uint64_t>(
         ((static_cast<std::int64_t>(b.counter % b.modulo) + cfg.counter_step) % mod + mod) % mod);
   }
-  for (const Bound& b : m.checksums) WriteChecksum(b.binding->checksum, *b.signal, payload);
+  for (const Bound& b : m.checksums) {
+    if (in_frame(*b.signal)) WriteChecksum(b.binding->checksum, *b.signal, payload);
+  }
 }
 
 void DbcDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) {
@@ -462,8 +526,14 @@ void DbcDevice::Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& po
       if (dropped) continue;
       NodeFrame f;
       f.due_ns = ts;
-      Encode(m, s, world, f.frame);
-      frames.push_back(f);
+      if (m.mux_values.empty()) {
+        Encode(m, std::nullopt, s, world, f.frame);
+        frames.push_back(f);
+      }
+      for (const int value : m.mux_values) {
+        Encode(m, value, s, world, f.frame);
+        frames.push_back(f);
+      }
     }
     ++shared_counter_;
     frames_sent_ += frames.size();

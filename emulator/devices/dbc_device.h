@@ -16,6 +16,9 @@
 /// override gives it a cycle time). Messages due at one instant share one sample of the
 /// sensors; a counter counts frames of its message, or, `shared`, instants at which the device
 /// sends. Checksums (frame_checksum.h) are computed last, over the payload with their bits zero.
+/// A multiplexed message whose bound signals belong to several multiplexer values is sent as one
+/// frame per bound value each cycle (ascending), the switch set to that value, carrying that
+/// value's signals and the message's others; its switch cannot be bound then.
 ///
 /// Sensors: three gyro axes and a three-axis accelerometer along the sensor axes, which are the
 /// body axes rotated by the mounting's roll, pitch and yaw (R_BS = Rz(yaw) Ry(pitch) Rx(roll)),
@@ -30,7 +33,8 @@
 /// speed. The wheel then follows the set point through the platform's motor model, with the
 /// motor's torque limit; it coasts before the first set point, while disabled, and when no set
 /// point frame came for setpoint_timeout_s. A received frame of the wrong length is refused
-/// (counted; an event names it). Virtual time only; never blocks; thread-compatible.
+/// (counted; an event names it). A multiplexed message's signals are read from the frames of
+/// their multiplexer value only. Virtual time only; never blocks; thread-compatible.
 
 #include <array>
 #include <cstdint>
@@ -171,6 +175,8 @@ class DbcDevice final : public Device {
     std::vector<Bound> checksums;
     /// GenSigStartValue (raw) of the signals that have one, read once.
     std::vector<std::pair<const bus::DbcSignal*, std::uint64_t>> start_values;
+    /// The multiplexer values of its bound signals, ascending: one frame each per cycle.
+    std::vector<int> mux_values;
     std::int64_t period_ns = 0;
     std::int64_t next_ns = 0;
   };
@@ -192,7 +198,10 @@ class DbcDevice final : public Device {
     bool enable_bound = false;     // a drive_enable signal exists for this wheel
     bool enabled = false;
   };
-  void Encode(Message& m, const Sample& s, const DeviceWorld& world, bus::CanFrame& out);
+  /// One frame of `m`; `mux_value`: the multiplexer value it carries (the switch set to it).
+  void Encode(Message& m, std::optional<int> mux_value, const Sample& s, const DeviceWorld& world,
+              bus::CanFrame& out);
+  void SplitByMultiplexerValue(Message& m);
   Channel& ChannelOf(std::size_t wheel);
   void BindReceived(const DbcSignalBinding& b);
 

@@ -5,9 +5,14 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <initializer_list>
+#include <limits>
 #include <memory>
 #include <numbers>
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -362,6 +367,131 @@ TEST(DbcMotorController, BindingsTheDbcCannotCarryAreRefusedNamingTheField) {
   current.signals.erase(current.signals.begin() + 3);  // FbSpeedLeft's own binding
   EXPECT_THAT([&] { DbcDevice d(db, current); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("'rpm' is not a unit of current")));
+}
+
+// --- multiplexed messages and set points that are not numbers ------------------------------
+
+// MC_Feedback's page 0 reports the left motor, page 1 the right one, page 2 the controller;
+// MC_Command's channel 0 commands the left wheel, channel 1 the right one (float set points).
+const std::string kMuxDbc =
+    std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/dbc/mux_motor_controller.dbc";
+
+std::shared_ptr<const bus::DbcDatabase> MuxDb() {
+  return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::LoadFile(kMuxDbc));
+}
+
+DbcDeviceConfig MuxFeedbackConfig() {
+  DbcDeviceConfig c;
+  c.name = "mc";
+  c.node = "Mc";
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeed),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeed),
+               Bind("CurrentLeft", DbcQuantity::kMotorCurrent),
+               Bind("Counter", DbcQuantity::kCounter), Bind("Crc", DbcQuantity::kChecksum)};
+  c.signals[1].wheel_index = 1;
+  c.signals[4].checksum.kind = ChecksumKind::kCrc8H2F;
+  return c;
+}
+
+// Signals of pages 0 and 1 bound: each cycle sends page 0 with the left motor's signals, then
+// page 1 with the right one's (one frame used to carry both speeds in the same bits under
+// whatever the switch said).
+TEST(DbcDevice, BoundSignalsOfTwoMultiplexerValuesGoOutAsOneFrameEach) {
+  const auto db = MuxDb();
+  DbcDevice d(db, MuxFeedbackConfig());
+  physics::BodyTruth body;
+  std::vector<physics::WheelTruth> wheels(2);
+  wheels[0].omega_rad_s = 3.0;
+  wheels[0].motor_current_a = 1.5;
+  wheels[1].omega_rad_s = -2.0;
+  DeviceWorld world{&body, &wheels, {}};
+  RecordingPort port;
+  d.Poll(15'000'000, world, port);  // cycles at 0 and 10 ms
+  ASSERT_EQ(port.sent.size(), 4u);
+  EXPECT_EQ(d.frames_sent(), 4u);
+  const bus::DbcMessage& msg = *db->FindMessage("MC_Feedback");
+  const double rpm = 2 * std::numbers::pi / 60;
+  for (std::size_t i = 0; i < port.sent.size(); ++i) {
+    const bus::CanFrame& f = port.sent[i].frame;
+    EXPECT_EQ(port.sent[i].due_ns, i < 2 ? 0 : 10'000'000) << i;
+    const auto v = bus::DecodeMessage(msg, f);
+    EXPECT_EQ(v.at("Page"), static_cast<double>(i % 2)) << i;
+    EXPECT_EQ(v.at("Counter"), static_cast<double>(i)) << i;  // frames of its message
+    EXPECT_EQ(v.at("Crc"),
+              ComputeChecksum(ChecksumKind::kCrc8H2F, *msg.FindSignal("Crc"), f.payload()));
+    if (i % 2 == 0) {
+      EXPECT_NEAR(v.at("SpeedLeft"), 3.0 / rpm, 0.05 + 1e-9) << i;
+      EXPECT_NEAR(v.at("CurrentLeft"), 1.5, 0.005 + 1e-9) << i;
+      EXPECT_FALSE(v.contains("SpeedRight"));
+    } else {
+      EXPECT_NEAR(v.at("SpeedRight"), -2.0 / rpm, 0.05 + 1e-9) << i;
+      EXPECT_EQ(v.at("CurrentRight"), 0.0) << i;  // not bound, no start value
+      EXPECT_FALSE(v.contains("SpeedLeft"));
+    }
+  }
+}
+
+TEST(DbcDevice, AMultiplexerSwitchTheDeviceMustSetIsNotBindable) {
+  DbcDeviceConfig c = MuxFeedbackConfig();
+  c.signals.push_back(Bind("Page", DbcQuantity::kConstant));
+  EXPECT_THAT([&] { DbcDevice d(MuxDb(), c); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr(
+                  "dbc.signals.Page: Page is the multiplexer switch of MC_Feedback, whose m0, m1 "
+                  "signals are bound: the device sends one frame per bound multiplexer value")));
+  // A multiplexer value its switch cannot say.
+  const auto narrow = std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(
+      "BU_: Mc Fw\nBO_ 513 Fb: 2 Mc\n SG_ Page M : 0|2@1+ (1,0) [0|0] \"\" Fw\n"
+      " SG_ T m5 : 8|8@1+ (1,0) [0|0] \"\" Fw\nBA_DEF_ BO_ \"GenMsgCycleTime\" INT 0 65535;\n"
+      "BA_ \"GenMsgCycleTime\" BO_ 513 10;\n",
+      "narrow.dbc"));
+  DbcDeviceConfig n;
+  n.node = "Mc";
+  n.signals = {Bind("T", DbcQuantity::kConstant)};
+  EXPECT_THAT([&] { DbcDevice d(narrow, n); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("Fb: multiplexer value m5 does not fit the 2-bit switch Page")));
+}
+
+bus::CanFrame FloatCommand(const bus::DbcMessage& msg,
+                           std::initializer_list<std::pair<const char*, float>> values,
+                           std::optional<int> channel = std::nullopt) {
+  bus::CanFrame f;
+  f.id = msg.id;
+  f.len = static_cast<std::uint8_t>(msg.length);
+  const std::span<std::uint8_t> payload(f.data.data(), f.len);
+  if (channel) bus::InsertRaw(*msg.multiplexer(), static_cast<std::uint64_t>(*channel), payload);
+  for (const auto& [name, v] : values) {
+    bus::InsertRaw(*msg.FindSignal(name), std::bit_cast<std::uint32_t>(v), payload);
+  }
+  return f;
+}
+
+// Channel 0's frame commands the left wheel only: the right wheel's set point shares its bits
+// but belongs to channel 1's frames.
+TEST(DbcMotorController, MultiplexedSetPointsAreReadFromTheirOwnFrames) {
+  const auto db = MuxDb();
+  DbcDeviceConfig c;
+  c.name = "mc";
+  c.node = "Mc";
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint, "MC_Command"),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint, "MC_Command")};
+  c.signals[0].motor_torque_limit_nm = 4.8;
+  c.signals[1].wheel_index = 1;
+  c.signals[1].motor_torque_limit_nm = 4.8;
+  DbcDevice d(db, c);
+  RecordingPort port;
+  const bus::DbcMessage& cmd = *db->FindMessage("MC_Command");
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 5.0f}}, 0), 1'000'000, port);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 5.0);
+  EXPECT_EQ(d.wheel_drives()[0].command.torque_limit_nm, 4.8);
+  EXPECT_EQ(d.wheel_drives()[1].command.torque_limit_nm, 0.0);  // no set point yet: coasting
+  d.OnFrame(FloatCommand(cmd, {{"SpeedRight", -7.0f}}, 1), 2'000'000, port);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 5.0);
+  EXPECT_EQ(d.wheel_drives()[1].command.omega_rad_s, -7.0);
+  EXPECT_EQ(d.setpoint_frames(), 2u);
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 9.0f}}, 3), 3'000'000, port);  // no such channel
+  EXPECT_EQ(d.setpoint_frames(), 2u);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 5.0);
 }
 
 }  // namespace
