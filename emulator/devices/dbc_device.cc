@@ -358,13 +358,33 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
       }
       return;
     }
-    // A multiplexed message's signals are in the frames of their multiplexer value only.
+    // Taken whole or not at all: a non-finite set point is no command (a drive refuses it), so
+    // it neither moves a wheel nor keeps the power stages on past setpoint_timeout_s.
     std::size_t present = 0;
+    bool refused = false;
+    for (const Bound& b : r.values) {
+      double v = 0;
+      if (!bus::DecodeSignalIfPresent(*r.msg, *b.signal, frame, &v))
+        continue;  // another multiplexer value
+      ++present;
+      if (std::isfinite(v)) continue;
+      refused = true;
+      if (++nonfinite_setpoints_ <= kRejectedFrameEvents) {
+        port.Event(nlohmann::json{{"t_s", port.MotionSeconds(t_ns)},
+                                  {"event", "setpoint_not_finite"},
+                                  {"device", name_},
+                                  {"message", r.msg->name},
+                                  {"signal", b.signal->name},
+                                  {"wheel", b.binding->wheel_index},
+                                  {"commanded", std::isnan(v) ? "nan"
+                                                : v > 0       ? "inf"
+                                                              : "-inf"}});
+      }
+    }
+    if (present == 0 || refused) return;
     for (const Bound& b : r.values) {
       double v = 0;
       if (!bus::DecodeSignalIfPresent(*r.msg, *b.signal, frame, &v)) continue;
-      ++present;
-      if (!std::isfinite(v)) continue;
       Channel& c = ChannelOf(b.binding->wheel_index);
       if (b.binding->quantity == DbcQuantity::kWheelSpeedSetpoint) {
         const double omega = b.binding->gain * b.unit.ToSi(v);
@@ -384,7 +404,6 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
         c.enabled = v != 0.0;
       }
     }
-    if (present == 0) return;
     ++setpoint_frames_;
     last_setpoint_ns_ = t_ns;
     setpoint_timed_out_ = false;

@@ -33,8 +33,10 @@
 /// speed. The wheel then follows the set point through the platform's motor model, with the
 /// motor's torque limit; it coasts before the first set point, while disabled, and when no set
 /// point frame came for setpoint_timeout_s. A received frame of the wrong length is refused
-/// (counted; an event names it). A multiplexed message's signals are read from the frames of
-/// their multiplexer value only. Virtual time only; never blocks; thread-compatible.
+/// (counted; an event names it), so is one holding a NaN or infinite set point (counted; a
+/// `setpoint_not_finite` event): neither moves a wheel nor counts as a set point frame for the
+/// timeout. A multiplexed message's signals are read from the frames of their multiplexer
+/// value only. Virtual time only; never blocks; thread-compatible.
 
 #include <array>
 #include <cstdint>
@@ -151,6 +153,9 @@ class DbcDevice final : public Device {
   std::uint64_t rejected_frames() const { return rejected_frames_; }
   /// Set points beyond +-1000 rad/s at the wheel, clamped to it (`setpoint_clamped` events).
   std::uint64_t clamped_setpoints() const { return clamped_setpoints_; }
+  /// NaN or infinite set points (float signals), each refusing its frame
+  /// (`setpoint_not_finite` events).
+  std::uint64_t nonfinite_setpoints() const { return nonfinite_setpoints_; }
 
   /// The messages it sends, in DBC order, and their periods.
   std::size_t message_count() const { return messages_.size(); }
@@ -220,6 +225,7 @@ class DbcDevice final : public Device {
   std::uint64_t setpoint_frames_ = 0;
   std::uint64_t rejected_frames_ = 0;
   std::uint64_t clamped_setpoints_ = 0;
+  std::uint64_t nonfinite_setpoints_ = 0;
 };
 
 }  // namespace wheelhil::emulator

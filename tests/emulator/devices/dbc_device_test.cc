@@ -303,7 +303,7 @@ TEST(DbcMotorController, SetPointsDriveTheWheelsAndFeedbackReportsThem) {
 }
 
 TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
-  // A float signal can command 1e30 rad/s (or inf: non-finite values are ignored already).
+  // A float signal can command 1e30 rad/s (NaN and inf are refused: see below).
   constexpr const char* kFloatDbc = R"(VERSION ""
 BU_: Fw Mc
 BO_ 512 MC_Command: 8 Fw
@@ -492,6 +492,65 @@ TEST(DbcMotorController, MultiplexedSetPointsAreReadFromTheirOwnFrames) {
   d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 9.0f}}, 3), 3'000'000, port);  // no such channel
   EXPECT_EQ(d.setpoint_frames(), 2u);
   EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 5.0);
+}
+
+// A float set point can be NaN or infinite. Such a frame is no command: counted, named, and it
+// does not hold the power stages on past the set-point timeout (it used to be skipped silently
+// while refreshing the timeout, so the wheels kept turning at the last set point).
+TEST(DbcMotorController, NonFiniteSetPointsAreCountedNamedAndDoNotHoldTheTimeout) {
+  constexpr const char* kFloatDbc = R"(VERSION ""
+BU_: Fw Mc
+BO_ 512 MC_Command: 8 Fw
+ SG_ SpeedLeft : 0|32@1- (1,0) [0|0] "rad/s" Mc
+ SG_ SpeedRight : 32|32@1- (1,0) [0|0] "rad/s" Mc
+BO_ 513 MC_Status: 1 Mc
+ SG_ Alive : 0|8@1+ (1,0) [0|255] "" Fw
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_ "GenMsgCycleTime" BO_ 513 10;
+SIG_VALTYPE_ 512 SpeedLeft : 1;
+SIG_VALTYPE_ 512 SpeedRight : 1;
+)";
+  const auto db =
+      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
+  DbcDeviceConfig c;
+  c.name = "mc";
+  c.node = "Mc";
+  c.setpoint_timeout_s = 0.1;
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint)};
+  c.signals[0].motor_torque_limit_nm = 4.8;
+  c.signals[1].wheel_index = 1;
+  c.signals[1].motor_torque_limit_nm = 4.8;
+  DbcDevice d(db, c);
+  RecordingPort port;
+  const bus::DbcMessage& cmd = *db->FindMessage("MC_Command");
+  constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 5.0f}, {"SpeedRight", 6.0f}}), 1'000'000, port);
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", kNan}, {"SpeedRight", 8.0f}}), 50'000'000, port);
+  EXPECT_EQ(d.nonfinite_setpoints(), 1u);
+  EXPECT_EQ(d.wheel_drives()[1].command.omega_rad_s, 6.0);  // the frame is refused whole
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 4.0f}, {"SpeedRight", -kInf}}), 100'000'000, port);
+  EXPECT_EQ(d.nonfinite_setpoints(), 2u);
+  EXPECT_EQ(d.setpoint_frames(), 1u);
+  ASSERT_EQ(port.events.size(), 2u);
+  EXPECT_EQ(port.events[0]["event"], "setpoint_not_finite");
+  EXPECT_EQ(port.events[0]["device"], "mc");
+  EXPECT_EQ(port.events[0]["message"], "MC_Command");
+  EXPECT_EQ(port.events[0]["signal"], "SpeedLeft");
+  EXPECT_EQ(port.events[0]["wheel"], 0);
+  EXPECT_EQ(port.events[0]["commanded"], "nan");
+  EXPECT_EQ(port.events[1]["signal"], "SpeedRight");
+  EXPECT_EQ(port.events[1]["wheel"], 1);
+  EXPECT_EQ(port.events[1]["commanded"], "-inf");
+  // 0.1 s after the last finite set point (1 ms) every power stage is off.
+  d.EndStep(101'000'001);
+  EXPECT_EQ(d.wheel_drives()[0].command.torque_limit_nm, 0.0);
+  EXPECT_EQ(d.wheel_drives()[1].command.torque_limit_nm, 0.0);
+  // A finite command brings them back.
+  d.OnFrame(FloatCommand(cmd, {{"SpeedLeft", 2.0f}, {"SpeedRight", 3.0f}}), 120'000'000, port);
+  EXPECT_EQ(d.wheel_drives()[0].command.omega_rad_s, 2.0);
+  EXPECT_EQ(d.wheel_drives()[1].command.torque_limit_nm, 4.8);
 }
 
 }  // namespace
