@@ -5,10 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include "bus/yaml_fields.h"
@@ -433,15 +431,14 @@ CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
     }
   }
 
-  // Fingerprint: everything that decides which runs exist and what they do.
-  std::ifstream base_in(spec.base_scenario, std::ios::binary);
-  std::stringstream base_text;
-  base_text << base_in.rdbuf();
+  // Fingerprint: everything that decides which runs exist and what they do. The base is read
+  // once, here, and kept: the runs are written from these bytes.
+  spec.base_text = bus::yaml::FieldReader(spec.base_scenario.string()).ReadFile();
   json fp = {{"sampling", sampling},
              {"runs", spec.runs},
              {"seed", spec.seed},
              {"repeats", spec.repeats},
-             {"base", Hex64(Fnv1a64(base_text.str()))}};
+             {"base", Hex64(Fnv1a64(*spec.base_text))}};
   for (const auto& o : spec.overrides) fp["set"].push_back({o.path, o.value});
   for (const auto& p : spec.parameters) {
     fp["parameters"].push_back({{"path", p.path},

@@ -78,6 +78,10 @@ struct CampaignSpec {
   std::string file;                     ///< campaign file path as given
   std::string name;                     ///< `campaign:` (default: file stem)
   std::filesystem::path base_scenario;  ///< absolute
+  /// The base scenario's text as read when the campaign was loaded, the text its fingerprint
+  /// covers: every run is written from it, so a base edited while the campaign runs changes no
+  /// run. Unset (a spec built in code): the file is read for each run.
+  std::optional<std::string> base_text;
   std::vector<Override> overrides;      ///< `set:`, applied first
   std::vector<ParameterSpec> parameters;
   Sampling sampling = Sampling::kGrid;

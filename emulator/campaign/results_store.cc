@@ -93,7 +93,8 @@ ResultsStore::ResultsStore(const std::filesystem::path& file, const std::string&
       } else if (stored != fingerprint) {
         throw std::runtime_error(fmt::format(
             "{}: holds results of campaign '{}' (fingerprint {}), not of this campaign file "
-            "(fingerprint {}); use another --db or delete the file",
+            "(fingerprint {}: the campaign file or its base scenario changed since those runs); "
+            "use another --db or delete the file",
             file_, Meta("campaign"), stored, fingerprint));
       }
     }

@@ -160,7 +160,7 @@ void AbsolutizeRelativePaths(YAML::Node node, const fs::path& base_dir) {
 
 YAML::Node LoadBase(const CampaignSpec& spec) {
   const bus::yaml::FieldReader base(spec.base_scenario.string());
-  return base.Parse(base.ReadFile());
+  return base.Parse(spec.base_text ? *spec.base_text : base.ReadFile());
 }
 
 }  // namespace

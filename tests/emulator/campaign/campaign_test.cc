@@ -313,6 +313,43 @@ TEST_F(CampaignTest, RunnerWithoutReportIsAnErrorNamingItsLog) {
   }
 }
 
+// A runner script: `body` (sh), then the fake runner with the campaign's arguments.
+fs::path RunnerScript(const TempDir& dir, const std::string& name, const std::string& body) {
+  const fs::path p = dir.Write(name, "#!/bin/sh\n" + body + "\nexec '" FAKE_RUNNER "' \"$@\"\n");
+  fs::permissions(p, fs::perms::owner_all);
+  return p;
+}
+
+// The base scenario edited while the campaign runs (the next experiment's version saved over
+// it): the runs still to start used the edited file under the first fingerprint. They are
+// written from the base as the campaign read it.
+TEST_F(CampaignTest, ABaseScenarioEditedWhileRunningChangesNoRun) {
+  const auto spec = LoadCampaignFile(campaign_file_);
+  const fs::path base = dir_.path() / "base.yaml";
+  // Before each run: the scenario of this run is written, those of the later ones are not.
+  const fs::path runner =
+      RunnerScript(dir_, "editing_runner.sh",
+                   "sed -i 's/limit_m: 0.1$/limit_m: 0.0001/' '" + base.string() + "'");
+  auto o = Options("edited");
+  o.runner_exe = runner.string();
+  o.jobs = 1;
+  const auto out = RunCampaign(spec, o);
+  ASSERT_THAT(ReadAll(base), HasSubstr("limit_m: 0.0001"));  // the edit happened
+  ASSERT_EQ(out.runs.size(), 24u);
+  for (const auto& r : out.runs) {
+    const std::string scenario = ReadAll(fs::path(r.run_dir) / "scenario.yaml");
+    EXPECT_THAT(scenario, HasSubstr("limit_m: 0.1\n")) << r.key;
+  }
+  // Same verdicts as the campaign on the unedited base.
+  dir_.Write("base.yaml", kBaseScenario);
+  EXPECT_EQ(Comparable(out.runs), Comparable(RunCampaign(spec, Options("unedited")).runs));
+  // Resumed with the edited base, the results are another campaign's: refused, saying why.
+  dir_.Write("base.yaml", std::string(kBaseScenario) + "# edited\n");
+  EXPECT_THAT([&] { RunCampaign(LoadCampaignFile(campaign_file_), Options("edited")); },
+              ::testing::ThrowsMessage<std::runtime_error>(
+                  HasSubstr("the campaign file or its base scenario changed since those runs")));
+}
+
 TEST_F(CampaignTest, RunReportFlattensMetricsAndNamesFailedExpectations) {
   std::string err;
   const auto r = ParseRunReport(R"({"scenario":"s","seed":3,"verdict":"fail",
