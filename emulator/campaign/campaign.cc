@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <stdexcept>
 
 #include "bus/yaml_fields.h"
@@ -88,10 +89,26 @@ CampaignOutcome RunCampaign(const CampaignSpec& spec, const CampaignOptions& opt
   const fs::path db = options.db.empty() ? out_dir / "results.sqlite" : options.db;
   fs::create_directories(out_dir);
   const auto all = ExpandRuns(spec);
-  if (options.check_scenario) CheckBeforeStart(spec, all, out_dir, options.check_scenario);
-  ResultsStore store(db, spec.name, spec.fingerprint);
   const auto mine = SelectShard(all, options.shard);
-  const auto stored = store.StoredKeys();
+  // Finished results are read without writing anything: they may be on a read-only file
+  // system (an archive, a colleague's share), where opening them for writing fails. With
+  // nothing to run, there is nothing to check either.
+  std::unique_ptr<ResultsStore> store;
+  std::error_code ec;
+  if (fs::is_regular_file(db, ec)) {
+    auto finished = std::make_unique<ResultsStore>(db, spec.name, spec.fingerprint,
+                                                   ResultsStore::Access::kReadOnly);
+    const auto keys = finished->StoredKeys();
+    if (std::all_of(mine.begin(), mine.end(),
+                    [&](const RunSpec& r) { return keys.count(r.key) != 0; })) {
+      store = std::move(finished);
+    }
+  }
+  if (!store) {
+    if (options.check_scenario) CheckBeforeStart(spec, all, out_dir, options.check_scenario);
+    store = std::make_unique<ResultsStore>(db, spec.name, spec.fingerprint);
+  }
+  const auto stored = store->StoredKeys();
   CampaignOutcome outcome;
   std::vector<PoolJob> jobs;
   for (const auto& run : mine) {
@@ -128,13 +145,13 @@ CampaignOutcome RunCampaign(const CampaignSpec& spec, const CampaignOptions& opt
   const auto done = RunPool(
       std::move(jobs), pool,
       [&spec](RunRecord& r, const RunReport* report) { EvaluateRun(spec, r, report); },
-      [&store](const RunRecord& r) { store.Put(r); });
+      [&store](const RunRecord& r) { store->Put(r); });
   outcome.ran_now = done.size();
 
   // Summary over the stored runs of this run list (other keys in the file are ignored).
   std::map<std::string, bool> wanted;
   for (const auto& r : mine) wanted[r.key] = true;
-  for (auto& r : store.All()) {
+  for (auto& r : store->All()) {
     if (wanted.count(r.key)) outcome.runs.push_back(std::move(r));
   }
   outcome.summary = Summarize(spec, outcome.runs, mine.size());

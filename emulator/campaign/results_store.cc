@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <sqlite3.h>
 
+#include <cctype>
 #include <stdexcept>
 
 namespace wheelhil::emulator::campaign {
@@ -56,11 +57,74 @@ class Stmt {
   std::string file_;
 };
 
+std::string OtherCampaign(const std::string& file, const std::string& campaign,
+                          const std::string& stored, const std::string& fingerprint) {
+  return fmt::format(
+      "{}: holds results of campaign '{}' (fingerprint {}), not of this campaign file "
+      "(fingerprint {}: the campaign file or its base scenario changed since those runs); use "
+      "another --db or delete the file",
+      file, campaign, stored, fingerprint);
+}
+
+// "file:" URI of `path` (RFC 3986 percent-encoding; '/' kept) with `query`.
+std::string FileUri(const std::string& path, const std::string& query) {
+  std::string uri = "file:";
+  for (const char c : path) {
+    const auto u = static_cast<unsigned char>(c);
+    if (std::isalnum(u) != 0 || c == '/' || c == '-' || c == '_' || c == '.' || c == '~') {
+      uri += c;
+    } else {
+      uri += fmt::format("%{:02X}", u);
+    }
+  }
+  return uri + "?" + query;
+}
+
 }  // namespace
 
+// A WAL database opened read-only still creates its -shm (and -wal) beside it; where they
+// cannot be created (a read-only file system, an immutable folder) SQLite cannot open it at
+// all unless told the file is immutable, which holds there: a writer would need that -shm.
+void ResultsStore::OpenReadOnly() {
+  int rc = SQLITE_OK;
+  for (const bool immutable : {false, true}) {
+    sqlite3_close(db_);
+    db_ = nullptr;
+    rc = sqlite3_open_v2(FileUri(file_, immutable ? "mode=ro&immutable=1" : "mode=ro").c_str(),
+                         &db_, SQLITE_OPEN_READONLY | SQLITE_OPEN_URI, nullptr);
+    if (rc == SQLITE_OK) {
+      sqlite3_busy_timeout(db_, 30000);
+      rc = sqlite3_exec(db_, "SELECT count(*) FROM sqlite_master", nullptr, nullptr, nullptr);
+    }
+    if ((rc & 0xFF) != SQLITE_CANTOPEN) break;  // open, or failed for another reason
+  }
+  if (rc != SQLITE_OK) {
+    throw std::runtime_error(
+        fmt::format("{}: sqlite: {}", file_, db_ ? sqlite3_errmsg(db_) : "out of memory"));
+  }
+  Stmt s(db_,
+         "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name IN ('meta', 'runs')",
+         file_);
+  has_tables_ = sqlite3_step(s.get()) == SQLITE_ROW && sqlite3_column_int(s.get(), 0) == 2;
+}
+
 ResultsStore::ResultsStore(const std::filesystem::path& file, const std::string& campaign_name,
-                           const std::string& fingerprint)
+                           const std::string& fingerprint, Access access)
     : file_(file.string()) {
+  if (access == Access::kReadOnly) {
+    try {
+      OpenReadOnly();
+      const std::string stored = Meta("fingerprint");
+      if (!fingerprint.empty() && !stored.empty() && stored != fingerprint) {
+        throw std::runtime_error(OtherCampaign(file_, Meta("campaign"), stored, fingerprint));
+      }
+    } catch (...) {
+      sqlite3_close(db_);
+      db_ = nullptr;
+      throw;
+    }
+    return;
+  }
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
   if (sqlite3_open(file_.c_str(), &db_) != SQLITE_OK) {
     const std::string msg = db_ ? sqlite3_errmsg(db_) : "out of memory";
@@ -91,11 +155,7 @@ ResultsStore::ResultsStore(const std::filesystem::path& file, const std::string&
         }
         Exec("COMMIT");
       } else if (stored != fingerprint) {
-        throw std::runtime_error(fmt::format(
-            "{}: holds results of campaign '{}' (fingerprint {}), not of this campaign file "
-            "(fingerprint {}: the campaign file or its base scenario changed since those runs); "
-            "use another --db or delete the file",
-            file_, Meta("campaign"), stored, fingerprint));
+        throw std::runtime_error(OtherCampaign(file_, Meta("campaign"), stored, fingerprint));
       }
     }
   } catch (...) {
@@ -117,6 +177,7 @@ void ResultsStore::Exec(const std::string& sql) const {
 }
 
 std::string ResultsStore::Meta(const std::string& key) const {
+  if (!has_tables_) return "";
   Stmt s(db_, "SELECT value FROM meta WHERE key = ?1", file_);
   s.Text(1, key);
   if (sqlite3_step(s.get()) == SQLITE_ROW) return s.ColText(0);
@@ -125,12 +186,17 @@ std::string ResultsStore::Meta(const std::string& key) const {
 
 std::set<std::string> ResultsStore::StoredKeys() const {
   std::set<std::string> keys;
+  if (!has_tables_) return keys;
   Stmt s(db_, "SELECT key FROM runs", file_);
   while (sqlite3_step(s.get()) == SQLITE_ROW) keys.insert(s.ColText(0));
   return keys;
 }
 
 void ResultsStore::Put(const RunRecord& r) {
+  if (sqlite3_db_readonly(db_, "main") == 1) {
+    throw std::runtime_error(
+        fmt::format("{}: opened read-only, cannot store run {}", file_, r.key));
+  }
   Exec("BEGIN IMMEDIATE");
   try {
     Stmt s(db_,
@@ -165,6 +231,7 @@ void ResultsStore::Put(const RunRecord& r) {
 
 std::vector<RunRecord> ResultsStore::All() const {
   std::vector<RunRecord> out;
+  if (!has_tables_) return out;
   Stmt s(db_,
          "SELECT key, run_index, point, repeat, seed, params, verdict, passed, failure, metrics, "
          "run_dir, scenario_path, report_path, exit_code, wall_s FROM runs "

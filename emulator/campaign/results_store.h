@@ -39,11 +39,18 @@ struct RunRecord {
 
 class ResultsStore {
  public:
-  /// Opens or creates `file`. With a non-empty `fingerprint`, records it on creation and throws
-  /// std::runtime_error if the file holds another campaign. Throws std::runtime_error on SQLite
-  /// errors.
+  enum class Access : std::uint8_t {
+    kReadWrite,
+    /// Reads an existing file without writing anything, -wal and -shm files included where they
+    /// cannot be created (a read-only file system), so that finished results can be summarised
+    /// wherever they are. Put() throws.
+    kReadOnly,
+  };
+  /// Opens or creates `file` (kReadOnly: opens it; a file without the tables reads as empty).
+  /// With a non-empty `fingerprint`, records it on creation and throws std::runtime_error if
+  /// the file holds another campaign. Throws std::runtime_error on SQLite errors.
   ResultsStore(const std::filesystem::path& file, const std::string& campaign_name,
-               const std::string& fingerprint);
+               const std::string& fingerprint, Access access = Access::kReadWrite);
   ~ResultsStore();
   ResultsStore(const ResultsStore&) = delete;
   ResultsStore& operator=(const ResultsStore&) = delete;
@@ -57,8 +64,10 @@ class ResultsStore {
 
  private:
   void Exec(const std::string& sql) const;
+  void OpenReadOnly();
   sqlite3* db_ = nullptr;
   std::string file_;
+  bool has_tables_ = true;  ///< kReadOnly: false for a file without the schema
 };
 
 /// `wheelhil campaign merge OUT IN...`: copies every run of the inputs into OUT (created if

@@ -350,6 +350,80 @@ TEST_F(CampaignTest, ABaseScenarioEditedWhileRunningChangesNoRun) {
                   HasSubstr("the campaign file or its base scenario changed since those runs")));
 }
 
+// Makes a folder and what it holds unwritable for this process, root included: chattr +i for
+// root (file modes do not stop root; an immutable folder takes no new file, so no SQLite -shm
+// or -wal either), chmod for anyone else. Undone when it goes.
+class ReadOnlyFolder {
+ public:
+  explicit ReadOnlyFolder(const fs::path& dir) : dir_(dir) {
+    for (const auto& e : fs::directory_iterator(dir)) paths_ += " '" + e.path().string() + "'";
+    paths_ += " '" + dir.string() + "'";
+    const std::string cmd = (::geteuid() == 0 ? "chattr +i" : "chmod a-w") + paths_ + " 2>&1";
+    if (std::system(cmd.c_str()) != 0) {
+      why_ = cmd + " failed (a file system without the immutable attribute?)";
+      return;
+    }
+    applied_ = true;
+    const int fd = ::open((dir / "probe").c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
+    if (fd >= 0) {
+      ::close(fd);
+      why_ = cmd + " did not stop a file being created in " + dir.string();
+    }
+  }
+  ~ReadOnlyFolder() {
+    if (!applied_) return;
+    const std::string cmd = (::geteuid() == 0 ? "chattr -i" : "chmod u+w") + paths_;
+    if (std::system(cmd.c_str()) != 0) ADD_FAILURE() << cmd;
+    std::error_code ec;
+    fs::remove(dir_ / "probe", ec);
+  }
+  ReadOnlyFolder(const ReadOnlyFolder&) = delete;
+  ReadOnlyFolder& operator=(const ReadOnlyFolder&) = delete;
+  const std::string& why_not() const { return why_; }
+
+ private:
+  fs::path dir_;
+  std::string paths_;
+  bool applied_ = false;
+  std::string why_;
+};
+
+// Finished results on a read-only file system (an archive, a colleague's share) could not even
+// be summarised: the store was opened for writing. With nothing left to run it is read-only,
+// and nothing is created beside it.
+TEST_F(CampaignTest, AFinishedCampaignIsSummarisedFromAReadOnlyFolder) {
+  const auto spec = LoadCampaignFile(campaign_file_);
+  auto o = Options("ro");
+  o.db = dir_.path() / "archive" / "results.sqlite";
+  const auto first = RunCampaign(spec, o);
+  ASSERT_EQ(first.ran_now, 24u);
+  auto listing = [&] {
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(o.db.parent_path())) {
+      names.insert(e.path().filename().string());
+    }
+    return names;
+  };
+  ASSERT_EQ(listing(), std::set<std::string>{"results.sqlite"});
+  const ReadOnlyFolder archive(o.db.parent_path());
+  if (!archive.why_not().empty()) GTEST_SKIP() << archive.why_not();
+  o.junit = dir_.path() / "ro.xml";
+  const auto again = RunCampaign(spec, o);
+  EXPECT_EQ(again.ran_now, 0u);
+  EXPECT_EQ(again.skipped, 24u);
+  EXPECT_EQ(Comparable(again.runs), Comparable(first.runs));
+  EXPECT_EQ(again.text, first.text);
+  EXPECT_THAT(ReadAll(o.junit), HasSubstr("tests=\"26\""));
+  EXPECT_EQ(listing(), std::set<std::string>{"results.sqlite"});
+  // Another campaign's file is refused as before, read-only or not.
+  std::string three = kCampaign;
+  three.replace(three.find("repeats: 2"), 10, "repeats: 3");
+  const fs::path other = dir_.Write("other.yaml", three);
+  EXPECT_THAT([&] { RunCampaign(LoadCampaignFile(other), o); },
+              ::testing::ThrowsMessage<std::runtime_error>(
+                  HasSubstr(o.db.string() + ": holds results of campaign 'fake_envelope'")));
+}
+
 TEST_F(CampaignTest, RunReportFlattensMetricsAndNamesFailedExpectations) {
   std::string err;
   const auto r = ParseRunReport(R"({"scenario":"s","seed":3,"verdict":"fail",
