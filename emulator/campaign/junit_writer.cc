@@ -13,7 +13,12 @@ namespace {
 std::string FirstLine(const std::string& s) {
   const auto nl = s.find('\n');
   std::string line = nl == std::string::npos ? s : s.substr(0, nl);
-  if (line.size() > 500) line = line.substr(0, 500) + "...";
+  if (line.size() > 500) {
+    // Cut before a character, not inside one (a continuation byte is 10xxxxxx).
+    std::size_t cut = 500;
+    while (cut > 0 && (static_cast<unsigned char>(line[cut]) & 0xC0) == 0x80) --cut;
+    line = line.substr(0, cut) + "...";
+  }
   return line;
 }
 

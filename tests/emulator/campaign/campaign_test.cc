@@ -24,6 +24,7 @@
 #include "emulator/campaign/junit_writer.h"
 #include "emulator/campaign/results_store.h"
 #include "emulator/campaign/run_report.h"
+#include "emulator/xml_escape.h"
 #include "tests/emulator/campaign/campaign_test_util.h"
 #include "tests/emulator/scoring/text_checks.h"
 
@@ -422,6 +423,37 @@ TEST_F(CampaignTest, AFinishedCampaignIsSummarisedFromAReadOnlyFolder) {
   EXPECT_THAT([&] { RunCampaign(LoadCampaignFile(other), o); },
               ::testing::ThrowsMessage<std::runtime_error>(
                   HasSubstr(o.db.string() + ": holds results of campaign 'fake_envelope'")));
+}
+
+// A runner's load error can hold any bytes (a path or a value in Latin-1): the JUnit file
+// carried them as they were, which no XML parser accepts. They become U+FFFD.
+TEST_F(CampaignTest, JUnitOfALoadErrorThatIsNotUtf8IsWellFormed) {
+  if (std::system("command -v xmllint >/dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "xmllint not installed (Debian package libxml2-utils, in ./hil PACKAGES)";
+  }
+  const fs::path runner = RunnerScript(
+      dir_, "latin1_runner.sh",
+      "printf 'scenario.yaml:3:7: name: caf\\351 \\377\\376 is not valid\\n' >&2; exit 2");
+  const auto spec = LoadCampaignFile(campaign_file_);
+  auto o = Options("latin1");
+  o.runner_exe = runner.string();
+  o.junit = dir_.path() / "latin1.xml";
+  const auto out = RunCampaign(spec, o);
+  ASSERT_EQ(out.runs.size(), 24u);
+  EXPECT_THAT(out.runs[0].failure, HasSubstr("caf\xE9 \xFF\xFE is not valid"));  // stored as is
+  const std::string xsd = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/junit/junit.xsd";
+  const std::string cmd = "xmllint --noout --schema " + xsd + " " + o.junit.string() + " 2>&1";
+  EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  EXPECT_THAT(ReadAll(o.junit),
+              HasSubstr("name: caf\xEF\xBF\xBD \xEF\xBF\xBD\xEF\xBF\xBD is not valid"));
+  EXPECT_THAT(ReadAll(o.out_dir / "campaign.html"), HasSubstr("caf\xEF\xBF\xBD"));
+  // Well-formed UTF-8 is kept; a cut long message does not split a character.
+  EXPECT_EQ(EscapeXml("gr\xC3\xBC\xC3\x9F \xF0\x9F\x9A\x97 \xEF\xBF\xBE \xED\xA0\x80 \xC0\xAF"),
+            "gr\xC3\xBC\xC3\x9F \xF0\x9F\x9A\x97 \xEF\xBF\xBD \xEF\xBF\xBD\xEF\xBF\xBD\xEF\xBF\xBD "
+            "\xEF\xBF\xBD\xEF\xBF\xBD");
+  const std::string xml =
+      JUnitXml({{"s", {{"c", "n", 0, std::string(499, 'a') + "\xC3\xBC", "", ""}}}}, "all");
+  EXPECT_THAT(xml, HasSubstr("message=\"" + std::string(499, 'a') + "...\""));
 }
 
 TEST_F(CampaignTest, RunReportFlattensMetricsAndNamesFailedExpectations) {
