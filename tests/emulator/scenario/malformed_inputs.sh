@@ -4,7 +4,8 @@
 # messages its first lines name (`# expect: TEXT`, each to be found; $DIR stands for the file's
 # folder), within
 # a 20 s wall-clock limit that only catches a hang. Then the inputs that cannot be committed:
-# /dev/zero, a directory, a file past the size limit, a scenario with too many expectations.
+# /dev/zero, a directory, a file past the size limit, a scenario with too many expectations, a
+# DBC that is a FIFO and an EDS that is a directory.
 # Usage: malformed_inputs.sh WHEELHIL_BIN SOURCE_DIR
 set -uo pipefail
 wheelhil=$1
@@ -54,6 +55,27 @@ check directory "$work:0:0: (file): is a directory, not a YAML file" \
 big=$work/big.yaml
 { echo "name: big"; head -c $((17 << 20)) /dev/zero | tr '\0' '#'; } >"$big"
 check oversized "$big:0:0: (file): is larger than 16 MiB" "$wheelhil" run "$big" --out "$work/out"
+# A device description that is a FIFO (the load waited for a writer) or a directory.
+mkfifo "$work/fifo.dbc"
+mkdir "$work/dir.eds"
+for kind in fifo_dbc dir_eds; do
+  {
+    echo "name: $kind"
+    echo "platform: $src/scenarios/platforms/diff2.yaml"
+    echo "motion: [{type: hold, duration_s: 0.5}]"
+    echo "devices:"
+    if [ "$kind" = fifo_dbc ]; then
+      echo "  - {kind: dbc, name: imu, dbc: $work/fifo.dbc, node: Imu, signals: {Rate: rate_z}}"
+    else
+      echo "  - {kind: canopen_cia406, wheel: left, node_id: 1, eds: $work/dir.eds}"
+      echo "  - {kind: canopen_cia406, wheel: right, node_id: 2, eds: $work/dir.eds}"
+    fi
+  } >"$work/$kind.yaml"
+done
+check fifo_dbc "$work/fifo.dbc:0: is not a regular file (a device or a pipe?)" \
+  "$wheelhil" run "$work/fifo_dbc.yaml" --out "$work/out"
+check dir_eds "$work/dir.eds:0: is a directory, not an EDS file" \
+  "$wheelhil" run "$work/dir_eds.yaml" --out "$work/out"
 many=$work/many_expectations.yaml
 {
   sed -n '2,$p' "$corpus/seed_fraction.yaml" | sed -e '/^seed:/d' \
