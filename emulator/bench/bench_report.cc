@@ -129,6 +129,11 @@ const std::vector<std::string>& BenchScenarios() {
   return k;
 }
 
+const std::vector<const char*>& HandoverAccountKeys() {
+  static const std::vector<const char*> k = {"handovers_per_sim_s", "handover_us_each"};
+  return k;
+}
+
 const std::vector<std::string>& VirtualTimeBenchScenarios() {
   static const std::vector<std::string> k = {"paper000", "paper002"};
   return k;
@@ -149,11 +154,14 @@ std::vector<std::string> DocumentedMetricKeys() {
     keys.push_back(fmt::format("lockstep.{}.rtf", s));
     keys.push_back(fmt::format("lockstep.{}.vcan_rtf", s));
   }
-  for (const auto& s : VirtualTimeBenchScenarios()) {
+  std::vector<std::string> virtual_rows = VirtualTimeBenchScenarios();
+  virtual_rows.insert(virtual_rows.end(), {"customer_c", "customer_python"});
+  for (const auto& s : virtual_rows) {
     keys.push_back(fmt::format("virtual_time.{}.rtf", s));
+    for (const char* account : HandoverAccountKeys()) {
+      keys.push_back(fmt::format("virtual_time.{}.{}", s, account));
+    }
   }
-  keys.push_back("virtual_time.customer_c.rtf");
-  keys.push_back("virtual_time.customer_python.rtf");
   for (const char* k : {"bus.ucan_frames_per_s",
                         "bus.ucan_fanout4_frames_per_s",
                         "bus.vcan_frames_per_s",

@@ -49,6 +49,9 @@ const std::vector<std::string>& BenchPlatforms();
 const std::vector<std::string>& BenchScenarios();
 /// Those also measured on the firmware's virtual clock (virtual_time.<paper>.rtf).
 const std::vector<std::string>& VirtualTimeBenchScenarios();
+/// The hand-over figures of each virtual-time row (virtual_time.<row>.<key>), from the run's
+/// report.json wall block (docs/performance.md).
+const std::vector<const char*>& HandoverAccountKeys();
 /// Every documented numeric key (finite number or "unavailable: ...").
 std::vector<std::string> DocumentedMetricKeys();
 /// Every documented text key (machine facts, notes).

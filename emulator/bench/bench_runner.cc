@@ -91,8 +91,22 @@ std::string SelfExePath() {
 struct LockstepRun {
   nlohmann::json rtf;  ///< wall.real_time_factor of its report.json, or "unavailable: <why>".
   nlohmann::json sim_s;
+  /// Where its wall time went: the hand-over counts and the stages' seconds of its report's
+  /// wall block (docs/performance.md), null when the run gave no figure.
+  nlohmann::json accounts;
   double max_rss_mib = 0.0;
 };
+
+/// The accounting part of a report's wall block.
+nlohmann::json Accounts(const nlohmann::json& wall) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const char* key : {"handovers", "handovers_per_sim_s", "handover_us_each", "handover_s",
+                          "firmware_cpu_s", "physics_s", "devices_bus_s", "other_s",
+                          "wall_time_s"}) {
+    if (wall.contains(key)) out[key] = wall[key];
+  }
+  return out;
+}
 
 /// `<self_exe> run <file> --out <tmp> --quiet [--can <iface>]`: the scenario with its reference
 /// firmware in the loop, on `iface` (a kernel interface) or, when empty, on the run's private
@@ -155,6 +169,9 @@ LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_e
       out.rtf = Unavailable(fmt::format("{} failed: {}", what, failure->get<std::string>()));
     } else if (rtf && rtf->is_number() && rtf->get<double>() > 0) {
       out.rtf = rtf->get<double>();
+      if (const nlohmann::json* wall = GetPath(run_report, "wall"); wall && wall->is_object()) {
+        out.accounts = Accounts(*wall);
+      }
       const nlohmann::json* sim = GetPath(run_report, "sim_time_s");
       if (sim && sim->is_number()) out.sim_s = *sim;
       out.max_rss_mib = w.max_rss_mib;
@@ -166,6 +183,22 @@ LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_e
   std::error_code ec;
   std::filesystem::remove_all(dir, ec);
   return out;
+}
+
+/// virtual_time.<row>.wall (the run's accounting) and its documented hand-over figures: the
+/// run's numbers, else the run's reason (or that its report had none).
+void SetHandoverRows(nlohmann::json& report, const std::string& row, const LockstepRun& r) {
+  if (!r.accounts.is_null()) SetPath(report, fmt::format("virtual_time.{}.wall", row), r.accounts);
+  for (const char* key : HandoverAccountKeys()) {
+    nlohmann::json v;
+    if (r.accounts.is_object() && r.accounts.contains(key) && r.accounts[key].is_number()) {
+      v = r.accounts[key];
+    } else {
+      v = r.rtf.is_string() ? r.rtf
+                            : nlohmann::json(Unavailable(fmt::format("report.json had no wall.{}", key)));
+    }
+    SetPath(report, fmt::format("virtual_time.{}.{}", row, key), v);
+  }
 }
 
 /// The lockstep rows over the private userspace bus: lockstep.<paper>.rtf (and .scenario,
@@ -190,6 +223,7 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
       SetPath(report, fmt::format("lockstep.{}.scenario", s),
               std::filesystem::path(file).filename().string());
       if (r.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.sim_s", s), r.sim_s);
+      if (!r.accounts.is_null()) SetPath(report, fmt::format("lockstep.{}.wall", s), r.accounts);
       lockstep_mib = std::max(lockstep_mib, r.max_rss_mib);
     }
     // The same scenario right after, on the firmware's virtual clock with the firmware as SYNC
@@ -201,6 +235,7 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
           o, self_exe, file, "",
           {{"timing.clock", "virtual", 0}, {"timing.sync_producer", "firmware", 0}});
       SetPath(report, vkey, v.rtf);
+      SetHandoverRows(report, s, v);
     }
   }
   // Firmwares written as customers write them (tests/customer_firmware/, built in the build tree
@@ -210,19 +245,22 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
                                   {"customer_python", "python_can_odometry"}}) {
     const std::string row = fmt::format("virtual_time.{}.rtf", key);
     const std::string file = o.source_dir + "/tests/data/customer_firmware/" + name + ".yaml";
+    LockstepRun c;
     if (!unavailable.empty()) {
-      SetPath(report, row, Unavailable(unavailable));
+      c.rtf = Unavailable(unavailable);
     } else if (!std::filesystem::exists(file)) {
-      SetPath(report, row, Unavailable("no " + file + " (a source tree is needed)"));
+      c.rtf = Unavailable("no " + file + " (a source tree is needed)");
     } else if (name == "c_epoll_odometry" &&
                !std::filesystem::exists(std::filesystem::path(self_exe).parent_path() / name)) {
-      SetPath(report, row, Unavailable("no " + name + " next to wheelhil (a build tree is needed)"));
+      c.rtf = Unavailable("no " + name + " next to wheelhil (a build tree is needed)");
     } else {
       // Whole (5 s of motion): a cut copy would move the file that ${SCENARIO_DIR} names.
       BenchOptions whole = o;
       whole.quick = false;
-      SetPath(report, row, RunLockstepScenario(whole, self_exe, file, "").rtf);
+      c = RunLockstepScenario(whole, self_exe, file, "");
     }
+    SetPath(report, row, c.rtf);
+    SetHandoverRows(report, key, c);
   }
   if (lockstep_mib > 0) {
     SetPath(report, "rss.lockstep_mib", lockstep_mib);

@@ -216,6 +216,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
+  ++handovers_;
   // The limit is on running without blocking: a firmware that blocks and is woken again by
   // what it asked the bus for (a burst of socket opens, requests) makes progress, and starts
   // the count again; only a far longer stay at one instant ends the run as well.
@@ -309,6 +310,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
 bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
                            FirmwareProcess& process, const FrameFn& on_frame) {
   const auto t0 = Clock::now();
+  ++handovers_;
   while (!done()) {
     const double left = timeout_s - WallSeconds(t0);
     if (left <= 0) return false;

@@ -74,6 +74,9 @@ class FirmwareLink {
   /// The firmware has a socket bound on the private bus (remembered: FailExited says whether it
   /// ever had one).
   bool FirmwareConnected();
+  /// The firmware's turns so far: settles that did not find it still blocked with nothing
+  /// new for it, and waits for its answer (WaitFor).
+  std::uint64_t handovers() const { return handovers_; }
   /// Closes the transport and the private bus (its runtime directory goes with it).
   void Close();
 
@@ -100,6 +103,7 @@ class FirmwareLink {
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
   bool opened_once_ = false;  // the firmware bound a socket once (FirmwareConnected)
+  std::uint64_t handovers_ = 0;
   std::chrono::steady_clock::time_point last_exit_check_{};
 };
 

@@ -1,5 +1,7 @@
 #include "emulator/scenario/runner.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -32,6 +34,7 @@
 #include "emulator/sim/cycle_scheduler.h"
 #include "emulator/sim/event_loop.h"
 #include "emulator/sim/run_context.h"
+#include "emulator/sim/wall_account.h"
 
 namespace wheelhil::emulator::scenario {
 
@@ -40,6 +43,14 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
+
+// CPU seconds (user + system) of the children this process has waited for.
+double ChildrenCpuSeconds() {
+  rusage ru{};
+  ::getrusage(RUSAGE_CHILDREN, &ru);
+  return static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+         static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) * 1e-6;
+}
 
 double WallSeconds(Clock::time_point since) {
   return std::chrono::duration<double>(Clock::now() - since).count();
@@ -68,6 +79,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // sim::RunStages
   std::int64_t step_ns() const override { return physics_->step_ns(); }
   bool StepPhysics(std::int64_t t_end_ns, bool motion) override {
+    sim::WallTimer timer(wall_.physics_s);
     if (s_.firmware_motion) CommandDrives();
     return physics_->Step(t_end_ns - physics_->step_ns(), motion);
   }
@@ -75,7 +87,10 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void RecordTruth(std::int64_t t_ns, bool force) override {
     truth_->Record(t_ns, physics_->body(), physics_->wheels(), force);
   }
-  void AdvanceBus(std::int64_t t_ns) override { hub_->AdvanceTo(t_ns); }
+  void AdvanceBus(std::int64_t t_ns) override {
+    sim::WallTimer timer(wall_.devices_bus_s);
+    hub_->AdvanceTo(t_ns);
+  }
   std::int64_t bus_now_ns() const override { return hub_->now_ns(); }
   int SendSync(std::int64_t t_ns) override;
   void AfterMotionStep() override { Progress(false); }
@@ -87,6 +102,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
     if (virtual_time_) {
       SettleFirmware();
     } else {
+      sim::WallTimer timer(wall_.handover_s);
       link_->Drain(0, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
     }
   }
@@ -148,6 +164,11 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   std::unique_ptr<FaultPlan> faults_;
   std::vector<WheelDrive> drives_;  // scratch of CommandDrives
   Clock::time_point wall0_, last_progress_;
+  sim::WallAccount wall_;
+  // The CPU seconds of this process's waited-for children (RUSAGE_CHILDREN) before the
+  // firmware started (-1: no firmware started); the firmware's own after its exit.
+  double children_cpu_before_s_ = -1;
+  double firmware_cpu_s_ = -1;
 };
 
 void Run::CommandDrives() {
@@ -196,6 +217,7 @@ void Run::WaitLastStatus(int cycle, std::int64_t k) {
 }
 
 void Run::StepDevices(std::int64_t t_ns, bool motion) {
+  sim::WallTimer timer(wall_.devices_bus_s);
   if (motion) faults_->StepNodeFaults(t_ns, physics_->step_ns(), devices_, run_);
   DeviceWorld world;
   world.body = &physics_->body();
@@ -223,6 +245,7 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
 }
 
 bool Run::WaitFirmware(const std::function<bool()>& done) {
+  sim::WallTimer timer(wall_.handover_s);
   return link_->WaitFor(done, s_.timing.timeout_s, firmware_,
                         [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
 }
@@ -236,6 +259,7 @@ void Run::WaitStatus(int cycle, std::int64_t k) {
 
 void Run::SettleFirmware() {
   if (run_.failed() || !firmware_.running()) return;
+  sim::WallTimer timer(wall_.handover_s);
   clock_->SetNow(hub_->now_ns());
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
@@ -376,6 +400,7 @@ void Run::StartFirmware() {
     clock_->ExpectFirstProcess();
   }
   link_->BeforeFirmwareStarts();
+  children_cpu_before_s_ = ChildrenCpuSeconds();
   firmware_.Start(cmd, env, out_ + "/firmware.log");
   if (virtual_time_) {
     clock_->SetFirstProcessPid(firmware_.pid());
@@ -518,10 +543,23 @@ json Run::Report(double wall_s) {
   metrics["bus"] = hub_->Metrics();
   if (auto f = faults_->Metrics(devices_, *hub_)) metrics["faults"] = *f;
   r["metrics"] = metrics;
+  // Where the wall time went (docs/performance.md, "Reading a run's wall block").
+  const double virtual_s = static_cast<double>(run_.now_ns) * 1e-9;
+  const std::uint64_t handovers = link_ ? link_->handovers() : 0;
+  const double staged_s = wall_.physics_s + wall_.devices_bus_s + wall_.handover_s;
   r["wall"] = json{{"wall_time_s", wall_s},
                    {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
                    {"cpu", cpus_.cpu()},
-                   {"physics_thread", physics_->worker_used()}};
+                   {"physics_thread", physics_->worker_used()},
+                   {"virtual_s", virtual_s},
+                   {"handovers", handovers},
+                   {"handovers_per_sim_s", virtual_s > 0 ? handovers / virtual_s : 0.0},
+                   {"handover_s", wall_.handover_s},
+                   {"handover_us_each", handovers > 0 ? wall_.handover_s / handovers * 1e6 : 0.0},
+                   {"firmware_cpu_s", firmware_cpu_s_ >= 0 ? json(firmware_cpu_s_) : json()},
+                   {"physics_s", wall_.physics_s},
+                   {"devices_bus_s", wall_.devices_bus_s},
+                   {"other_s", std::max(0.0, wall_s - staged_s)}};
   return r;
 }
 
@@ -570,6 +608,7 @@ RunResult Run::Execute() {
   } else {
     firmware_.Stop();
   }
+  if (children_cpu_before_s_ >= 0) firmware_cpu_s_ = ChildrenCpuSeconds() - children_cpu_before_s_;
   hub_->CloseLog();
   run_.TakeInterrupt();
   if (run_.failed()) {

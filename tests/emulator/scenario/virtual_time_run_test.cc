@@ -309,6 +309,34 @@ TEST_F(VirtualTimeRun, AFirmwareThatExecsWithoutTheClockLibraryIsNamed) {
   EXPECT_EQ(n, 1u);
 }
 
+// report.json's wall block says where the wall time went: the firmware's turns (at least one
+// per SYNC it produces: each follows its timerfd), and the stages, which with the rest add up
+// to the run's wall time.
+TEST_F(VirtualTimeRun, TheWallBlockAccountsForHandoversAndStages) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  s.timing.duration_s = 1.0;
+  s.expectations.clear();
+  const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / "acct"));
+  ASSERT_EQ(r.failure, "");
+  const nlohmann::json& w = r.report["wall"];
+  const auto handovers = w["handovers"].get<std::uint64_t>();
+  EXPECT_GE(handovers, r.report["cycles"].get<std::uint64_t>());
+  EXPECT_GT(r.report["cycles"].get<int>(), 90);
+  const double virtual_s = w["virtual_s"].get<double>();
+  EXPECT_GT(virtual_s, 1.0);
+  EXPECT_DOUBLE_EQ(w["handovers_per_sim_s"].get<double>(), handovers / virtual_s);
+  EXPECT_DOUBLE_EQ(w["handover_us_each"].get<double>(),
+                   w["handover_s"].get<double>() / handovers * 1e6);
+  double staged = 0;
+  for (const char* k : {"handover_s", "physics_s", "devices_bus_s", "other_s"}) {
+    EXPECT_GT(w[k].get<double>(), 0.0) << k;
+    staged += w[k].get<double>();
+  }
+  EXPECT_NEAR(staged, w["wall_time_s"].get<double>(), 1e-6);
+  ASSERT_TRUE(w["firmware_cpu_s"].is_number()) << w.dump();
+  EXPECT_GE(w["firmware_cpu_s"].get<double>(), 0.0);
+}
+
 // A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
 // page and whatever the firmware put there go with it.
 TEST_F(VirtualTimeRun, ARunLeavesNothingInTheTemporaryDirectory) {
