@@ -142,10 +142,25 @@ struct Harness {
   }
 };
 
+Harness* g_harness = nullptr;
+
+// For the whole process (the broker outlives every input), gone at exit with its runtime
+// directory, which the broker removes.
+Harness* TheHarness() {
+  if (g_harness == nullptr) {
+    g_harness = new Harness;
+    std::atexit([] {
+      delete g_harness;
+      g_harness = nullptr;
+    });
+  }
+  return g_harness;
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  static Harness* h = new Harness;  // for the whole process; the broker outlives every input
+  Harness* h = TheHarness();
   std::vector<std::unique_ptr<Connection>> conns;
   std::size_t i = 0;
   auto take = [&](std::size_t n) {
