@@ -193,9 +193,10 @@ void SetHandoverRows(nlohmann::json& report, const std::string& row, const Locks
     nlohmann::json v;
     if (r.accounts.is_object() && r.accounts.contains(key) && r.accounts[key].is_number()) {
       v = r.accounts[key];
+    } else if (r.rtf.is_string()) {
+      v = r.rtf;
     } else {
-      v = r.rtf.is_string() ? r.rtf
-                            : nlohmann::json(Unavailable(fmt::format("report.json had no wall.{}", key)));
+      v = Unavailable(fmt::format("report.json had no wall.{}", key));
     }
     SetPath(report, fmt::format("virtual_time.{}.{}", row, key), v);
   }

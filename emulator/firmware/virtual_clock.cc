@@ -477,13 +477,14 @@ bool VirtualClock::FoundOffTheClock(pid_t pid) {
   // Until its exec is done the process has the old program's environment, which has the
   // library; after it, a program that has it registers soon, one without it never does.
   const std::string env = ReadProcFile(fmt::format("/proc/{}/environ", pid));
+  const std::string page_var = std::string(vt::kPageEnv) + "=";
   std::string preload;
   bool page = false;
   for (std::size_t at = 0; at < env.size();) {
     const std::size_t end = std::min(env.find('\0', at), env.size());
     const std::string_view var(env.data() + at, end - at);
     if (var.substr(0, 11) == "LD_PRELOAD=") preload = std::string(var.substr(11));
-    if (var.substr(0, std::strlen(vt::kPageEnv) + 1) == std::string(vt::kPageEnv) + "=") page = true;
+    if (var.substr(0, page_var.size()) == page_var) page = true;
     at = end + 1;
   }
   // (An empty environment is one: `env -i`; but so reads a process in the middle of its exec,
