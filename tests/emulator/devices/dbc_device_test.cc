@@ -302,8 +302,8 @@ TEST(DbcMotorController, SetPointsDriveTheWheelsAndFeedbackReportsThem) {
   EXPECT_DOUBLE_EQ(fb.at("FbPosLeft"), 500);
 }
 
-TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
-  // A float signal can command 1e30 rad/s (NaN and inf are refused: see below).
+// A motor controller whose set points are 32-bit floats (they can say 1e30, NaN, inf).
+std::shared_ptr<const bus::DbcDatabase> FloatSetpointDbc() {
   constexpr const char* kFloatDbc = R"(VERSION ""
 BU_: Fw Mc
 BO_ 512 MC_Command: 8 Fw
@@ -316,8 +316,12 @@ BA_ "GenMsgCycleTime" BO_ 513 10;
 SIG_VALTYPE_ 512 SpeedLeft : 1;
 SIG_VALTYPE_ 512 SpeedRight : 1;
 )";
-  const auto db =
-      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
+  return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
+}
+
+TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
+  // A float signal can command 1e30 rad/s (NaN and inf are refused: see below).
+  const auto db = FloatSetpointDbc();
   DbcDeviceConfig c;
   c.name = "mc";
   c.node = "Mc";
@@ -498,20 +502,7 @@ TEST(DbcMotorController, MultiplexedSetPointsAreReadFromTheirOwnFrames) {
 // does not hold the power stages on past the set-point timeout (it used to be skipped silently
 // while refreshing the timeout, so the wheels kept turning at the last set point).
 TEST(DbcMotorController, NonFiniteSetPointsAreCountedNamedAndDoNotHoldTheTimeout) {
-  constexpr const char* kFloatDbc = R"(VERSION ""
-BU_: Fw Mc
-BO_ 512 MC_Command: 8 Fw
- SG_ SpeedLeft : 0|32@1- (1,0) [0|0] "rad/s" Mc
- SG_ SpeedRight : 32|32@1- (1,0) [0|0] "rad/s" Mc
-BO_ 513 MC_Status: 1 Mc
- SG_ Alive : 0|8@1+ (1,0) [0|255] "" Fw
-BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
-BA_ "GenMsgCycleTime" BO_ 513 10;
-SIG_VALTYPE_ 512 SpeedLeft : 1;
-SIG_VALTYPE_ 512 SpeedRight : 1;
-)";
-  const auto db =
-      std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
+  const auto db = FloatSetpointDbc();
   DbcDeviceConfig c;
   c.name = "mc";
   c.node = "Mc";
