@@ -88,47 +88,33 @@ Evaluated EvaluateValue(std::string_view text, int node_id) {
   return {Evaluated::kOk, total};
 }
 
-struct IntegerRange {
-  std::string_view type;
-  __int128 min = 0;
-  __int128 max = 0;
+// The integer data types of CiA 301 (7.1.6) this reader knows: size in the object, range.
+struct IntegerType {
+  std::uint16_t code;
+  std::string_view name;
+  int bytes;
+  int value_bits;  // BOOLEAN takes a byte and holds 0 or 1
+  bool is_signed;
+  __int128 min() const { return is_signed ? -(static_cast<__int128>(1) << (value_bits - 1)) : 0; }
+  __int128 max() const {
+    return (static_cast<__int128>(1) << (is_signed ? value_bits - 1 : value_bits)) - 1;
+  }
 };
 
-// The integer data types of CiA 301 (7.1.6) this reader knows.
-std::optional<IntegerRange> RangeOf(std::uint16_t data_type) {
-  auto u = [](std::string_view name, int bits) {
-    return IntegerRange{name, 0, (static_cast<__int128>(1) << bits) - 1};
-  };
-  auto i = [](std::string_view name, int bits) {
-    return IntegerRange{name, -(static_cast<__int128>(1) << (bits - 1)),
-                        (static_cast<__int128>(1) << (bits - 1)) - 1};
-  };
-  switch (data_type) {
-    case 0x0001:
-      return u("BOOLEAN", 1);
-    case 0x0002:
-      return i("INTEGER8", 8);
-    case 0x0003:
-      return i("INTEGER16", 16);
-    case 0x0004:
-      return i("INTEGER32", 32);
-    case 0x0005:
-      return u("UNSIGNED8", 8);
-    case 0x0006:
-      return u("UNSIGNED16", 16);
-    case 0x0007:
-      return u("UNSIGNED32", 32);
-    case 0x0010:
-      return i("INTEGER24", 24);
-    case 0x0015:
-      return i("INTEGER64", 64);
-    case 0x0016:
-      return u("UNSIGNED24", 24);
-    case 0x001B:
-      return u("UNSIGNED64", 64);
-    default:
-      return std::nullopt;
+constexpr IntegerType kIntegerTypes[] = {
+    {0x0001, "BOOLEAN", 1, 1, false},     {0x0002, "INTEGER8", 1, 8, true},
+    {0x0003, "INTEGER16", 2, 16, true},   {0x0004, "INTEGER32", 4, 32, true},
+    {0x0005, "UNSIGNED8", 1, 8, false},   {0x0006, "UNSIGNED16", 2, 16, false},
+    {0x0007, "UNSIGNED32", 4, 32, false}, {0x0010, "INTEGER24", 3, 24, true},
+    {0x0015, "INTEGER64", 8, 64, true},   {0x0016, "UNSIGNED24", 3, 24, false},
+    {0x001B, "UNSIGNED64", 8, 64, false},
+};
+
+const IntegerType* FindIntegerType(std::uint16_t data_type) {
+  for (const IntegerType& t : kIntegerTypes) {
+    if (t.code == data_type) return &t;
   }
+  return nullptr;
 }
 
 std::string Decimal(__int128 v) {
@@ -141,26 +127,28 @@ std::string Decimal(__int128 v) {
   return negative ? "-" + digits : digits;
 }
 
-// Empty when `e`'s value is an integer of its data type's range with this node id; otherwise
-// what is wrong, for "file:line: [1017] DefaultValue: <problem>".
-std::string ValueProblem(const EdsEntry& e, int node_id, bool with_node_id) {
+// `e`'s value with this node id; when it is not an integer of its data type's range, what is
+// wrong in `problem`, for "file:line: [1017] DefaultValue: <problem>".
+__int128 CheckedValue(const EdsEntry& e, int node_id, bool with_node_id, std::string& problem) {
   const Evaluated v = EvaluateValue(e.default_value, node_id);
   if (v.status == Evaluated::kNotAnInteger) {
-    return fmt::format("'{}' is not an integer (decimal, 0x.., or with $NODEID)", e.default_value);
+    problem =
+        fmt::format("'{}' is not an integer (decimal, 0x.., or with $NODEID)", e.default_value);
+    return 0;
   }
-  const auto range = RangeOf(e.data_type);
-  if (!range) return {};
+  const IntegerType* type = FindIntegerType(e.data_type);
+  if (type == nullptr) return v.value;
   // Silently truncated to the object's size before: a heartbeat of 70000 ms became 4464.
   const std::string node = with_node_id ? fmt::format(" with node id {}", node_id) : std::string();
   if (v.status == Evaluated::kBeyond64Bits) {
-    return fmt::format("'{}'{} is beyond 64 bits, outside {}'s range {}..{}", e.default_value, node,
-                       range->type, Decimal(range->min), Decimal(range->max));
+    problem = fmt::format("'{}'{} is beyond 64 bits, outside {}'s range {}..{}", e.default_value,
+                          node, type->name, Decimal(type->min()), Decimal(type->max()));
+  } else if (v.value < type->min() || v.value > type->max()) {
+    problem = fmt::format("'{}' is {}{}, outside {}'s range {}..{}", e.default_value,
+                          Decimal(v.value), node, type->name, Decimal(type->min()),
+                          Decimal(type->max()));
   }
-  if (v.value < range->min || v.value > range->max) {
-    return fmt::format("'{}' is {}{}, outside {}'s range {}..{}", e.default_value, Decimal(v.value),
-                       node, range->type, Decimal(range->min), Decimal(range->max));
-  }
-  return {};
+  return v.value;
 }
 
 struct Section {
@@ -173,26 +161,8 @@ struct Section {
 }  // namespace
 
 int EdsFile::IntegerSize(std::uint16_t data_type) {
-  switch (data_type) {
-    case 0x0001:  // BOOLEAN
-    case 0x0002:  // INTEGER8
-    case 0x0005:  // UNSIGNED8
-      return 1;
-    case 0x0003:  // INTEGER16
-    case 0x0006:  // UNSIGNED16
-      return 2;
-    case 0x0010:  // INTEGER24
-    case 0x0016:  // UNSIGNED24
-      return 3;
-    case 0x0004:  // INTEGER32
-    case 0x0007:  // UNSIGNED32
-      return 4;
-    case 0x0015:  // INTEGER64
-    case 0x001B:  // UNSIGNED64
-      return 8;
-    default:
-      return 0;
-  }
+  const IntegerType* type = FindIntegerType(data_type);
+  return type != nullptr ? type->bytes : 0;
 }
 
 EdsFile EdsFile::LoadFile(const std::string& path) {
@@ -340,9 +310,9 @@ EdsFile EdsFile::Parse(std::string_view text, const std::string& source_name) {
     // An integer value must read as one now, and fit its type (with a node id of 1; the
     // node's own is checked when it is read): a typo is a load error.
     if (IntegerSize(e.data_type) > 0 && !e.default_value.empty()) {
-      if (const std::string why = ValueProblem(e, 1, false); !why.empty()) {
-        fail(e.value_line, fmt::format("[{}] {}: {}", n, e.value_key, why));
-      }
+      std::string why;
+      CheckedValue(e, 1, false, why);
+      if (!why.empty()) fail(e.value_line, fmt::format("[{}] {}: {}", n, e.value_key, why));
     }
     eds.entries_[{e.index, e.sub}] = std::move(e);
   }
@@ -374,13 +344,15 @@ std::uint64_t EdsFile::Integer(std::uint16_t index, std::uint8_t sub, int node_i
     throw std::invalid_argument(
         fmt::format("{}: object 0x{:04X} sub {} is not in the file", source_, index, sub));
   }
-  if (const std::string why = ValueProblem(*e, node_id, true); !why.empty()) {
+  std::string why;
+  const __int128 value = CheckedValue(*e, node_id, true, why);
+  if (!why.empty()) {
     throw std::invalid_argument(fmt::format("{}:{}: [{:04X}{}] {}: {}", source_, e->value_line,
                                             index, sub != 0 ? fmt::format("sub{}", sub) : "",
                                             e->value_key, why));
   }
   // In range: a negative value of a signed type is its two's complement.
-  return static_cast<std::uint64_t>(EvaluateValue(e->default_value, node_id).value);
+  return static_cast<std::uint64_t>(value);
 }
 
 }  // namespace wheelhil::bus
