@@ -1249,8 +1249,8 @@ void FreeTimersIn(unsigned first, unsigned last) {
   }
 }
 
-/// The program is about to put another file on number `fd`, which is a wake eventfd of the
-/// library's: that eventfd moves to a free number first. -1 (errno) when there is none.
+/// The program is about to put another file on number `fd`: when that is a wake eventfd of the
+/// library's, it moves to a free number first. -1 (errno) when there is none.
 int MoveLibraryFd(int fd) {
   const int used = g_page->threads_used.load();
   for (int i = 0; i < used; ++i) {
@@ -1329,19 +1329,22 @@ VTIME_EXPORT void closefrom(int low) {
 
 namespace {
 
-bool KeepLibraryFd(int fd, int fd2) {
-  return g_page != nullptr && fd != fd2 && IsLibraryFd(fd2) && !InVforkChild();
+/// Before `fd2` takes another file: 0, or -1 (errno) when the library's descriptor there
+/// could not be moved away.
+int KeepLibraryFd(int fd, int fd2) {
+  if (g_page == nullptr || fd == fd2 || InVforkChild()) return 0;
+  return MoveLibraryFd(fd2);
 }
 
 }  // namespace
 
 VTIME_EXPORT int dup2(int fd, int fd2) {
-  if (KeepLibraryFd(fd, fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  if (KeepLibraryFd(fd, fd2) != 0) return -1;
   return real_dup2()(fd, fd2);
 }
 
 VTIME_EXPORT int dup3(int fd, int fd2, int flags) {
-  if (KeepLibraryFd(fd, fd2) && MoveLibraryFd(fd2) != 0) return -1;
+  if (KeepLibraryFd(fd, fd2) != 0) return -1;
   return real_dup3()(fd, fd2, flags);
 }
 
