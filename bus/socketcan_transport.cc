@@ -23,6 +23,7 @@
 #include <utility>
 
 #include "bus/internal/socketcan_convert.h"
+#include "bus/internal/unique_fd.h"
 
 #ifndef CANFD_FDF
 #define CANFD_FDF 0x04
@@ -147,21 +148,6 @@ struct SocketCanTransport::Counters {
 
 namespace {
 
-class FdGuard {
- public:
-  explicit FdGuard(int fd) : fd_(fd) {}
-  ~FdGuard() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  FdGuard(const FdGuard&) = delete;
-  FdGuard& operator=(const FdGuard&) = delete;
-  int get() const { return fd_; }
-  int release() { return std::exchange(fd_, -1); }
-
- private:
-  int fd_;
-};
-
 [[noreturn]] void ThrowErrno(int err, const std::string& what) {
   throw std::system_error(err, std::system_category(), what);
 }
@@ -205,7 +191,7 @@ SocketCanTransport SocketCanTransport::Open(const std::string& iface,
         fmt::format("CAN interface '{}': send retry limits must be >= 0", iface));
   }
 
-  FdGuard sock(::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW));
+  internal::UniqueFd sock(::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW));
   if (sock.get() < 0) {
     const int err = errno;
     ThrowErrno(err, internal::NoSocketCanMessage(iface, err));

@@ -36,6 +36,7 @@
 #include <utility>
 
 #include "bus/internal/socketcan_convert.h"
+#include "bus/internal/unique_fd.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
 
@@ -65,29 +66,7 @@ constexpr rlim_t kReservedFds = 64;
 constexpr std::size_t kMaxRequest = sizeof(Request) + ucan::kMaxFilters * sizeof(can_filter);
 constexpr std::size_t kClientMsgBuf = 128;  // > 80, so a larger message shows as MSG_TRUNC
 
-/// An owned file descriptor.
-class Fd {
- public:
-  Fd() = default;
-  explicit Fd(int fd) : fd_(fd) {}
-  Fd(Fd&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
-  Fd& operator=(Fd&& o) noexcept {
-    if (this != &o) {
-      Reset();
-      fd_ = std::exchange(o.fd_, -1);
-    }
-    return *this;
-  }
-  ~Fd() { Reset(); }
-  void Reset() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
-  int get() const { return fd_; }
-
- private:
-  int fd_ = -1;
-};
+using Fd = internal::UniqueFd;
 
 std::system_error SysError(int err, const std::string& what) {
   return std::system_error(err, std::generic_category(), what);

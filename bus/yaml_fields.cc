@@ -3,12 +3,13 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
-#include <filesystem>
-#include <fstream>
 #include <map>
 #include <stdexcept>
+
+#include "bus/internal/input_file.h"
 
 namespace wheelhil::bus::yaml {
 
@@ -51,32 +52,31 @@ void FieldReader::FailYaml(const YAML::Exception& e) const {
 }
 
 std::string FieldReader::ReadFile() const {
-  std::error_code ec;
-  const auto status = std::filesystem::status(file_, ec);
-  if (ec || !std::filesystem::exists(status)) {
-    Fail(YAML::Mark::null_mark(), "(file)", "cannot be read (no such file)");
+  internal::RegularFile f = internal::ReadRegularFile(file_, kMaxFileBytes);
+  std::string problem;
+  switch (f.problem) {
+    case internal::RegularFile::kRead:
+      return std::move(f.text);
+    case internal::RegularFile::kCannotOpen:
+      // (Permission is the one reason a file that is there cannot be opened for reading.)
+      problem = f.error == EACCES || f.error == EPERM ? "cannot be read"
+                                                      : "cannot be read (no such file)";
+      break;
+    case internal::RegularFile::kDirectory:
+      problem = "is a directory, not a YAML file";
+      break;
+    case internal::RegularFile::kNotRegular:
+      problem = "is not a regular file (a device or a pipe?)";
+      break;
+    case internal::RegularFile::kTooLarge:
+      problem = fmt::format("is larger than {} MiB; a wheelhil input file is a few KiB",
+                            kMaxFileBytes >> 20);
+      break;
+    case internal::RegularFile::kCannotRead:
+      problem = "cannot be read";
+      break;
   }
-  if (std::filesystem::is_directory(status)) {
-    Fail(YAML::Mark::null_mark(), "(file)", "is a directory, not a YAML file");
-  }
-  if (!std::filesystem::is_regular_file(status)) {
-    Fail(YAML::Mark::null_mark(), "(file)", "is not a regular file (a device or a pipe?)");
-  }
-  std::ifstream in(file_, std::ios::binary);
-  if (!in) Fail(YAML::Mark::null_mark(), "(file)", "cannot be read");
-  // Counted while read, so a file that grows meanwhile is caught too.
-  std::string text;
-  char chunk[1 << 16];
-  while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
-    text.append(chunk, static_cast<std::size_t>(in.gcount()));
-    if (text.size() > kMaxFileBytes) {
-      Fail(YAML::Mark::null_mark(), "(file)",
-           fmt::format("is larger than {} MiB; a wheelhil input file is a few KiB",
-                       kMaxFileBytes >> 20));
-    }
-  }
-  if (in.bad()) Fail(YAML::Mark::null_mark(), "(file)", "cannot be read");
-  return text;
+  Fail(YAML::Mark::null_mark(), "(file)", problem);
 }
 
 std::string FieldReader::FieldName(const std::vector<PathStep>& path) {
