@@ -319,18 +319,24 @@ SIG_VALTYPE_ 512 SpeedRight : 1;
   return std::make_shared<const bus::DbcDatabase>(bus::DbcDatabase::Parse(kFloatDbc, "mc.dbc"));
 }
 
-TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
-  // A float signal can command 1e30 rad/s (NaN and inf are refused: see below).
-  const auto db = FloatSetpointDbc();
+// A controller of two wheels' speed set points (signals of `message`, "" for the DBC's own).
+DbcDeviceConfig SetPointConfig(const char* message = "") {
   DbcDeviceConfig c;
   c.name = "mc";
   c.node = "Mc";
-  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint),
-               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint),
-               Bind("Alive", DbcQuantity::kCounter)};
+  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint, message),
+               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint, message)};
   c.signals[0].motor_torque_limit_nm = 4.8;
   c.signals[1].wheel_index = 1;
   c.signals[1].motor_torque_limit_nm = 4.8;
+  return c;
+}
+
+TEST(DbcMotorController, AbsurdSetPointsAreClampedAndNamed) {
+  // A float signal can command 1e30 rad/s (NaN and inf are refused: see below).
+  const auto db = FloatSetpointDbc();
+  DbcDeviceConfig c = SetPointConfig();
+  c.signals.push_back(Bind("Alive", DbcQuantity::kCounter));
   DbcDevice d(db, c);
   RecordingPort port;
   d.OnFrame(bus::EncodeMessage(*db->FindMessage("MC_Command"),
@@ -474,14 +480,7 @@ bus::CanFrame FloatCommand(const bus::DbcMessage& msg,
 // but belongs to channel 1's frames.
 TEST(DbcMotorController, MultiplexedSetPointsAreReadFromTheirOwnFrames) {
   const auto db = MuxDb();
-  DbcDeviceConfig c;
-  c.name = "mc";
-  c.node = "Mc";
-  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint, "MC_Command"),
-               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint, "MC_Command")};
-  c.signals[0].motor_torque_limit_nm = 4.8;
-  c.signals[1].wheel_index = 1;
-  c.signals[1].motor_torque_limit_nm = 4.8;
+  const DbcDeviceConfig c = SetPointConfig("MC_Command");
   DbcDevice d(db, c);
   RecordingPort port;
   const bus::DbcMessage& cmd = *db->FindMessage("MC_Command");
@@ -503,15 +502,8 @@ TEST(DbcMotorController, MultiplexedSetPointsAreReadFromTheirOwnFrames) {
 // while refreshing the timeout, so the wheels kept turning at the last set point).
 TEST(DbcMotorController, NonFiniteSetPointsAreCountedNamedAndDoNotHoldTheTimeout) {
   const auto db = FloatSetpointDbc();
-  DbcDeviceConfig c;
-  c.name = "mc";
-  c.node = "Mc";
+  DbcDeviceConfig c = SetPointConfig();
   c.setpoint_timeout_s = 0.1;
-  c.signals = {Bind("SpeedLeft", DbcQuantity::kWheelSpeedSetpoint),
-               Bind("SpeedRight", DbcQuantity::kWheelSpeedSetpoint)};
-  c.signals[0].motor_torque_limit_nm = 4.8;
-  c.signals[1].wheel_index = 1;
-  c.signals[1].motor_torque_limit_nm = 4.8;
   DbcDevice d(db, c);
   RecordingPort port;
   const bus::DbcMessage& cmd = *db->FindMessage("MC_Command");
