@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "bus/internal/input_file.h"
+#include "bus/internal/utf8.h"
 
 namespace wheelhil::bus::yaml {
 
@@ -146,43 +147,15 @@ bool YamlPrintable(std::uint32_t cp) {
 /// valid one that is not YAML-printable (0xFFFFFFFF: invalid UTF-8).
 std::size_t FirstInvalidUtf8(std::string_view s, std::uint32_t* bad_cp) {
   *bad_cp = 0xFFFFFFFFu;
-  std::size_t i = 0;
-  while (i < s.size()) {
-    const auto b = static_cast<unsigned char>(s[i]);
-    std::size_t n = 0;
+  for (std::size_t i = 0; i < s.size();) {
     std::uint32_t cp = 0;
-    if (b < 0x80) {
-      if (!YamlPrintable(b)) {
-        *bad_cp = b;
-        return i;
-      }
-      ++i;
-      continue;
-    } else if ((b & 0xE0) == 0xC0) {
-      n = 1;
-      cp = b & 0x1F;
-    } else if ((b & 0xF0) == 0xE0) {
-      n = 2;
-      cp = b & 0x0F;
-    } else if ((b & 0xF8) == 0xF0) {
-      n = 3;
-      cp = b & 0x07;
-    } else {
-      return i;
-    }
-    for (std::size_t k = 1; k <= n; ++k) {
-      if (i + k >= s.size()) return i;
-      const auto c = static_cast<unsigned char>(s[i + k]);
-      if ((c & 0xC0) != 0x80) return i;
-      cp = cp << 6 | (c & 0x3F);
-    }
-    const std::uint32_t min = n == 1 ? 0x80 : n == 2 ? 0x800 : 0x10000;
-    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return i;
+    const std::size_t n = internal::Utf8Sequence(s, i, cp);
+    if (n == 0) return i;
     if (!YamlPrintable(cp)) {
       *bad_cp = cp;
       return i;
     }
-    i += n + 1;
+    i += n;
   }
   return std::string_view::npos;
 }

@@ -11,46 +11,9 @@
 #include <string>
 #include <string_view>
 
+#include "bus/internal/utf8.h"
+
 namespace wheelhil::emulator {
-
-namespace xml_escape_internal {
-
-/// Length of the well-formed UTF-8 sequence at s[i] (RFC 3629: no overlong forms, no
-/// surrogates, at most U+10FFFF), 0 when there is none; `cp` its code point.
-inline std::size_t Utf8Sequence(std::string_view s, std::size_t i, std::uint32_t& cp) {
-  const auto b = [&](std::size_t k) { return static_cast<unsigned char>(s[i + k]); };
-  const unsigned char c = b(0);
-  std::size_t n = 0;
-  std::uint32_t min = 0;
-  if (c < 0x80) {
-    cp = c;
-    return 1;
-  }
-  if ((c & 0xE0) == 0xC0) {
-    n = 2;
-    cp = c & 0x1Fu;
-    min = 0x80;
-  } else if ((c & 0xF0) == 0xE0) {
-    n = 3;
-    cp = c & 0x0Fu;
-    min = 0x800;
-  } else if ((c & 0xF8) == 0xF0) {
-    n = 4;
-    cp = c & 0x07u;
-    min = 0x10000;
-  } else {
-    return 0;
-  }
-  if (i + n > s.size()) return 0;
-  for (std::size_t k = 1; k < n; ++k) {
-    if ((b(k) & 0xC0) != 0x80) return 0;
-    cp = (cp << 6) | (b(k) & 0x3F);
-  }
-  if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return 0;
-  return n;
-}
-
-}  // namespace xml_escape_internal
 
 inline std::string EscapeXml(std::string_view s) {
   std::string out;
@@ -59,7 +22,7 @@ inline std::string EscapeXml(std::string_view s) {
     const char c = s[i];
     if (static_cast<unsigned char>(c) >= 0x80) {
       std::uint32_t cp = 0;
-      const std::size_t n = xml_escape_internal::Utf8Sequence(s, i, cp);
+      const std::size_t n = bus::internal::Utf8Sequence(s, i, cp);
       if (n == 0 || cp == 0xFFFE || cp == 0xFFFF) {
         out += "\xEF\xBF\xBD";  // U+FFFD REPLACEMENT CHARACTER, for one byte or character
         i += n == 0 ? 1 : n;
