@@ -360,13 +360,13 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
     }
     // Taken whole or not at all: a non-finite set point is no command (a drive refuses it), so
     // it neither moves a wheel nor keeps the power stages on past setpoint_timeout_s.
-    std::size_t present = 0;
+    decoded_.clear();
     bool refused = false;
     for (const Bound& b : r.values) {
       double v = 0;
       if (!bus::DecodeSignalIfPresent(*r.msg, *b.signal, frame, &v))
         continue;  // another multiplexer value
-      ++present;
+      decoded_.emplace_back(&b, v);
       if (std::isfinite(v)) continue;
       refused = true;
       if (++nonfinite_setpoints_ <= kRejectedFrameEvents) {
@@ -381,10 +381,9 @@ void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePor
                                                               : "-inf"}});
       }
     }
-    if (present == 0 || refused) return;
-    for (const Bound& b : r.values) {
-      double v = 0;
-      if (!bus::DecodeSignalIfPresent(*r.msg, *b.signal, frame, &v)) continue;
+    if (decoded_.empty() || refused) return;
+    for (const auto& [bound, v] : decoded_) {
+      const Bound& b = *bound;
       Channel& c = ChannelOf(b.binding->wheel_index);
       if (b.binding->quantity == DbcQuantity::kWheelSpeedSetpoint) {
         const double omega = b.binding->gain * b.unit.ToSi(v);

@@ -43,6 +43,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -226,6 +227,8 @@ class DbcDevice final : public Device {
   std::uint64_t rejected_frames_ = 0;
   std::uint64_t clamped_setpoints_ = 0;
   std::uint64_t nonfinite_setpoints_ = 0;
+  // OnFrame's scratch: the bound signals a received frame carries, decoded once.
+  std::vector<std::pair<const Bound*, double>> decoded_;
 };
 
 }  // namespace wheelhil::emulator
