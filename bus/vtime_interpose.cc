@@ -1418,11 +1418,8 @@ VTIME_EXPORT pid_t fork() {
 // never taken for blocked and is named when the run gives up on it.
 namespace {
 
-// The exec of a vfork child (InVforkChild) is not its parent's: the new program registers
-// itself.
-bool ExecIsThisProcess() {
-  return g_page != nullptr && g_proc >= 0 && g_page->processes[g_proc].pid.load() == getpid();
-}
+// The exec of a vfork child is not its parent's: the new program registers itself.
+bool ExecIsThisProcess() { return g_page != nullptr && g_proc >= 0 && !InVforkChild(); }
 
 void BeforeExec() {
   if (ExecIsThisProcess()) {
