@@ -51,6 +51,15 @@ char TaskState(const std::string& stat) {
 
 bool Gone(char state) { return state == '\0' || state == 'Z' || state == 'X'; }
 
+// The timeslices of a /proc .../schedstat line ("run ns, wait ns, timeslices"): the count of
+// times the task got a CPU; 0 when the line is not one.
+std::uint64_t Timeslices(const std::string& schedstat) {
+  const auto last_space = schedstat.rfind(' ');
+  return last_space == std::string::npos
+             ? 0
+             : std::strtoull(schedstat.c_str() + last_space + 1, nullptr, 10);
+}
+
 const char* LastCallName(std::uint32_t c) {
   switch (c) {
     case vt::kCallClock: return "a clock read";
@@ -313,11 +322,7 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
   const char state = TaskState(ReadAt0(f.stat_fd));
   if (Gone(state)) return Kernel::kGone;
   if (runs != nullptr) {
-    // "run ns, wait ns, timeslices": the last counts every time the thread got a CPU.
-    const std::string sched = f.schedstat_fd >= 0 ? ReadAt0(f.schedstat_fd) : std::string();
-    const auto last_space = sched.rfind(' ');
-    *runs = last_space == std::string::npos ? 0 : std::strtoull(sched.c_str() + last_space + 1,
-                                                                nullptr, 10);
+    *runs = Timeslices(f.schedstat_fd >= 0 ? ReadAt0(f.schedstat_fd) : std::string());
   }
   return state == 'S' ? Kernel::kAsleep : Kernel::kRunning;
 }
@@ -500,11 +505,7 @@ bool VirtualClock::FoundOffTheClock(pid_t pid) {
   // Judged only once it waits: asleep in the kernel twice without running in between, which a
   // program whose library is on its way to register it does not do (exec, loading and the
   // library's start-up do not sleep).
-  const std::string sched = ReadProcFile(fmt::format("/proc/{}/schedstat", pid));
-  const auto last_space = sched.rfind(' ');
-  const std::uint64_t runs = last_space == std::string::npos
-                                 ? 0
-                                 : std::strtoull(sched.c_str() + last_space + 1, nullptr, 10);
+  const std::uint64_t runs = Timeslices(ReadProcFile(fmt::format("/proc/{}/schedstat", pid)));
   const bool asleep = TaskState(ReadProcFile(fmt::format("/proc/{}/stat", pid))) == 'S';
   auto seen = std::find_if(starting_asleep_.begin(), starting_asleep_.end(),
                            [pid](const auto& p) { return p.first == pid; });
