@@ -667,6 +667,9 @@ ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap
     SettleRx(fd, r, head);
     pthread_mutex_unlock(&r.lock);
     if (h->closed.load() != 0) return 0;
+    // A frame pushed after the look above is the next call's, as it would be on a kernel
+    // socket: a call that may not wait needs no look at the doorbells (one system call less).
+    if (flags & MSG_DONTWAIT) return Fail(EAGAIN);
     // A doorbell still queued announces a push after the clear above: take the frame.
     std::uint64_t bell = 0;
     const ssize_t n = real_recv()(fd, &bell, sizeof(bell), MSG_PEEK | MSG_DONTWAIT);
@@ -854,6 +857,23 @@ int DupFcntl(int fd, int cmd, int rc) {
 }  // namespace
 
 // ---- the interposed API ----
+
+/// What the virtual clock's library (bus/vtime_interpose.cc) needs to know of fd to tell a wait
+/// only the host ends: 0, not a socket bound to a bus of the broker; 1, one with nothing to read
+/// (its rx ring empty, no doorbell pending or left on the socket); 2, one that may have
+/// something to read (or no rings to tell). Only the broker makes such a socket readable.
+UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd) {
+  View v;
+  if (!GetView(fd, &v) || !v.bound) return 0;
+  if (v.rings == nullptr) return 2;
+  ucan::RingIndex& rx = v.rings->header->rx;
+  LockRing(rx);
+  const std::uint64_t bell = rx.bell.load();
+  const bool empty = rx.tail.load() == rx.head.load() && (bell & 1) == 0 &&
+                     rx.bells_taken >= (bell >> 1);
+  pthread_mutex_unlock(&rx.lock);
+  return empty ? 1 : 2;
+}
 
 UCAN_EXPORT int socket(int domain, int type, int protocol) {
   if (domain != PF_CAN || (type & 0xF) != SOCK_RAW || protocol != CAN_RAW) {

@@ -36,6 +36,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -102,6 +103,9 @@ REAL_FN(sem_timedwait, int, (sem_t*, const timespec*))
 REAL_FN(sem_clockwait, int, (sem_t*, clockid_t, const timespec*))
 REAL_FN(pthread_mutex_timedlock, int, (pthread_mutex_t*, const timespec*))
 REAL_FN(pthread_mutex_clocklock, int, (pthread_mutex_t*, clockid_t, const timespec*))
+REAL_FN(kill, int, (pid_t, int))
+REAL_FN(pthread_kill, int, (pthread_t, int))
+REAL_FN(sigqueue, int, (pid_t, int, const union sigval))
 
 // ---- the page and this process's slots ----
 
@@ -260,8 +264,9 @@ struct WaitTarget {
 
 /// Publishes this thread's wait. A wait begun while the thread is in another (a signal
 /// handler's, or the spin cost's sleep) saves the one it interrupts; EndWait hands it back.
+/// `vouched`, `entry_wakes`: see ThreadSlot.
 void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
-               WaitTarget target = {}) {
+               WaitTarget target = {}, bool vouched = false, std::uint32_t entry_wakes = 0) {
   const int depth = t_wait_depth;
   // Counted before the slot is written: a handler that runs from here on saves and restores
   // what it finds, and this wait then finishes writing its own.
@@ -277,6 +282,8 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
   s.kind.store(kind);
   s.fired.store(0);
   s.resumed.store(0);
+  s.entry_wakes.store(entry_wakes);
+  s.vouched.store(vouched ? 1 : 0);
   s.deadline_ns.store(deadline);
   s.calls.store(0, std::memory_order_relaxed);
   s.state.store(vt::kWaiting);
@@ -296,6 +303,7 @@ void EndWait(vt::ThreadSlot& s) {
     s.kind.store(w.kind);
     s.fired.store(0);
     s.resumed.store(1);
+    s.vouched.store(0);
     s.deadline_ns.store(w.deadline_ns);
     s.state.store(vt::kWaiting);
     Transition(true);
@@ -304,6 +312,7 @@ void EndWait(vt::ThreadSlot& s) {
   s.state.store(vt::kRunning);
   s.deadline_ns.store(vt::kNoDeadline);
   s.resumed.store(0);
+  s.vouched.store(0);
   Transition();
 }
 
@@ -333,8 +342,12 @@ void* TimerThreadMain(void* raw) {
   return nullptr;
 }
 
+/// After a write that may end an fd wait the host cannot see (ThreadSlot::vouched).
+void NoteFdWake() { g_page->fd_wakes.fetch_add(1); }
+
 void FireTimers() {
   const int used = g_page->timers_used.load();
+  bool wrote = false;
   for (int i = 0; i < used; ++i) {
     vt::TimerSlot& t = g_page->timers[i];
     if (t.pid.load() != getpid() || t.fired.load() == 0) continue;
@@ -342,6 +355,7 @@ void FireTimers() {
     t.fired.store(0);
     if (t.notify.load() == vt::kNotifyEventFd) {
       eventfd_write(t.fd, expirations);
+      wrote = true;
     } else if (t.notify.load() == vt::kNotifyThread) {
       // SIGEV_THREAD: like glibc, a new thread per expiration (through our pthread_create, so
       // the host sees it).
@@ -356,6 +370,7 @@ void FireTimers() {
       pthread_attr_destroy(&attr);
     }
   }
+  if (wrote) NoteFdWake();
 }
 
 void FireWaits() {
@@ -366,6 +381,7 @@ void FireWaits() {
     if (s.fired.exchange(0) == 0) continue;
     if (s.kind.load() == vt::kFdWait && s.wake_fd >= 0) {
       eventfd_write(s.wake_fd, 1);
+      NoteFdWake();
     } else if (s.kind.load() == vt::kFutexWait) {
       real_syscall()(SYS_futex, reinterpret_cast<std::uint32_t*>(s.cond),
                      static_cast<int>(FUTEX_WAKE_BITSET | s.mutex), INT32_MAX, nullptr, nullptr,
@@ -537,17 +553,91 @@ int PollUntilSignalled(pollfd* fds, nfds_t n, std::int64_t deadline, const sigse
   return rc;
 }
 
+/// libwheelhil_ucan.so's `wheelhil_ucan_bus_socket_state` (nullptr: that library is not
+/// loaded): 0 not a bus socket of the broker, 1 one with nothing to read, 2 one that may have.
+using BusSocketFn = int (*)(int);
+BusSocketFn UcanBusSocketState() {
+  static std::atomic<BusSocketFn> fn{nullptr};
+  static std::atomic<bool> looked{false};
+  if (!looked.load(std::memory_order_acquire)) {
+    fn.store(reinterpret_cast<BusSocketFn>(dlsym(RTLD_DEFAULT, "wheelhil_ucan_bus_socket_state")));
+    looked.store(true, std::memory_order_release);
+  }
+  return fn.load(std::memory_order_relaxed);
+}
+
+/// A virtual timerfd of this process (no system call: the pid is the process slot's).
+bool IsVirtualTimerFd(int fd) {
+  const pid_t me = g_page->processes[g_proc].pid.load(std::memory_order_relaxed);
+  const int used = g_page->timers_used.load();
+  for (int i = 0; i < used; ++i) {
+    const vt::TimerSlot& t = g_page->timers[i];
+    if (t.fd == fd && t.state.load() != vt::kTimerFree && t.pid.load() == me) return true;
+  }
+  return false;
+}
+
+/// Whether only the host or an agent can make the program's `fds` ready (ThreadSlot::vouched):
+/// input from bus sockets of the broker and from virtual timerfds; output is the kernel's to
+/// tell. kLook: vouchable once a look in the kernel found none ready (a timerfd's count, a bus
+/// socket without rings); kReady: one may be ready already (a bus socket's ring).
+enum class Vouch { kNo, kYes, kLook, kReady };
+Vouch VouchFor(const pollfd* fds, nfds_t n) {
+  const BusSocketFn bus = UcanBusSocketState();
+  if (bus == nullptr || g_proc < 0) return Vouch::kNo;
+  Vouch v = Vouch::kYes;
+  for (nfds_t i = 0; i < n; ++i) {
+    const int fd = fds[i].fd;
+    if (fd < 0) continue;  // poll ignores it
+    if (fds[i].events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
+    const int state = bus(fd);
+    if (state == 2) {
+      v = Vouch::kReady;
+    } else if (state == 0) {
+      if (!IsVirtualTimerFd(fd)) return Vouch::kNo;
+      if (v == Vouch::kYes) v = Vouch::kLook;
+    }
+  }
+  return v;
+}
+
+// This thread's wake eventfd may hold a wake-up the host wrote for a wait that ended before it
+// read it: the next vouched wait looks in the kernel first.
+thread_local bool t_wake_may_be_left = false;
+
+/// ppoll() on `all` (the program's `n` fds, then this thread's wake eventfd when `wake_fd` is
+/// not -1) without timeout, as the thread's kFdWait. A vouched wait reads Page::fd_wakes
+/// before it makes sure none of the fds is ready (in memory or by a look in the kernel): every
+/// write counted before that read is seen, so the wait can be ended only by a later write,
+/// which bumps the count again. -1 with errno, or the ready count.
+int WaitOnFds(vt::ThreadSlot& s, pollfd* all, nfds_t n, int wake_fd, const sigset_t* mask,
+              std::int64_t deadline, WaitTarget target) {
+  static const timespec kZero{0, 0};
+  const nfds_t n_all = n + (wake_fd >= 0 ? 1 : 0);
+  const std::uint32_t wakes = g_page->fd_wakes.load();
+  Vouch v = VouchFor(all, n);
+  if (v == Vouch::kYes && t_wake_may_be_left) v = Vouch::kLook;
+  if (v == Vouch::kLook || v == Vouch::kReady) {
+    t_wake_may_be_left = false;
+    const int rc = real_ppoll()(all, n_all, &kZero, mask);
+    if (rc != 0) return rc;
+  }
+  BeginWait(s, vt::kFdWait, deadline, target, v != Vouch::kNo, wakes);
+  const int rc = real_ppoll()(all, n_all, nullptr, mask);
+  const int err = errno;
+  // Ended by the host (its deadline) before its eventfd write was seen: that write may follow.
+  if (wake_fd >= 0 && s.state.load() == vt::kRunning && all[n].revents == 0) {
+    t_wake_may_be_left = true;
+  }
+  EndWait(s);
+  errno = err;
+  return rc;
+}
+
 /// poll() on `fds` until one is ready or virtual `deadline` (kNoDeadline: none) passed.
 int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask) {
   vt::ThreadSlot& s = Self();
-  if (deadline == vt::kNoDeadline) {
-    BeginWait(s, vt::kFdWait, vt::kNoDeadline);
-    const int rc = real_ppoll()(fds, n, nullptr, mask);
-    const int err = errno;
-    EndWait(s);
-    errno = err;
-    return rc;
-  }
+  if (deadline == vt::kNoDeadline) return WaitOnFds(s, fds, n, -1, mask, deadline, {});
   EnsureAgent();
   int wake = WakeFd();
   if (wake < 0) return PollUntilSignalled(fds, n, deadline, mask);
@@ -562,10 +652,8 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
     all[n] = pollfd{wake, POLLIN, 0};
     WaitTarget target;
     target.wake_fd = wake;
-    BeginWait(s, vt::kFdWait, deadline, target);
-    const int rc = real_ppoll()(all, n + 1, nullptr, mask);
+    const int rc = WaitOnFds(s, all, n, wake, mask, deadline, target);
     const int err = errno;
-    EndWait(s);
     if (rc < 0 && err == EINTR && g_wake_fd_plus1[t_slot].load() != wake + 1) {
       wake = g_wake_fd_plus1[t_slot].load() - 1;  // moved away from a dup2 (MoveLibraryFd)
       if (wake < 0) wake = WakeFd();
@@ -1657,11 +1745,40 @@ VTIME_EXPORT long syscall(long number, ...) {
         }
         break;
       }
+      case SYS_kill:
+      case SYS_tkill:
+      case SYS_tgkill:
+      case SYS_rt_sigqueueinfo:
+      case SYS_rt_tgsigqueueinfo: {
+        const long rc = real_syscall()(number, a1, a2, a3, a4, a5, a6);
+        if (rc == 0) NoteFdWake();
+        return rc;
+      }
       default:
         break;
     }
   }
   return real_syscall()(number, a1, a2, a3, a4, a5, a6);
+}
+
+// ---- signals between the firmware's threads: they may end a wait the host takes for vouched ----
+
+VTIME_EXPORT int kill(pid_t pid, int sig) {
+  const int rc = real_kill()(pid, sig);
+  if (g_page != nullptr && rc == 0 && sig != 0) NoteFdWake();
+  return rc;
+}
+
+VTIME_EXPORT int pthread_kill(pthread_t thread, int sig) {
+  const int rc = real_pthread_kill()(thread, sig);
+  if (g_page != nullptr && rc == 0 && sig != 0) NoteFdWake();
+  return rc;
+}
+
+VTIME_EXPORT int sigqueue(pid_t pid, int sig, const union sigval value) {
+  const int rc = real_sigqueue()(pid, sig, value);
+  if (g_page != nullptr && rc == 0 && sig != 0) NoteFdWake();
+  return rc;
 }
 
 // ---- alarm, setitimer(ITIMER_REAL), POSIX timers ----

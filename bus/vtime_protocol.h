@@ -94,12 +94,20 @@ struct alignas(64) ThreadSlot {
   std::atomic<std::int64_t> deadline_ns{kNoDeadline};  ///< Virtual CLOCK_MONOTONIC.
   std::atomic<std::int32_t> pid{0};
   std::atomic<std::int32_t> tid{0};     ///< 0: created, not started yet.
-  std::atomic<std::uint64_t> calls{0};  ///< Non-blocking calls since its last wait.
+  std::atomic<std::uint32_t> calls{0};  ///< Non-blocking calls since its last wait.
+  /// kFdWait with `vouched`: Page::fd_wakes when the thread last found none of its fds ready,
+  /// right before it published the wait.
+  std::atomic<std::uint32_t> entry_wakes{0};
   std::atomic<std::uint16_t> last_call{kCallNone};
   /// 1 while the slot holds a wait that a signal handler's own wait interrupted and handed back:
   /// the thread may be running on its way out of it, so the host asks the kernel (as for fd
   /// waits) even for a kSleep.
-  std::atomic<std::uint16_t> resumed{0};
+  std::atomic<std::uint8_t> resumed{0};
+  /// kFdWait: 1 when every fd of the wait is one only the host or an agent makes ready (a bus
+  /// socket of the broker, a virtual timerfd, the thread's wake eventfd), each waited on for
+  /// input, and none was ready at `entry_wakes`. While Page::fd_wakes is still `entry_wakes`,
+  /// nothing can have woken the thread: the host needs no look at the kernel.
+  std::atomic<std::uint8_t> vouched{0};
   // Process-local, written by the thread before it waits, read by its process's agent.
   std::int32_t wake_fd = -1;  ///< kFdWait: the thread's eventfd.
   std::uint64_t cond = 0;     ///< kCondWait: pthread_cond_t*
@@ -150,6 +158,10 @@ struct Page {
   std::atomic<std::int64_t> spin_cost_ns{0};
   /// Bumped on every wait entry and exit (futex word).
   alignas(64) std::atomic<std::uint32_t> transitions{0};
+  /// Bumped after every write that can end an fd wait without the slot saying so: the host's
+  /// (its broker's writes to the firmware's sockets, the eventfds and signals of WakeDue), an
+  /// agent's (eventfds), a firmware thread's signal to another. See ThreadSlot::vouched.
+  std::atomic<std::uint32_t> fd_wakes{0};
   /// Set by the host before it sleeps on `transitions`; the first transition after takes it
   /// (exchange to 0) and wakes the host.
   std::atomic<std::uint32_t> host_waiting{0};
@@ -203,6 +215,7 @@ inline std::uint64_t ExpireTimer(TimerSlot& t, std::int64_t now) {
 
 static_assert(std::atomic<std::int64_t>::is_always_lock_free);
 static_assert(std::atomic<std::uint16_t>::is_always_lock_free);
+static_assert(std::atomic<std::uint8_t>::is_always_lock_free);
 static_assert(sizeof(ThreadSlot) == 64, "a thread's slot is one cache line");
 static_assert(std::atomic<std::uint32_t>::is_always_lock_free);
 

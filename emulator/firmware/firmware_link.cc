@@ -136,7 +136,7 @@ bool FirmwareLink::WaitForConnection(FirmwareProcess& process, double timeout_s,
       return false;
     }
     if (pumped_) {
-      broker_->Pump(2);  // its connection and its requests need a broker pass
+      PumpBroker(2);  // its connection and its requests need a broker pass
     } else {
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
@@ -159,7 +159,7 @@ bool FirmwareLink::Send(const bus::CanFrame& frame) {
 
 void FirmwareLink::Pump(int timeout_ms) {
   unpumped_frames_ = 0;
-  if (!broker_->Pump(timeout_ms)) run_.Fail("the userspace bus stopped");
+  if (!PumpBroker(timeout_ms)) run_.Fail("the userspace bus stopped");
   CheckBrokerLimits();
 }
 
@@ -196,7 +196,7 @@ bool FirmwareLink::FirmwareConnected() {
 
 void FirmwareLink::KeepAlive(VirtualClock& clock) {
   clock.WakeDue();
-  if (!broker_->Pump(0)) return;
+  if (!PumpBroker(0)) return;
   bus::CanFrame f;
   while (broker_->ReceiveLocal(local_port_, &f)) {
   }
@@ -204,8 +204,16 @@ void FirmwareLink::KeepAlive(VirtualClock& clock) {
   clock.WaitForChange(1000);
 }
 
-void FirmwareLink::UseReceiveClock(const VirtualClock& clock) {
+bool FirmwareLink::PumpBroker(int timeout_ms) {
+  const std::uint64_t before = broker_->client_progress();
+  const bool ok = broker_->Pump(timeout_ms);
+  if (clock_ != nullptr && broker_->client_progress() != before) clock_->NoteFdWakes();
+  return ok;
+}
+
+void FirmwareLink::UseVirtualClock(VirtualClock& clock) {
   if (!broker_) return;
+  clock_ = &clock;
   broker_->SetReceiveClock([&clock] { return clock.RealtimeNs(); });
 }
 

@@ -69,8 +69,9 @@ class FirmwareLink {
   /// Virtual time, after the run: ends the waits due, routes the bus (the firmware's frames are
   /// dropped) and waits up to 1 ms for the firmware to change.
   void KeepAlive(VirtualClock& clock);
-  /// Virtual time: the frames' receive stamps are the clock's CLOCK_REALTIME.
-  void UseReceiveClock(const VirtualClock& clock);
+  /// Virtual time: the frames' receive stamps are the clock's CLOCK_REALTIME, and every broker
+  /// pass that wrote to the firmware tells the clock (VirtualClock::NoteFdWakes).
+  void UseVirtualClock(VirtualClock& clock);
   /// The firmware has a socket bound on the private bus (remembered: FailExited says whether it
   /// ever had one).
   bool FirmwareConnected();
@@ -82,6 +83,8 @@ class FirmwareLink {
 
  private:
   void Pump(int timeout_ms);
+  // One broker pass (UcanBroker::Pump), told to the virtual clock when it wrote to a client.
+  bool PumpBroker(int timeout_ms);
   // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
   void CheckBrokerLimits();
   // "the firmware was killed by signal 11 (SIGSEGV) during the run (see firmware.log)".
@@ -94,6 +97,7 @@ class FirmwareLink {
   std::optional<bus::SocketCanTransport> can_;
   bool pumped_ = false;
   int local_port_ = -1;  // the emulator's port on the pumped bus
+  VirtualClock* clock_ = nullptr;  // UseVirtualClock
   static constexpr int kMaxUnpumpedFrames = 32;
   // Settle: wall time at one virtual instant for a firmware that keeps blocking and being woken
   // by the bus: this many timeouts, and at least this many seconds.

@@ -263,8 +263,12 @@ int VirtualClock::WakeDue() {
       break;
     }
   }
+  // Timerfds and wake eventfds written, signals sent: a vouched wait may have ended.
+  if (ended > 0) NoteFdWakes();
   return ended;
 }
+
+void VirtualClock::NoteFdWakes() { page_->fd_wakes.fetch_add(1); }
 
 int VirtualClock::CopyOfFd(pid_t pid, int fd, std::uint64_t tag) {
   if (!fd_copies_work_ || pid <= 0 || fd < 0) return -1;
@@ -319,6 +323,7 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
     f.schedstat_fd = ::open((dir + "schedstat").c_str(), O_RDONLY | O_CLOEXEC);
   }
   if (f.stat_fd < 0) return Kernel::kGone;
+  ++kernel_looks_;
   const char state = TaskState(ReadAt0(f.stat_fd));
   if (Gone(state)) return Kernel::kGone;
   if (runs != nullptr) {
@@ -378,8 +383,13 @@ bool VirtualClock::Blocked() {
     if (tid == 0) return false;  // created, not started
     if (st == vt::kWaiting) {
       const std::uint32_t kind = s.kind.load();
-      // Only WakeDue ends these, unless it sent a signal to their process at this instant.
-      if ((kind == vt::kSleep || kind == vt::kAgent) && s.resumed.load() == 0 &&
+      // Only WakeDue ends these, unless it sent a signal to their process at this instant. A
+      // vouched fd wait: nothing that could end it happened since it found its fds not ready.
+      const bool only_host_ends =
+          kind == vt::kSleep || kind == vt::kAgent ||
+          (kind == vt::kFdWait && s.vouched.load() != 0 &&
+           s.entry_wakes.load() == page_->fd_wakes.load());
+      if (only_host_ends && s.resumed.load() == 0 &&
           (signalled_.empty() ||
            std::find(signalled_.begin(), signalled_.end(), pid) == signalled_.end())) {
         continue;

@@ -5,8 +5,9 @@
 /// reached their deadline (WakeDue: futex wakes, writes to copies of the firmware's eventfds
 /// taken with pidfd_getfd, signals, or the agent thread), and tells whether every thread of
 /// every firmware process is blocked (Blocked): in a wait of the library that only the clock
-/// can end, or asleep in the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition
-/// of any thread while it looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
+/// can end (a sleep, or an fd wait the library vouches for: bus/vtime_protocol.h), or asleep in
+/// the kernel (read from /proc/<pid>/task/<tid>/stat) with no transition of any thread while it
+/// looked. Times are run ns (0 = run start); the firmware's CLOCK_MONOTONIC is
 /// kMonotonicAtStartNs + run ns and its CLOCK_REALTIME kRealtimeAtStartNs + run ns, whatever
 /// the host's clocks say, so a run is the same on every machine (until the firmware sets its
 /// own CLOCK_REALTIME, which moves only its virtual one: RealtimeNs).
@@ -62,6 +63,11 @@ class VirtualClock {
   /// Ends every wait whose deadline is now or past and fires the timers due. Returns the
   /// number of waits ended and timers fired.
   int WakeDue();
+  /// After the host wrote to the firmware's sockets (a broker pass that wrote to a client): an
+  /// fd wait Blocked() took on the library's word may have ended (ThreadSlot::vouched).
+  void NoteFdWakes();
+  /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
+  std::uint64_t kernel_looks() const { return kernel_looks_; }
 
   /// True when every thread of the firmware is blocked (see above). A thread asleep in the
   /// kernel outside the library's waits counts once it was seen asleep twice without running
@@ -121,6 +127,7 @@ class VirtualClock {
   bus::vtime::Page* page_ = nullptr;
   std::vector<ProcFiles> files_;
   std::uint32_t transitions_seen_ = 0;
+  std::uint64_t kernel_looks_ = 0;
   int first_process_slot_ = -1;
   struct FdCopy {
     pid_t pid = 0;
