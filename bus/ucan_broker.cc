@@ -1163,7 +1163,7 @@ struct UcanBroker::Impl {
   /// stamp order. A write that returned before T0 is then either routed already or read in this
   /// pass, so a frame is never routed before one whose write() returned before it was sent.
   /// Waits up to `timeout_ms` (-1: forever) for traffic first. False once the broker must stop.
-  bool Pass(std::vector<epoll_event>& events, int timeout_ms) {
+  bool Pass(std::vector<epoll_event>& events, int timeout_ms, bool look_at_sockets = true) {
     bool more_pending = false;
     {
       std::lock_guard lk(mu);
@@ -1214,7 +1214,7 @@ struct UcanBroker::Impl {
     };
     // A client sends its request right after connecting: a second look answers it in this pass
     // (a pumped broker's owner would otherwise wait for a pass that nothing asks for).
-    if (serve_ready() > 0) serve_ready();
+    if (look_at_sockets && serve_ready() > 0) serve_ready();
     // Every ring, ready or not: a push that returned before T0 may have found its doorbell
     // already pending (one rung in an earlier pass, not yet read), so readiness says nothing.
     for (std::size_t i = 0; i < ring_clients.size(); ++i) DrainRing(ring_clients[i]);
@@ -1368,6 +1368,19 @@ bool UcanBroker::ReceiveLocal(int port, CanFrame* frame) {
     c->queue.PopFront(1);
     if (ok) return true;
   }
+  return false;
+}
+
+bool UcanBroker::PumpQuiet() {
+  if (impl_->thread.joinable()) {
+    throw std::logic_error("UcanBroker::PumpQuiet: the broker thread still runs (UseCallerThread)");
+  }
+  {
+    std::lock_guard lk(impl_->mu);
+    if (impl_->stopped) return false;
+  }
+  if (impl_->Pass(impl_->pump_events, 0, false)) return true;
+  impl_->Finish();
   return false;
 }
 

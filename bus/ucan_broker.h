@@ -115,6 +115,11 @@ class UcanBroker {
   /// (0: not at all, -1: forever) for traffic, then accepts, reads and routes everything ready.
   /// False once the broker has stopped. Throws std::logic_error while the thread still runs.
   bool Pump(int timeout_ms);
+  /// A pass that does not look at the clients' sockets (no system call unless it writes): it
+  /// routes what SendLocal() queued and what the clients' rings hold. For an owner that knows
+  /// no client can have written to its socket since its last Pump() (its programs were all
+  /// blocked since), so that pass's look would find nothing.
+  bool PumpQuiet();
 
   /// An in-process socket on `bus` for the owner that pumps: a CAN_RAW socket with a new
   /// socket's options (every frame, loopback on, its own frames not received) but no kernel

@@ -157,9 +157,9 @@ bool FirmwareLink::Send(const bus::CanFrame& frame) {
   return !can_->Send(frame);
 }
 
-void FirmwareLink::Pump(int timeout_ms) {
+void FirmwareLink::Pump(int timeout_ms, bool quiet) {
   unpumped_frames_ = 0;
-  if (!PumpBroker(timeout_ms)) run_.Fail("the userspace bus stopped");
+  if (!PumpBroker(timeout_ms, quiet)) run_.Fail("the userspace bus stopped");
   CheckBrokerLimits();
 }
 
@@ -204,10 +204,13 @@ void FirmwareLink::KeepAlive(VirtualClock& clock) {
   clock.WaitForChange(1000);
 }
 
-bool FirmwareLink::PumpBroker(int timeout_ms) {
+bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet) {
   const std::uint64_t before = broker_->client_progress();
-  const bool ok = broker_->Pump(timeout_ms);
-  if (clock_ != nullptr && broker_->client_progress() != before) clock_->NoteFdWakes();
+  const bool ok = quiet ? broker_->PumpQuiet() : broker_->Pump(timeout_ms);
+  if (broker_->client_progress() != before) {
+    sockets_quiet_ = false;
+    if (clock_ != nullptr) clock_->NoteFdWakes();
+  }
   return ok;
 }
 
@@ -224,6 +227,11 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
+  // Blocked since the last pass looked at its sockets, and nothing woke it since: the first
+  // pass need not look (every process of it is on the clock: none runs on its own).
+  const bool quiet_first_pass =
+      sockets_quiet_ && !ended_waits && clock.UnregisteredProcess() == 0;
+  sockets_quiet_ = false;
   ++handovers_;
   // The limit is on running without blocking: a firmware that blocks and is woken again by
   // what it asked the bus for (a burst of socket opens, requests) makes progress, and starts
@@ -241,9 +249,9 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     return who;
   };
   // One broker pass; true when it wrote to a client (which may wake a firmware thread).
-  auto pass = [&] {
+  auto pass = [&](bool quiet = false) {
     const std::uint64_t before = broker_->client_progress();
-    Pump(0);
+    Pump(0, quiet);
     bus::CanFrame f;
     while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
     return broker_->client_progress() != before;
@@ -251,7 +259,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   // What the run sent since the last settle; if that reached the firmware, it runs now (and
   // cannot be blocked yet).
   // Waits it just ended run now as well: no look at the firmware can find it blocked yet.
-  bool woke = pass() || ended_waits;
+  bool woke = pass(quiet_first_pass) || ended_waits;
   for (;;) {
     if (run_.failed()) return false;
     if (!woke && clock.Blocked()) {
@@ -281,6 +289,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
         } while (WallSeconds(gone_at) < 2.0);
       }
       firmware_blocked_ = true;
+      sockets_quiet_ = true;
       return true;
     }
     const double wall = WallSeconds(t0);

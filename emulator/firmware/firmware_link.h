@@ -82,9 +82,10 @@ class FirmwareLink {
   void Close();
 
  private:
-  void Pump(int timeout_ms);
-  // One broker pass (UcanBroker::Pump), told to the virtual clock when it wrote to a client.
-  bool PumpBroker(int timeout_ms);
+  // quiet: UcanBroker::PumpQuiet (no look at the clients' sockets).
+  void Pump(int timeout_ms, bool quiet = false);
+  // One broker pass, told to the virtual clock when it wrote to a client.
+  bool PumpBroker(int timeout_ms, bool quiet = false);
   // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
   void CheckBrokerLimits();
   // "the firmware was killed by signal 11 (SIGSEGV) during the run (see firmware.log)".
@@ -106,6 +107,9 @@ class FirmwareLink {
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
+  // Virtual time: the firmware was blocked when a pass last looked at the clients' sockets,
+  // and no pass has written to a client since (nothing can have woken it).
+  bool sockets_quiet_ = false;
   bool opened_once_ = false;  // the firmware bound a socket once (FirmwareConnected)
   std::uint64_t handovers_ = 0;
   std::chrono::steady_clock::time_point last_exit_check_{};

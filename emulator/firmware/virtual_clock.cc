@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <linux/futex.h>
+#include <sched.h>
 #include <sys/eventfd.h>
 #include <sys/mman.h>
 #include <sys/syscall.h>
@@ -423,6 +424,14 @@ bool VirtualClock::Blocked() {
 }
 
 void VirtualClock::WaitForChange(int timeout_us) {
+  if (shares_cpu_ && yields_in_vain_ < kYieldsBeforeSleep) {
+    // The firmware runs on this CPU once this thread makes way, and the host is back when it
+    // blocks: no wake-up for it to send (a system call on its side).
+    if (page_->transitions.load() == transitions_seen_) ::sched_yield();
+    yields_in_vain_ = page_->transitions.load() == transitions_seen_ ? yields_in_vain_ + 1 : 0;
+    return;
+  }
+  yields_in_vain_ = 0;
   page_->host_waiting.store(1);
   if (page_->transitions.load() == transitions_seen_) {
     const timespec ts{0, static_cast<long>(timeout_us) * 1000};

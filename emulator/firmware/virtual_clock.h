@@ -79,6 +79,9 @@ class VirtualClock {
   /// Sleeps until a thread of the firmware entered or left a wait since the last Blocked()
   /// began (so nothing between that check and this sleep is missed), at most timeout_us.
   void WaitForChange(int timeout_us);
+  /// The firmware's processes run on the host thread's one CPU: WaitForChange makes way for
+  /// them (sched_yield) before it sleeps on the page.
+  void SetSharesCpu(bool shares) { shares_cpu_ = shares; }
 
   /// The threads that are not blocked: "name (tid N) last called X (K calls since its last
   /// wait)", for the report of a firmware that does not block.
@@ -128,6 +131,10 @@ class VirtualClock {
   std::vector<ProcFiles> files_;
   std::uint32_t transitions_seen_ = 0;
   std::uint64_t kernel_looks_ = 0;
+  bool shares_cpu_ = false;
+  // WaitForChange: yields in a row after which no thread had changed (then it sleeps).
+  static constexpr int kYieldsBeforeSleep = 2;
+  int yields_in_vain_ = 0;
   int first_process_slot_ = -1;
   struct FdCopy {
     pid_t pid = 0;

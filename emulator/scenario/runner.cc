@@ -336,6 +336,7 @@ void Run::Build() {
   if (virtual_time_) {
     clock_ = std::make_unique<firmware::VirtualClock>(link_->runtime_dir());
     clock_->SetSpinCost(std::llround(s_.timing.spin_cost_s * 1e9));
+    clock_->SetSharesCpu(cpus_.cpu() >= 0);
     link_->UseVirtualClock(*clock_);
   }
   if (link_->private_bus() && o_.on_private_bus) {
