@@ -62,6 +62,9 @@ REAL_FN(select, int, (int, fd_set*, fd_set*, fd_set*, timeval*))
 REAL_FN(pselect, int, (int, fd_set*, fd_set*, fd_set*, const timespec*, const sigset_t*))
 REAL_FN(epoll_wait, int, (int, epoll_event*, int, int))
 REAL_FN(epoll_pwait, int, (int, epoll_event*, int, int, const sigset_t*))
+REAL_FN(epoll_create, int, (int))
+REAL_FN(epoll_create1, int, (int))
+REAL_FN(epoll_ctl, int, (int, int, int, epoll_event*))
 REAL_FN(timerfd_create, int, (int, int))
 REAL_FN(timerfd_settime, int, (int, int, const itimerspec*, itimerspec*))
 REAL_FN(timerfd_gettime, int, (int, itimerspec*))
@@ -577,10 +580,84 @@ bool IsVirtualTimerFd(int fd) {
   return false;
 }
 
+/// An fd only the host or an agent makes ready, waited on for input (ThreadSlot::vouched).
+bool VouchableInput(int fd, std::uint32_t events) {
+  if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return false;
+  const BusSocketFn bus = UcanBusSocketState();
+  return (bus != nullptr && bus(fd) != 0) || IsVirtualTimerFd(fd);
+}
+
+// The epoll sets this process made through the library, by fd number: the members it added
+// that are not vouchable (a few by number; more, and the set stays unvouched until closed).
+// A set whose members are all vouchable is itself (its zero-timeout look in the kernel tells
+// whether any member is ready). Members the kernel drops on their last close stay counted,
+// which only costs a look in /proc. Written under g_epoll_lock, read without it.
+constexpr int kMaxEpollFds = 1024;
+constexpr int kMaxUnvouchedMembers = 6;
+struct EpollSet {
+  std::atomic<std::uint8_t> tracked{0};
+  std::atomic<std::uint8_t> overflow{0};
+  std::atomic<std::uint8_t> unvouched{0};  // entries used in `members`
+  std::int32_t members[kMaxUnvouchedMembers];
+};
+EpollSet g_epoll[kMaxEpollFds];
+pthread_mutex_t g_epoll_lock = PTHREAD_MUTEX_INITIALIZER;
+
+bool EpollVouchable(int epfd) {
+  if (epfd < 0 || epfd >= kMaxEpollFds) return false;
+  const EpollSet& e = g_epoll[epfd];
+  return e.tracked.load() != 0 && e.overflow.load() == 0 && e.unvouched.load() == 0;
+}
+
+void ForgetEpoll(int fd) {
+  if (fd < 0 || fd >= kMaxEpollFds || g_epoll[fd].tracked.load() == 0) return;
+  pthread_mutex_lock(&g_epoll_lock);
+  g_epoll[fd].tracked.store(0);
+  pthread_mutex_unlock(&g_epoll_lock);
+}
+
+void TrackNewEpoll(int fd) {
+  if (fd < 0 || fd >= kMaxEpollFds) return;
+  pthread_mutex_lock(&g_epoll_lock);
+  EpollSet& e = g_epoll[fd];
+  e.overflow.store(0);
+  e.unvouched.store(0);
+  e.tracked.store(1);
+  pthread_mutex_unlock(&g_epoll_lock);
+}
+
+/// After a successful epoll_ctl on a tracked set.
+void TrackEpollCtl(int epfd, int op, int fd, const epoll_event* ev) {
+  if (epfd < 0 || epfd >= kMaxEpollFds) return;
+  const bool vouchable = op != EPOLL_CTL_DEL && ev != nullptr && VouchableInput(fd, ev->events);
+  pthread_mutex_lock(&g_epoll_lock);
+  EpollSet& e = g_epoll[epfd];
+  if (e.tracked.load() != 0) {
+    int n = e.unvouched.load();
+    int at = -1;
+    for (int i = 0; i < n; ++i) {
+      if (e.members[i] == fd) at = i;
+    }
+    if (at >= 0 && (op == EPOLL_CTL_DEL || vouchable)) {
+      e.members[at] = e.members[n - 1];
+      e.unvouched.store(static_cast<std::uint8_t>(n - 1));
+    } else if (at < 0 && op != EPOLL_CTL_DEL && !vouchable) {
+      if (n == kMaxUnvouchedMembers) {
+        e.overflow.store(1);
+      } else {
+        e.members[n] = fd;
+        e.unvouched.store(static_cast<std::uint8_t>(n + 1));
+      }
+    }
+  }
+  pthread_mutex_unlock(&g_epoll_lock);
+}
+
 /// Whether only the host or an agent can make the program's `fds` ready (ThreadSlot::vouched):
 /// input from bus sockets of the broker and from virtual timerfds; output is the kernel's to
-/// tell. kLook: vouchable once a look in the kernel found none ready (a timerfd's count, a bus
-/// socket without rings); kReady: one may be ready already (a bus socket's ring).
+/// tell. kLook: vouchable once a look in the kernel found none ready (a timerfd's count, an
+/// epoll set of such fds, a bus socket without rings); kReady: one may be ready already (a bus
+/// socket's ring).
 enum class Vouch { kNo, kYes, kLook, kReady };
 Vouch VouchFor(const pollfd* fds, nfds_t n) {
   const BusSocketFn bus = UcanBusSocketState();
@@ -594,7 +671,7 @@ Vouch VouchFor(const pollfd* fds, nfds_t n) {
     if (state == 2) {
       v = Vouch::kReady;
     } else if (state == 0) {
-      if (!IsVirtualTimerFd(fd)) return Vouch::kNo;
+      if (!IsVirtualTimerFd(fd) && !EpollVouchable(fd)) return Vouch::kNo;
       if (v == Vouch::kYes) v = Vouch::kLook;
     }
   }
@@ -1261,6 +1338,24 @@ VTIME_EXPORT int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms,
   }
 }
 
+VTIME_EXPORT int epoll_create(int size) {
+  const int fd = real_epoll_create()(size);
+  if (g_page != nullptr) TrackNewEpoll(fd);
+  return fd;
+}
+
+VTIME_EXPORT int epoll_create1(int flags) {
+  const int fd = real_epoll_create1()(flags);
+  if (g_page != nullptr) TrackNewEpoll(fd);
+  return fd;
+}
+
+VTIME_EXPORT int epoll_ctl(int epfd, int op, int fd, epoll_event* ev) {
+  const int rc = real_epoll_ctl()(epfd, op, fd, ev);
+  if (g_page != nullptr && rc == 0) TrackEpollCtl(epfd, op, fd, ev);
+  return rc;
+}
+
 VTIME_EXPORT int epoll_wait(int epfd, epoll_event* ev, int max, int timeout_ms) {
   if (g_page == nullptr) return real_epoll_wait()(epfd, ev, max, timeout_ms);
   return epoll_pwait(epfd, ev, max, timeout_ms, nullptr);
@@ -1372,6 +1467,7 @@ VTIME_EXPORT int close(int fd) {
     }
     const int i = TimerOf(fd);
     if (i >= 0) FreeTimerSlot(i);
+    ForgetEpoll(fd);
   }
   return real_close()(fd);
 }
@@ -1400,6 +1496,9 @@ VTIME_EXPORT int close_range(unsigned first, unsigned last, int flags) {
   }
   if (from <= last && real_close_range()(from, last, flags) != 0) return -1;
   FreeTimersIn(first, last);
+  for (unsigned fd = first; fd <= last && fd < static_cast<unsigned>(kMaxEpollFds); ++fd) {
+    ForgetEpoll(static_cast<int>(fd));
+  }
   return 0;
 }
 
@@ -1421,6 +1520,7 @@ namespace {
 /// could not be moved away.
 int KeepLibraryFd(int fd, int fd2) {
   if (g_page == nullptr || fd == fd2 || InVforkChild()) return 0;
+  ForgetEpoll(fd2);
   return MoveLibraryFd(fd2);
 }
 
