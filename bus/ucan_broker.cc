@@ -314,6 +314,7 @@ struct UcanBroker::Impl {
   std::deque<std::pair<std::uint32_t, std::int64_t>> awaiting_request;  // id, accepted_ns
   UcanBrokerHealth health;
   std::uint64_t client_progress = 0;  // see UcanBroker::client_progress
+  UcanWokenClients woken;             // see UcanBroker::TakeWokenClients
   std::function<std::int64_t()> receive_clock;  // empty: CLOCK_REALTIME
 
   mutable std::mutex mu;
@@ -488,10 +489,15 @@ struct UcanBroker::Impl {
 
   // ---- clients (mu held) ----
 
+  void NoteWoken(const Client* c) {
+    if (woken.ids.empty() || woken.ids.back() != c->id) woken.ids.push_back(c->id);
+  }
+
   void Kill(Client* c) {
     if (c->dead) return;
     c->dead = true;
     ++client_progress;
+    woken.other = true;
     if (c->rings) c->rings->header->closed.store(1);
     if (!c->local) ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
   }
@@ -550,6 +556,7 @@ struct UcanBroker::Impl {
     ++health.refused_connections;
     health.last_refusal = std::move(why);
     ++client_progress;
+    woken.other = true;
   }
 
   void ResumeAccepting() {
@@ -623,6 +630,7 @@ struct UcanBroker::Impl {
         continue;
       }
       ++client_progress;  // its request is read and answered by this pass's second look or later
+      woken.other = true;
       ++accepted;
       auto c = std::make_unique<Client>();
       c->fd = Fd(fd);
@@ -667,6 +675,7 @@ struct UcanBroker::Impl {
     }
     [[maybe_unused]] ssize_t n = ::sendmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
     ++client_progress;
+    woken.other = true;
   }
 
   bool SetOptions(Client* c, const Request& req, const std::uint8_t* filters_bytes,
@@ -1101,7 +1110,10 @@ struct UcanBroker::Impl {
         return;
       }
       c->queue.PopFront(static_cast<std::size_t>(sent));
-      if (sent > 0) ++client_progress;
+      if (sent > 0) {
+        ++client_progress;
+        NoteWoken(c);
+      }
       if (sent < n) break;
     }
     const bool want_out = !c->queue.empty();
@@ -1129,6 +1141,7 @@ struct UcanBroker::Impl {
           [[maybe_unused]] ssize_t n =
               ::send(c->fd.get(), &bell, sizeof(bell), MSG_DONTWAIT | MSG_NOSIGNAL);
           ++client_progress;
+          NoteWoken(c);
         }
         continue;
       }
@@ -1395,6 +1408,13 @@ bool UcanBroker::Pump(int timeout_ms) {
   if (impl_->Pass(impl_->pump_events, timeout_ms)) return true;
   impl_->Finish();
   return false;
+}
+
+void UcanBroker::TakeWokenClients(UcanWokenClients* out) {
+  std::lock_guard lk(impl_->mu);
+  out->ids.clear();
+  std::swap(out->ids, impl_->woken.ids);
+  out->other = std::exchange(impl_->woken.other, false);
 }
 
 std::uint64_t UcanBroker::client_progress() const {

@@ -83,6 +83,12 @@ struct UcanBusStats {
   std::uint64_t bad_messages = 0;  ///< Rejected client messages (bad size or frame).
 };
 
+/// UcanBroker::TakeWokenClients.
+struct UcanWokenClients {
+  std::vector<std::uint32_t> ids;
+  bool other = false;
+};
+
 class UcanBroker {
  public:
   /// Creates/verifies the runtime directory, takes its lock, binds the socket and starts the
@@ -138,6 +144,10 @@ class UcanBroker {
   /// same pass when it came with the connection, else by a later one), a client dropped.
   /// Equal before and after a Pump(): that pass woke no client.
   std::uint64_t client_progress() const;
+  /// Who the passes since the last call woke (the same writes client_progress counts): the data
+  /// clients written to (frames, doorbells), by the id their kOpen Reply gave them, and whether
+  /// anything else was (a reply, a connection accepted or refused, a client dropped).
+  void TakeWokenClients(UcanWokenClients* out);
   /// The receive timestamps' clock (ns; default CLOCK_REALTIME), e.g. a run's virtual clock.
   /// Set it before traffic, or from the thread that pumps.
   void SetReceiveClock(std::function<std::int64_t()> clock_ns);

@@ -139,6 +139,7 @@ void UnlockTable();
 struct View {
   bool bound = false;
   int ifindex = 0;
+  std::uint32_t client_id = 0;
   bool fd_frames = false;
   int timestamp_mode = 0;
   int timestamp_cmsg = 0;
@@ -212,6 +213,7 @@ bool GetView(int fd, View* v) {
   if (const UcanSocket* s = g_sockets[fd]) {
     v->bound = s->bound;
     v->ifindex = s->ifindex;
+    v->client_id = s->client_id;
     v->fd_frames = s->options.fd_frames != 0;
     v->timestamp_mode = s->timestamp_mode;
     v->timestamp_cmsg = s->timestamp_cmsg;
@@ -862,9 +864,11 @@ int DupFcntl(int fd, int cmd, int rc) {
 /// only the host ends: 0, not a socket bound to a bus of the broker; 1, one with nothing to read
 /// (its rx ring empty, no doorbell pending or left on the socket); 2, one that may have
 /// something to read (or no rings to tell). Only the broker makes such a socket readable.
-UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd) {
+/// `*client_id`: its id on the broker (the wake channel the host counts its writes on).
+UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd, std::uint32_t* client_id) {
   View v;
   if (!GetView(fd, &v) || !v.bound) return 0;
+  *client_id = v.client_id;
   if (v.rings == nullptr) return 2;
   ucan::RingIndex& rx = v.rings->header->rx;
   LockRing(rx);

@@ -269,7 +269,8 @@ struct WaitTarget {
 /// handler's, or the spin cost's sleep) saves the one it interrupts; EndWait hands it back.
 /// `vouched`, `entry_wakes`: see ThreadSlot.
 void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
-               WaitTarget target = {}, bool vouched = false, std::uint32_t entry_wakes = 0) {
+               WaitTarget target = {}, bool vouched = false, std::uint32_t entry_wakes = 0,
+               std::uint32_t channels = 0) {
   const int depth = t_wait_depth;
   // Counted before the slot is written: a handler that runs from here on saves and restores
   // what it finds, and this wait then finishes writing its own.
@@ -286,6 +287,7 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
   s.fired.store(0);
   s.resumed.store(0);
   s.entry_wakes.store(entry_wakes);
+  s.wait_channels.store(channels);
   s.vouched.store(vouched ? 1 : 0);
   s.deadline_ns.store(deadline);
   s.calls.store(0, std::memory_order_relaxed);
@@ -346,7 +348,7 @@ void* TimerThreadMain(void* raw) {
 }
 
 /// After a write that may end an fd wait the host cannot see (ThreadSlot::vouched).
-void NoteFdWake() { g_page->fd_wakes.fetch_add(1); }
+void NoteFdWake() { vt::NoteWake(*g_page, vt::kAnyChannel); }
 
 void FireTimers() {
   const int used = g_page->timers_used.load();
@@ -557,8 +559,9 @@ int PollUntilSignalled(pollfd* fds, nfds_t n, std::int64_t deadline, const sigse
 }
 
 /// libwheelhil_ucan.so's `wheelhil_ucan_bus_socket_state` (nullptr: that library is not
-/// loaded): 0 not a bus socket of the broker, 1 one with nothing to read, 2 one that may have.
-using BusSocketFn = int (*)(int);
+/// loaded): 0 not a bus socket of the broker, 1 one with nothing to read, 2 one that may have;
+/// its client id on the broker.
+using BusSocketFn = int (*)(int, std::uint32_t*);
 BusSocketFn UcanBusSocketState() {
   static std::atomic<BusSocketFn> fn{nullptr};
   static std::atomic<bool> looked{false};
@@ -569,22 +572,27 @@ BusSocketFn UcanBusSocketState() {
   return fn.load(std::memory_order_relaxed);
 }
 
-/// A virtual timerfd of this process (no system call: the pid is the process slot's).
-bool IsVirtualTimerFd(int fd) {
+/// The timer slot of fd when it is a virtual timerfd of this process, else -1 (no system call:
+/// the pid is the process slot's).
+int VirtualTimerFdSlot(int fd) {
   const pid_t me = g_page->processes[g_proc].pid.load(std::memory_order_relaxed);
   const int used = g_page->timers_used.load();
   for (int i = 0; i < used; ++i) {
     const vt::TimerSlot& t = g_page->timers[i];
-    if (t.fd == fd && t.state.load() != vt::kTimerFree && t.pid.load() == me) return true;
+    if (t.fd == fd && t.state.load() != vt::kTimerFree && t.pid.load() == me) return i;
   }
-  return false;
+  return -1;
 }
 
-/// An fd only the host or an agent makes ready, waited on for input (ThreadSlot::vouched).
-bool VouchableInput(int fd, std::uint32_t events) {
-  if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return false;
+/// An fd only the host or an agent makes ready, waited on for input (ThreadSlot::vouched): its
+/// wake channels, 0 when it is not one.
+std::uint32_t VouchableInput(int fd, std::uint32_t events) {
+  if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return 0;
   const BusSocketFn bus = UcanBusSocketState();
-  return (bus != nullptr && bus(fd) != 0) || IsVirtualTimerFd(fd);
+  std::uint32_t client = 0;
+  if (bus != nullptr && bus(fd, &client) != 0) return vt::BusSocketChannel(client);
+  const int timer = VirtualTimerFdSlot(fd);
+  return timer >= 0 ? vt::TimerChannel(timer) : 0;
 }
 
 // The epoll sets this process made through the library, by fd number: the members it added
@@ -595,6 +603,7 @@ bool VouchableInput(int fd, std::uint32_t events) {
 constexpr int kMaxEpollFds = 1024;
 constexpr int kMaxUnvouchedMembers = 6;
 struct EpollSet {
+  std::atomic<std::uint32_t> channels{0};  // of the vouchable members ever added
   std::atomic<std::uint8_t> tracked{0};
   std::atomic<std::uint8_t> overflow{0};
   std::atomic<std::uint8_t> unvouched{0};  // entries used in `members`
@@ -603,10 +612,12 @@ struct EpollSet {
 EpollSet g_epoll[kMaxEpollFds];
 pthread_mutex_t g_epoll_lock = PTHREAD_MUTEX_INITIALIZER;
 
-bool EpollVouchable(int epfd) {
-  if (epfd < 0 || epfd >= kMaxEpollFds) return false;
+/// The wake channels of a tracked epoll set whose members are all vouchable, else 0.
+std::uint32_t EpollVouchable(int epfd) {
+  if (epfd < 0 || epfd >= kMaxEpollFds) return 0;
   const EpollSet& e = g_epoll[epfd];
-  return e.tracked.load() != 0 && e.overflow.load() == 0 && e.unvouched.load() == 0;
+  if (e.tracked.load() == 0 || e.overflow.load() != 0 || e.unvouched.load() != 0) return 0;
+  return e.channels.load() | vt::kAnyChannel;
 }
 
 void ForgetEpoll(int fd) {
@@ -622,6 +633,7 @@ void TrackNewEpoll(int fd) {
   EpollSet& e = g_epoll[fd];
   e.overflow.store(0);
   e.unvouched.store(0);
+  e.channels.store(0);
   e.tracked.store(1);
   pthread_mutex_unlock(&g_epoll_lock);
 }
@@ -629,10 +641,13 @@ void TrackNewEpoll(int fd) {
 /// After a successful epoll_ctl on a tracked set.
 void TrackEpollCtl(int epfd, int op, int fd, const epoll_event* ev) {
   if (epfd < 0 || epfd >= kMaxEpollFds) return;
-  const bool vouchable = op != EPOLL_CTL_DEL && ev != nullptr && VouchableInput(fd, ev->events);
+  const std::uint32_t channels =
+      op != EPOLL_CTL_DEL && ev != nullptr ? VouchableInput(fd, ev->events) : 0;
+  const bool vouchable = channels != 0;
   pthread_mutex_lock(&g_epoll_lock);
   EpollSet& e = g_epoll[epfd];
   if (e.tracked.load() != 0) {
+    e.channels.fetch_or(channels);
     int n = e.unvouched.load();
     int at = -1;
     for (int i = 0; i < n; ++i) {
@@ -659,21 +674,28 @@ void TrackEpollCtl(int epfd, int op, int fd, const epoll_event* ev) {
 /// epoll set of such fds, a bus socket without rings); kReady: one may be ready already (a bus
 /// socket's ring).
 enum class Vouch { kNo, kYes, kLook, kReady };
-Vouch VouchFor(const pollfd* fds, nfds_t n) {
+/// `*channels`: the wake channels of the fds.
+Vouch VouchFor(const pollfd* fds, nfds_t n, std::uint32_t* channels) {
   const BusSocketFn bus = UcanBusSocketState();
   if (bus == nullptr || g_proc < 0) return Vouch::kNo;
   Vouch v = Vouch::kYes;
+  *channels = 0;
   for (nfds_t i = 0; i < n; ++i) {
     const int fd = fds[i].fd;
     if (fd < 0) continue;  // poll ignores it
     if (fds[i].events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
-    const int state = bus(fd);
-    if (state == 2) {
-      v = Vouch::kReady;
-    } else if (state == 0) {
-      if (!IsVirtualTimerFd(fd) && !EpollVouchable(fd)) return Vouch::kNo;
-      if (v == Vouch::kYes) v = Vouch::kLook;
+    std::uint32_t client = 0;
+    const int state = bus(fd, &client);
+    if (state != 0) {
+      *channels |= vt::BusSocketChannel(client);
+      if (state == 2) v = Vouch::kReady;
+      continue;
     }
+    const int timer = VirtualTimerFdSlot(fd);
+    const std::uint32_t of_set = timer >= 0 ? vt::TimerChannel(timer) : EpollVouchable(fd);
+    if (of_set == 0) return Vouch::kNo;
+    *channels |= of_set;
+    if (v == Vouch::kYes) v = Vouch::kLook;
   }
   return v;
 }
@@ -692,14 +714,15 @@ int WaitOnFds(vt::ThreadSlot& s, pollfd* all, nfds_t n, int wake_fd, const sigse
   static const timespec kZero{0, 0};
   const nfds_t n_all = n + (wake_fd >= 0 ? 1 : 0);
   const std::uint32_t wakes = g_page->fd_wakes.load();
-  Vouch v = VouchFor(all, n);
+  std::uint32_t channels = 0;
+  Vouch v = VouchFor(all, n, &channels);
   if (v == Vouch::kYes && t_wake_may_be_left) v = Vouch::kLook;
   if (v == Vouch::kLook || v == Vouch::kReady) {
     t_wake_may_be_left = false;
     const int rc = real_ppoll()(all, n_all, &kZero, mask);
     if (rc != 0) return rc;
   }
-  BeginWait(s, vt::kFdWait, deadline, target, v != Vouch::kNo, wakes);
+  BeginWait(s, vt::kFdWait, deadline, target, v != Vouch::kNo, wakes, channels);
   const int rc = real_ppoll()(all, n_all, nullptr, mask);
   const int err = errno;
   // Ended by the host (its deadline) before its eventfd write was seen: that write may follow.

@@ -86,11 +86,24 @@ struct ProcessSlot {
   std::atomic<std::uint32_t> exec_pending{0};
 };
 
+/// Wake channels (ThreadSlot::wait_channels, Page::channel_wakes): what a write that may end a
+/// vouched fd wait was for, as a bit. Channel 0 is anything (a signal, an agent's write, the
+/// broker's connection events); the others are shared by timers, and by bus sockets, whose
+/// numbers fall on the same bit (a write for one then also counts for the other).
+inline constexpr int kWakeChannels = 32;
+inline constexpr std::uint32_t kAnyChannel = 1u;
+inline std::uint32_t TimerChannel(int timer_slot) { return 1u << (1 + timer_slot % 15); }
+inline std::uint32_t BusSocketChannel(std::uint32_t client_id) {
+  return 1u << (16 + client_id % 16);
+}
+
 struct alignas(64) ThreadSlot {
   std::atomic<std::uint32_t> state{kFree};
   std::atomic<std::uint32_t> wake{0};   ///< Futex word (kSleep, kAgent).
-  std::atomic<std::uint32_t> kind{kNone};
-  std::atomic<std::uint32_t> fired{0};  ///< Host -> agent: the deadline of this wait passed.
+  std::atomic<std::uint16_t> kind{kNone};
+  std::atomic<std::uint16_t> fired{0};  ///< Host -> agent: the deadline of this wait passed.
+  /// kFdWait with `vouched`: the wake channels of its fds (kAnyChannel always counts).
+  std::atomic<std::uint32_t> wait_channels{0};
   std::atomic<std::int64_t> deadline_ns{kNoDeadline};  ///< Virtual CLOCK_MONOTONIC.
   std::atomic<std::int32_t> pid{0};
   std::atomic<std::int32_t> tid{0};     ///< 0: created, not started yet.
@@ -104,9 +117,10 @@ struct alignas(64) ThreadSlot {
   /// waits) even for a kSleep.
   std::atomic<std::uint8_t> resumed{0};
   /// kFdWait: 1 when every fd of the wait is one only the host or an agent makes ready (a bus
-  /// socket of the broker, a virtual timerfd, the thread's wake eventfd), each waited on for
-  /// input, and none was ready at `entry_wakes`. While Page::fd_wakes is still `entry_wakes`,
-  /// nothing can have woken the thread: the host needs no look at the kernel.
+  /// socket of the broker, a virtual timerfd, an epoll set of those, the thread's wake
+  /// eventfd), each waited on for input, and none was ready at `entry_wakes`. While no channel
+  /// of `wait_channels` was written after that (Page::channel_wakes), nothing can have woken
+  /// the thread: the host needs no look at the kernel.
   std::atomic<std::uint8_t> vouched{0};
   // Process-local, written by the thread before it waits, read by its process's agent.
   std::int32_t wake_fd = -1;  ///< kFdWait: the thread's eventfd.
@@ -162,6 +176,8 @@ struct Page {
   /// (its broker's writes to the firmware's sockets, the eventfds and signals of WakeDue), an
   /// agent's (eventfds), a firmware thread's signal to another. See ThreadSlot::vouched.
   std::atomic<std::uint32_t> fd_wakes{0};
+  /// Per wake channel: the fd_wakes value of the last write on it (NoteWake).
+  std::atomic<std::uint32_t> channel_wakes[kWakeChannels] = {};
   /// Set by the host before it sleeps on `transitions`; the first transition after takes it
   /// (exchange to 0) and wakes the host.
   std::atomic<std::uint32_t> host_waiting{0};
@@ -172,6 +188,32 @@ struct Page {
   ThreadSlot threads[kMaxThreads];
   TimerSlot timers[kMaxTimers];
 };
+
+/// Counts a write that may end a vouched fd wait, on the channels of `channels`: after it, a
+/// wait that read fd_wakes before it and waits on one of them is no longer vouched for.
+inline void NoteWake(Page& page, std::uint32_t channels) {
+  const std::uint32_t v = page.fd_wakes.fetch_add(1) + 1;
+  for (int b = 0; b < kWakeChannels; ++b) {
+    if ((channels >> b & 1u) == 0) continue;
+    std::uint32_t cur = page.channel_wakes[b].load();
+    while (static_cast<std::int32_t>(v - cur) > 0 &&
+           !page.channel_wakes[b].compare_exchange_weak(cur, v)) {
+    }
+  }
+}
+
+/// Nothing was written on the channels of a vouched wait of `slot` since it was entered.
+inline bool VouchHolds(const Page& page, const ThreadSlot& slot) {
+  const std::uint32_t entry = slot.entry_wakes.load();
+  const std::uint32_t channels = slot.wait_channels.load() | kAnyChannel;
+  for (int b = 0; b < kWakeChannels; ++b) {
+    if ((channels >> b & 1u) != 0 &&
+        static_cast<std::int32_t>(page.channel_wakes[b].load() - entry) > 0) {
+      return false;
+    }
+  }
+  return true;
+}
 
 /// sec + nsec as ns, saturated: a time beyond the int64 range of ns ("sleep forever" as
 /// tv_sec = LONG_MAX) is kNoDeadline, one before it -kNoDeadline. nsec in [0, 1e9).

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "bus/ucan_runtime_dir.h"
+#include "bus/vtime_protocol.h"
 #include "emulator/firmware/stale_run_dirs.h"
 
 namespace wheelhil::emulator::firmware {
@@ -209,7 +210,12 @@ bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet) {
   const bool ok = quiet ? broker_->PumpQuiet() : broker_->Pump(timeout_ms);
   if (broker_->client_progress() != before) {
     sockets_quiet_ = false;
-    if (clock_ != nullptr) clock_->NoteFdWakes();
+    broker_->TakeWokenClients(&woken_);
+    if (clock_ != nullptr) {
+      std::uint32_t channels = woken_.other ? bus::vtime::kAnyChannel : 0u;
+      for (const std::uint32_t id : woken_.ids) channels |= bus::vtime::BusSocketChannel(id);
+      clock_->NoteFdWakes(channels);
+    }
   }
   return ok;
 }

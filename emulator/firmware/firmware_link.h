@@ -99,6 +99,7 @@ class FirmwareLink {
   bool pumped_ = false;
   int local_port_ = -1;  // the emulator's port on the pumped bus
   VirtualClock* clock_ = nullptr;  // UseVirtualClock
+  bus::UcanWokenClients woken_;    // PumpBroker's scratch
   static constexpr int kMaxUnpumpedFrames = 32;
   // Settle: wall time at one virtual instant for a firmware that keeps blocking and being woken
   // by the bus: this many timeouts, and at least this many seconds.

@@ -186,6 +186,7 @@ int VirtualClock::WakeDue() {
   const std::int64_t now = page_->now_ns.load();
   signalled_.clear();
   int ended = 0;
+  std::uint32_t channels = 0;  // of the writes and signals that may end a vouched fd wait
   pid_t agents[vt::kMaxProcesses];
   int n_agents = 0;
   auto need_agent = [&](pid_t pid) {
@@ -207,6 +208,7 @@ int VirtualClock::WakeDue() {
         const int copy = CopyOfFd(pid, t.fd, tag);
         if (copy >= 0) {
           eventfd_write(copy, vt::ExpireTimer(t, now));
+          channels |= vt::TimerChannel(i);
           continue;
         }
         break;  // the agent writes it
@@ -215,6 +217,7 @@ int VirtualClock::WakeDue() {
       case vt::kNotifyAlarm:
         vt::ExpireTimer(t, now);
         SendTimerSignal(t, pid);
+        channels |= vt::kAnyChannel;
         continue;
       case vt::kNotifyNone:
         vt::ExpireTimer(t, now);
@@ -245,6 +248,7 @@ int VirtualClock::WakeDue() {
       need_agent(s.pid.load());
     } else if (kind == vt::kSignalWait) {
       ::syscall(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
+      channels |= vt::kAnyChannel;
     } else {
       s.wake.fetch_add(1);
       FutexWake(&s.wake);
@@ -264,12 +268,12 @@ int VirtualClock::WakeDue() {
       break;
     }
   }
-  // Timerfds and wake eventfds written, signals sent: a vouched wait may have ended.
-  if (ended > 0) NoteFdWakes();
+  // Timerfds written, signals sent: a vouched wait on them may have ended.
+  if (channels != 0) NoteFdWakes(channels);
   return ended;
 }
 
-void VirtualClock::NoteFdWakes() { page_->fd_wakes.fetch_add(1); }
+void VirtualClock::NoteFdWakes(std::uint32_t channels) { vt::NoteWake(*page_, channels); }
 
 int VirtualClock::CopyOfFd(pid_t pid, int fd, std::uint64_t tag) {
   if (!fd_copies_work_ || pid <= 0 || fd < 0) return -1;
@@ -388,8 +392,7 @@ bool VirtualClock::Blocked() {
       // vouched fd wait: nothing that could end it happened since it found its fds not ready.
       const bool only_host_ends =
           kind == vt::kSleep || kind == vt::kAgent ||
-          (kind == vt::kFdWait && s.vouched.load() != 0 &&
-           s.entry_wakes.load() == page_->fd_wakes.load());
+          (kind == vt::kFdWait && s.vouched.load() != 0 && vt::VouchHolds(*page_, s));
       if (only_host_ends && s.resumed.load() == 0 &&
           (signalled_.empty() ||
            std::find(signalled_.begin(), signalled_.end(), pid) == signalled_.end())) {

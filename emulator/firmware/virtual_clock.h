@@ -64,8 +64,9 @@ class VirtualClock {
   /// number of waits ended and timers fired.
   int WakeDue();
   /// After the host wrote to the firmware's sockets (a broker pass that wrote to a client): an
-  /// fd wait Blocked() took on the library's word may have ended (ThreadSlot::vouched).
-  void NoteFdWakes();
+  /// fd wait on those `channels` (bus/vtime_protocol.h: BusSocketChannel of the clients
+  /// written to, kAnyChannel for anything else) may have ended (ThreadSlot::vouched).
+  void NoteFdWakes(std::uint32_t channels);
   /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
   std::uint64_t kernel_looks() const { return kernel_looks_; }
 
