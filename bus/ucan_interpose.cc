@@ -646,6 +646,7 @@ ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap
   ucan::RingIndex& r = h->rx;
   bool may_block = (flags & MSG_DONTWAIT) == 0;
   bool checked_mode = false;
+  bool polled = false;  // the socket was found readable by the poll below
   std::int64_t deadline_ns = -1;  // SO_RCVTIMEO
   for (;;) {
     LockRing(r);
@@ -672,12 +673,16 @@ ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap
     // A frame pushed after the look above is the next call's, as it would be on a kernel
     // socket: a call that may not wait needs no look at the doorbells (one system call less).
     if (flags & MSG_DONTWAIT) return Fail(EAGAIN);
-    // A doorbell still queued announces a push after the clear above: take the frame.
-    std::uint64_t bell = 0;
-    const ssize_t n = real_recv()(fd, &bell, sizeof(bell), MSG_PEEK | MSG_DONTWAIT);
-    if (n == 0) return 0;  // the broker closed the connection
-    if (n > 0) continue;
-    if (errno != EAGAIN) return -1;
+    if (polled) {
+      // Readable, yet the ring is empty: a doorbell for a push after the clear above (take
+      // the frame), or the end of the connection.
+      polled = false;
+      std::uint64_t bell = 0;
+      const ssize_t n = real_recv()(fd, &bell, sizeof(bell), MSG_PEEK | MSG_DONTWAIT);
+      if (n == 0) return 0;  // the broker closed the connection
+      if (n > 0) continue;
+      if (errno != EAGAIN) return -1;
+    }
     if (!checked_mode && may_block) {
       checked_mode = true;
       const int fl = real_fcntl()(fd, F_GETFL);
@@ -697,9 +702,11 @@ ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap
       if (left_ns <= 0) return Fail(EAGAIN);
       timeout_ms = static_cast<int>((left_ns + 999999) / 1000000);
     }
+    // A doorbell still queued ends this poll at once.
     pollfd p{fd, POLLIN, 0};
     const int rc = ::poll(&p, 1, timeout_ms);
     if (rc < 0) return -1;  // EINTR
+    polled = rc > 0;
   }
 }
 
