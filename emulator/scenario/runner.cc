@@ -558,6 +558,7 @@ json Run::Report(double wall_s) {
                    {"handover_s", wall_.handover_s},
                    {"handover_us_each", handovers > 0 ? wall_.handover_s / handovers * 1e6 : 0.0},
                    {"firmware_cpu_s", firmware_cpu_s_ >= 0 ? json(firmware_cpu_s_) : json()},
+                   {"kernel_looks", clock_ ? json(clock_->kernel_looks()) : json()},
                    {"physics_s", wall_.physics_s},
                    {"devices_bus_s", wall_.devices_bus_s},
                    {"other_s", std::max(0.0, wall_s - staged_s)}};

@@ -9,7 +9,7 @@
  * Usage: c_epoll_odometry --can IFACE [--left ID] [--right ID] [--cpr N] [--radius M]
  *                         [--track M] [--period-ms N] [--spin-after-s S] [--exit-after-s S]
  *                         [--fork] [--raw-sleep-after-s S] [--superloop 1]
- *                         [--abort-after-bind 1] [--reexec-without LIB]
+ *                         [--abort-after-bind 1] [--reexec-without LIB] [--self-pipe 1]
  * --fork: the work is done by a forked child; the parent only waits for it (a supervisor).
  * --superloop: the main loop never blocks: it polls its epoll set with a zero timeout, as a
  * bare-metal super loop ported to Linux does.
@@ -18,9 +18,11 @@
  * host's clock each cycle through a raw system call, as a Go runtime makes it (tests of what the
  * emulator reports for such firmware); --abort-after-bind: abort() as soon as the bus is open;
  * --reexec-without LIB: first exec itself again with every LD_PRELOAD entry naming LIB dropped,
- * as a launcher that cleans its environment does. */
+ * as a launcher that cleans its environment does; --self-pipe: the read end of a pipe (written
+ * by its SIGTERM handler) is in the epoll set too, the classic way to wake a loop on a signal. */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
 #include <math.h>
@@ -52,10 +54,15 @@ static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 static struct node g_nodes[2];
 static volatile sig_atomic_t g_stop = 0;
 static int g_can = -1;
+static int g_wake_pipe[2] = {-1, -1};
 
 static void on_signal(int sig) {
   (void)sig;
   g_stop = 1;
+  if (g_wake_pipe[1] >= 0) {
+    const char c = 1;
+    (void)!write(g_wake_pipe[1], &c, 1);
+  }
 }
 
 static int send_frame(uint32_t id, const uint8_t* data, uint8_t len) {
@@ -131,6 +138,7 @@ int main(int argc, char** argv) {
   double raw_sleep_after_s = -1;
   int fork_child = 0;
   int superloop = 0;
+  int self_pipe = 0;
   int abort_after_bind = 0;
   const char* reexec_without = NULL;
   int period_ms = 10;
@@ -151,6 +159,7 @@ int main(int argc, char** argv) {
     else if (strcmp(argv[i], "--raw-sleep-after-s") == 0) raw_sleep_after_s = atof(argv[i + 1]);
     else if (strcmp(argv[i], "--abort-after-bind") == 0) abort_after_bind = atoi(argv[i + 1]);
     else if (strcmp(argv[i], "--reexec-without") == 0) reexec_without = argv[i + 1];
+    else if (strcmp(argv[i], "--self-pipe") == 0) self_pipe = atoi(argv[i + 1]);
   }
   if (reexec_without != NULL) {
     /* LD_PRELOAD without the entries naming the library; the same arguments but this pair. */
@@ -232,6 +241,10 @@ int main(int argc, char** argv) {
   ev.events = EPOLLIN;
   ev.data.fd = tfd;
   epoll_ctl(ep, EPOLL_CTL_ADD, tfd, &ev);
+  if (self_pipe && pipe2(g_wake_pipe, O_CLOEXEC | O_NONBLOCK) == 0) {
+    ev.data.fd = g_wake_pipe[0];
+    epoll_ctl(ep, EPOLL_CTL_ADD, g_wake_pipe[0], &ev);
+  }
 
   enum { kWaitBoot, kWaitSdo, kRun } state = kWaitBoot;
   const double t0 = now_s();
@@ -258,6 +271,7 @@ int main(int argc, char** argv) {
       perror("c_epoll_odometry: epoll_wait");
       return 1;
     }
+    if (g_wake_pipe[0] >= 0 && out.data.fd == g_wake_pipe[0]) continue;  /* a signal: g_stop */
     uint64_t expirations = 0;
     if (read(tfd, &expirations, sizeof(expirations)) != (ssize_t)sizeof(expirations)) continue;
 

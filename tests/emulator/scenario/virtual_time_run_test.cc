@@ -335,6 +335,33 @@ TEST_F(VirtualTimeRun, TheWallBlockAccountsForHandoversAndStages) {
   EXPECT_NEAR(staged, w["wall_time_s"].get<double>(), 1e-6);
   ASSERT_TRUE(w["firmware_cpu_s"].is_number()) << w.dump();
   EXPECT_GE(w["firmware_cpu_s"].get<double>(), 0.0);
+  ASSERT_TRUE(w["kernel_looks"].is_number()) << w.dump();
+}
+
+// The waits of the C firmware (its epoll set of a timerfd, its reader thread's receive) are
+// ones only the emulator can end, so it knows the firmware blocked without asking the kernel.
+// The same firmware with a pipe in its epoll set (the self-pipe of a signal handler; never
+// written in the run) waits where only the kernel knows: a look in /proc per turn or more.
+// What it does is the same either way.
+TEST_F(VirtualTimeRun, WaitsOnlyTheEmulatorCanEndNeedNoLookInTheKernel) {
+  auto run = [&](const std::string& name, bool self_pipe) {
+    Scenario s = LoadScenarioFile(kCustomerC);
+    s.timing.duration_s = 1.0;
+    s.expectations.clear();
+    if (self_pipe) s.firmware.command += " --self-pipe 1";
+    const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / name));
+    EXPECT_EQ(r.failure, "") << name;
+    return r.report["wall"];
+  };
+  const nlohmann::json vouched = run("vouched", false);
+  const nlohmann::json piped = run("piped", true);
+  const auto turns = vouched["handovers"].get<double>();
+  ASSERT_GT(turns, 100);
+  EXPECT_LT(vouched["kernel_looks"].get<double>(), 0.2 * turns) << vouched.dump();
+  EXPECT_GT(piped["kernel_looks"].get<double>(), 0.9 * piped["handovers"].get<double>())
+      << piped.dump();
+  EXPECT_EQ(Slurp(dir_ / "vouched" / "can.log"), Slurp(dir_ / "piped" / "can.log"));
+  EXPECT_EQ(Slurp(dir_ / "vouched" / "estimate.csv"), Slurp(dir_ / "piped" / "estimate.csv"));
 }
 
 // A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
