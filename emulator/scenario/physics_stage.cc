@@ -253,7 +253,7 @@ std::span<const double> PhysicsStage::readings(std::size_t device) const {
 }
 
 void PhysicsStage::StartWorker(std::int64_t steps, const cpu_set_t* cpus,
-                               std::vector<std::unique_ptr<Device>>& devices) {
+                               std::vector<std::unique_ptr<Device>>& devices, bool fall_back) {
   if (steps <= 0) return;
   // From here the worker owns the vehicle: what the run reads before the first motion step
   // (the truth row of the motion start) is a copy.
@@ -273,6 +273,7 @@ void PhysicsStage::StartWorker(std::int64_t steps, const cpu_set_t* cpus,
   }
   if (!any_ahead) ahead.clear();
   const std::int64_t t0_ns = run_.now_ns;
+  worker_t0_ns_ = t0_ns;
   // 2048 steps of look-ahead (~2 s of motion at 1 kHz, ~1.5 MB): either side may lose its CPU
   // to another process for a time slice (a few ms) without the other running dry or blocking.
   pipeline_ = std::make_unique<sim::StepPipeline<StepResult>>(
@@ -290,10 +291,15 @@ void PhysicsStage::StartWorker(std::int64_t steps, const cpu_set_t* cpus,
           if (ahead[d] != nullptr) ahead[d]->TakeReadingsAhead(t_after, out.body, out.readings[d]);
         }
       },
-      cpus);
+      cpus, fall_back);
   worker_used_ = true;
 }
 
 void PhysicsStage::StopWorker() { pipeline_.reset(); }
+
+std::int64_t PhysicsStage::inline_from_ns() const {
+  if (!pipeline_ || pipeline_->inline_from_step() < 0) return -1;
+  return worker_t0_ns_ + pipeline_->inline_from_step() * step_ns_;
+}
 
 }  // namespace wheelhil::emulator::scenario

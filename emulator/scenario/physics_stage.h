@@ -54,12 +54,17 @@ class PhysicsStage {
   std::span<const double> readings(std::size_t device) const;
 
   /// Runs the next `steps` motion steps on a worker on `cpus` (nullptr: inherited), taking the
-  /// readings ahead for the devices that allow it. Call after StartMotion.
+  /// readings ahead for the devices that allow it. Call after StartMotion. `fall_back`: when
+  /// the worker makes the run wait longer than its steps cost it (its CPU taken by another
+  /// job), the run's thread takes the rest of the steps back (sim::StepPipeline).
   void StartWorker(std::int64_t steps, const cpu_set_t* cpus,
-                   std::vector<std::unique_ptr<Device>>& devices);
+                   std::vector<std::unique_ptr<Device>>& devices, bool fall_back);
   /// Stops the worker (a failed run leaves it steps ahead).
   void StopWorker();
   bool worker_used() const { return worker_used_; }
+  /// The run time (ns) from which the run's thread made the steps itself after a worker; -1
+  /// when it did not. Valid until StopWorker.
+  std::int64_t inline_from_ns() const;
 
  private:
   struct StepResult {
@@ -87,6 +92,7 @@ class PhysicsStage {
   StepResult start_state_;  // the vehicle at the motion start, once a worker owns it
   std::unique_ptr<sim::StepPipeline<StepResult>> pipeline_;
   bool worker_used_ = false;
+  std::int64_t worker_t0_ns_ = 0;  // the run time of the worker's step 0
   // Physical faults: per scenario fault, active; per wheel scratch (sized once).
   std::vector<char> physical_on_;
   bool has_physical_faults_ = false;

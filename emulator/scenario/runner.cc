@@ -81,7 +81,13 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   bool StepPhysics(std::int64_t t_end_ns, bool motion) override {
     sim::WallTimer timer(wall_.physics_s);
     if (s_.firmware_motion) CommandDrives();
-    return physics_->Step(t_end_ns - physics_->step_ns(), motion);
+    const bool ok = physics_->Step(t_end_ns - physics_->step_ns(), motion);
+    if (!log_on_run_thread_ && physics_->inline_from_ns() >= 0) {
+      // The worker's CPUs are taken (it fell back): can.log comes back to this thread too.
+      hub_->StopBackgroundLog();
+      log_on_run_thread_ = true;
+    }
+    return ok;
   }
   void StepDevices(std::int64_t t_ns, bool motion) override;
   void RecordTruth(std::int64_t t_ns, bool force) override {
@@ -169,6 +175,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // firmware started (-1: no firmware started); the firmware's own after its exit.
   double children_cpu_before_s_ = -1;
   double firmware_cpu_s_ = -1;
+  // --physics-thread auto: when the run's thread took the steps back from the worker (-1: no).
+  std::int64_t physics_inline_from_ns_ = -1;
+  bool log_on_run_thread_ = false;  // can.log written here again after the worker fell back
 };
 
 void Run::CommandDrives() {
@@ -419,7 +428,7 @@ void Run::StartWorker(std::int64_t steps) {
   if (o_.physics_thread == PT::kAuto && !have_others) return;
   if (CPU_COUNT(&others) == 0) CPU_SET(cpus_.cpu() >= 0 ? cpus_.cpu() : 0, &others);  // kOn
   const cpu_set_t* where = cpus_.cpu() >= 0 || o_.physics_thread == PT::kOn ? &others : nullptr;
-  physics_->StartWorker(steps, where, devices_);
+  physics_->StartWorker(steps, where, devices_, o_.physics_thread == PT::kAuto);
   // The lines of the frames from here on are formatted there as well.
   hub_->StartBackgroundLog(where);
 }
@@ -552,6 +561,10 @@ json Run::Report(double wall_s) {
                    {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
                    {"cpu", cpus_.cpu()},
                    {"physics_thread", physics_->worker_used()},
+                   {"physics_inline_from_s",
+                    physics_inline_from_ns_ >= 0
+                        ? json(run_.MotionSeconds(physics_inline_from_ns_))
+                        : json()},
                    {"virtual_s", virtual_s},
                    {"handovers", handovers},
                    {"handovers_per_sim_s", virtual_s > 0 ? handovers / virtual_s : 0.0},
@@ -594,6 +607,7 @@ RunResult Run::Execute() {
   StartFirmware();
   RunPhases();
 
+  physics_inline_from_ns_ = physics_->inline_from_ns();
   physics_->StopWorker();  // a failed run leaves it steps ahead
   Progress(true);
   hub_->DrainToLog();

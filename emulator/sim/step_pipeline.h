@@ -21,16 +21,26 @@
 // woken (its wait is on a sequence word it read before announcing itself, and the waker bumps
 // it). The producer, once asleep on a full ring, is woken when half the ring is free, so a
 // consumer that drains fast does not pay a wake-up per step.
+//
+// Falling back (the constructor's `fall_back`): a worker whose CPU is taken by another job makes
+// the consumer wait longer than the steps would take it to compute. Every kJudgeSteps steps the
+// consumer compares its wait with the worker's CPU time for those steps; when the wait was
+// longer by half in two windows in a row (the first window, while the worker builds its lead,
+// not counted), the worker is stopped between two steps and the consumer computes the rest
+// itself, in the same order (the same bits).
 #include <immintrin.h>
+#include <time.h>
 #include <pthread.h>
 #include <sched.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace wheelhil::emulator::sim {
@@ -43,9 +53,10 @@ class StepPipeline {
   using StepFn = std::function<void(std::int64_t step, Slot& out)>;
 
   /// Starts the worker. `capacity` is rounded up to a power of two (>= 4). `cpus`: the worker's
-  /// CPU set (nullptr: inherited).
-  StepPipeline(std::size_t capacity, std::int64_t steps, StepFn fn, const cpu_set_t* cpus)
-      : steps_(steps), fn_(std::move(fn)) {
+  /// CPU set (nullptr: inherited). `fall_back`: the consumer may take the steps back (above).
+  StepPipeline(std::size_t capacity, std::int64_t steps, StepFn fn, const cpu_set_t* cpus,
+               bool fall_back = false)
+      : steps_(steps), fn_(std::move(fn)), fall_back_(fall_back) {
     std::size_t cap = 4;
     while (cap < capacity) cap *= 2;
     slots_.resize(cap);
@@ -66,10 +77,19 @@ class StepPipeline {
   StepPipeline(const StepPipeline&) = delete;
   StepPipeline& operator=(const StepPipeline&) = delete;
 
+  /// The step from which the consumer computed the steps itself, or -1.
+  std::int64_t inline_from_step() const { return inline_from_; }
+  /// Seconds the consumer waited for the worker.
+  double wait_s() const { return static_cast<double>(wait_ns_total_) * 1e-9; }
+
   /// The next step's slot. Throws std::runtime_error when the step function threw or every
   /// step was already consumed.
   const Slot& Next() {
     if (next_ > 0) Release(next_);
+    if (fall_back_ && inline_from_ < 0 && next_ > 0 && next_ % kJudgeSteps == 0) Judge();
+    if (inline_from_ >= 0 && head_.load() <= next_) return ComputeInline();
+    if (head_.load(std::memory_order_acquire) > next_) return slots_[next_++ & mask_];
+    const auto wait_start = std::chrono::steady_clock::now();
     for (int spin = 0; head_.load(std::memory_order_acquire) <= next_; ++spin) {
       if (done_.load(std::memory_order_acquire) && head_.load() <= next_) {
         throw std::runtime_error(error_.empty() ? "physics: no step left to consume"
@@ -88,10 +108,61 @@ class StepPipeline {
       data_seq_.wait(seq);
       consumer_waiting_.store(false);
     }
+    const std::int64_t waited = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                    std::chrono::steady_clock::now() - wait_start)
+                                    .count();
+    wait_ns_window_ += waited;
+    wait_ns_total_ += waited;
     return slots_[next_++ & mask_];
   }
 
  private:
+  static constexpr std::int64_t kJudgeSteps = 1024;
+
+  static std::int64_t ThreadCpuNs() {
+    timespec ts{};
+    ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return std::int64_t{ts.tv_sec} * 1000000000 + ts.tv_nsec;
+  }
+
+  // Every kJudgeSteps consumed steps: the wait against what the worker's CPU spent on them.
+  void Judge() {
+    const std::int64_t cpu_ns = worker_cpu_ns_.load();
+    const std::int64_t cpu_steps = worker_cpu_steps_.load();
+    const std::int64_t waited = std::exchange(wait_ns_window_, 0);
+    if (cpu_steps <= 0 || next_ <= static_cast<std::uint64_t>(kJudgeSteps)) return;
+    const double cpu_per_step = static_cast<double>(cpu_ns) / static_cast<double>(cpu_steps);
+    losing_windows_ = static_cast<double>(waited) > 1.5 * cpu_per_step * kJudgeSteps
+                          ? losing_windows_ + 1
+                          : 0;
+    if (losing_windows_ >= 2) StopWorker();
+  }
+
+  // Stops the worker between two steps; the consumer computes from the first it did not make.
+  void StopWorker() {
+    stop_.store(true);
+    space_seq_.fetch_add(1);
+    space_seq_.notify_one();
+    if (worker_.joinable()) worker_.join();
+    if (!error_.empty()) return;  // Next() reports it
+    inline_from_ = static_cast<std::int64_t>(head_.load());
+    done_.store(false);
+  }
+
+  const Slot& ComputeInline() {
+    if (next_ >= static_cast<std::uint64_t>(steps_)) {
+      throw std::runtime_error("physics: no step left to consume");
+    }
+    Slot& out = slots_[next_ & mask_];
+    try {
+      fn_(static_cast<std::int64_t>(next_), out);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("physics: ") + e.what());
+    }
+    head_.store(next_ + 1);
+    return slots_[next_++ & mask_];
+  }
+
   // Spin rounds (pause instruction, ~10-50 ns each here) before a side blocks.
   static constexpr int kConsumerSpins = 4000;
   static constexpr int kProducerSpins = 400;
@@ -108,6 +179,7 @@ class StepPipeline {
   }
 
   void Produce() {
+    const std::int64_t cpu_at_start = fall_back_ ? ThreadCpuNs() : 0;
     try {
       for (std::int64_t step = 0; step < steps_; ++step) {
         const std::uint64_t head = head_.load(std::memory_order_relaxed);
@@ -130,6 +202,10 @@ class StepPipeline {
         if (stop_.load()) return Finish();
         fn_(step, slots_[head & mask_]);
         head_.store(head + 1);
+        if ((step + 1) % 64 == 0 && fall_back_) {
+          worker_cpu_ns_.store(ThreadCpuNs() - cpu_at_start);
+          worker_cpu_steps_.store(step + 1);
+        }
         WakeConsumer();
       }
     } catch (const std::exception& e) {
@@ -155,6 +231,7 @@ class StepPipeline {
 
   const std::int64_t steps_;
   StepFn fn_;
+  const bool fall_back_;
   std::vector<Slot> slots_;
   std::size_t mask_ = 0;
   // Each side's hot words on their own cache line: the spinning side reads the other's line
@@ -169,6 +246,13 @@ class StepPipeline {
   alignas(64) std::atomic<bool> producer_waiting_{false};
   std::atomic<bool> stop_{false};
   std::string error_;  // written before done_ (release), read after it (acquire)
+  // Falling back: the consumer's side, then the worker's CPU time for its first steps.
+  std::int64_t inline_from_ = -1;
+  int losing_windows_ = 0;
+  std::int64_t wait_ns_window_ = 0;
+  std::int64_t wait_ns_total_ = 0;
+  alignas(64) std::atomic<std::int64_t> worker_cpu_ns_{0};
+  std::atomic<std::int64_t> worker_cpu_steps_{0};
   std::thread worker_;
 };
 

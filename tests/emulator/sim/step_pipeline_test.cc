@@ -2,7 +2,10 @@
 // order, with the producer's data, whatever the timing of the two sides (random pauses on
 // both, a ring far smaller than the run, sleeps long enough that both sides block); a
 // throwing step function ends the stream with its message; destruction in the middle of a
-// run stops the worker even while it sleeps on a full ring.
+// run stops the worker even while it sleeps on a full ring; with fall-back on, a worker that
+// makes the consumer wait longer than its steps cost (its CPU elsewhere: it sleeps) is stopped
+// and the consumer computes the rest, still every step once in order, and a worker that keeps
+// ahead is not.
 #include "emulator/sim/step_pipeline.h"
 
 #include <gtest/gtest.h>
@@ -61,6 +64,50 @@ TEST(StepPipeline, EveryStepOnceInOrderUnderRandomTiming) {
     }
     EXPECT_THROW(p.Next(), std::runtime_error);  // no step left
   }
+}
+
+TEST(StepPipeline, AWorkerThatMakesTheConsumerWaitIsTakenOverInOrder) {
+  constexpr std::int64_t kSteps = 5000;
+  std::atomic<std::int64_t> on_worker{0};
+  const std::thread::id consumer = std::this_thread::get_id();
+  StepPipeline<Slot> p(
+      64, kSteps,
+      [&](std::int64_t step, Slot& out) {
+        if (std::this_thread::get_id() != consumer) {
+          ++on_worker;
+          // Its CPU taken by another job: the step costs little CPU but much wall time.
+          std::this_thread::sleep_for(std::chrono::microseconds(50));
+        }
+        Fill(step, out);
+      },
+      nullptr, true);
+  for (std::int64_t k = 0; k < kSteps; ++k) {
+    const Slot& s = p.Next();
+    ASSERT_EQ(s.step, k);
+    ASSERT_EQ(s.payload.back(), k * 3 + 1);
+  }
+  ASSERT_GE(p.inline_from_step(), 3 * 1024) << "two windows lost after the first";
+  EXPECT_LT(p.inline_from_step(), kSteps);
+  EXPECT_EQ(on_worker.load(), p.inline_from_step());
+  EXPECT_GT(p.wait_s(), 0.0);
+}
+
+TEST(StepPipeline, AWorkerThatKeepsAheadIsKept) {
+  constexpr std::int64_t kSteps = 5000;
+  std::atomic<std::int64_t> made{0};
+  StepPipeline<Slot> p(
+      8192, kSteps,
+      [&](std::int64_t step, Slot& out) {
+        for (int i = 0; i < 200; ++i) _mm_pause();  // CPU work, no sleep
+        Fill(step, out);
+        ++made;
+      },
+      nullptr, true);
+  // Every step is made before the consumer asks for one: it never waits.
+  while (made.load() < kSteps) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  for (std::int64_t k = 0; k < kSteps; ++k) ASSERT_EQ(p.Next().step, k);
+  EXPECT_EQ(p.wait_s(), 0.0);
+  EXPECT_EQ(p.inline_from_step(), -1);
 }
 
 TEST(StepPipeline, AThrowingStepEndsTheStreamWithItsMessage) {
