@@ -858,8 +858,16 @@ ssize_t RecvSimple(int fd, const View& v, void* buf, std::size_t len, int flags,
   return n;
 }
 
-int DupFcntl(int fd, int cmd, int rc) {
+// Some bus socket of this process signals its input (O_ASYNC, FIOASYNC): a frame for it may
+// interrupt any thread's wait (SIGIO), which the virtual clock's library must know.
+std::atomic<bool> g_signals_on_input{false};
+
+int DupFcntl(int fd, int cmd, int rc, void* arg) {
   if (rc >= 0 && (cmd == F_DUPFD || cmd == F_DUPFD_CLOEXEC) && IsUcan(fd)) ShareFd(fd, rc);
+  if (rc >= 0 && cmd == F_SETFL && (reinterpret_cast<std::intptr_t>(arg) & O_ASYNC) &&
+      IsUcan(fd)) {
+    g_signals_on_input.store(true);
+  }
   return rc;
 }
 
@@ -871,8 +879,11 @@ int DupFcntl(int fd, int cmd, int rc) {
 /// only the host ends: 0, not a socket bound to a bus of the broker; 1, one with nothing to read
 /// (its rx ring empty, no doorbell pending or left on the socket); 2, one that may have
 /// something to read (or no rings to tell). Only the broker makes such a socket readable.
-/// `*client_id`: its id on the broker (the wake channel the host counts its writes on).
+/// `*client_id`: its id on the broker (the wake channel the host counts its writes on). 3, for
+/// any fd: some bus socket of the process signals its input (O_ASYNC), so a frame may end any
+/// thread's wait.
 UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd, std::uint32_t* client_id) {
+  if (g_signals_on_input.load(std::memory_order_relaxed)) return 3;
   View v;
   if (!GetView(fd, &v) || !v.bound) return 0;
   *client_id = v.client_id;
@@ -985,7 +996,7 @@ UCAN_EXPORT int fcntl(int fd, int cmd, ...) {
   va_start(ap, cmd);
   void* arg = va_arg(ap, void*);
   va_end(ap);
-  return DupFcntl(fd, cmd, real_fcntl()(fd, cmd, arg));
+  return DupFcntl(fd, cmd, real_fcntl()(fd, cmd, arg), arg);
 }
 
 UCAN_EXPORT int fcntl64(int fd, int cmd, ...) {
@@ -994,7 +1005,7 @@ UCAN_EXPORT int fcntl64(int fd, int cmd, ...) {
   void* arg = va_arg(ap, void*);
   va_end(ap);
   auto f = real_fcntl64();
-  return DupFcntl(fd, cmd, f != nullptr ? f(fd, cmd, arg) : real_fcntl()(fd, cmd, arg));
+  return DupFcntl(fd, cmd, f != nullptr ? f(fd, cmd, arg) : real_fcntl()(fd, cmd, arg), arg);
 }
 
 UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
@@ -1002,7 +1013,9 @@ UCAN_EXPORT int ioctl(int fd, unsigned long request, ...) {
   va_start(ap, request);
   void* arg = va_arg(ap, void*);
   va_end(ap);
-  if (request == SIOCGIFINDEX && arg != nullptr) {
+  if (request == FIOASYNC && arg != nullptr && *static_cast<const int*>(arg) != 0 && IsUcan(fd)) {
+    g_signals_on_input.store(true);  // and on to the kernel below
+  } else if (request == SIOCGIFINDEX && arg != nullptr) {
     auto* ifr = static_cast<ifreq*>(arg);
     char name[ucan::kNameSize] = {};
     std::memcpy(name, ifr->ifr_name, sizeof(name) - 1);

@@ -590,7 +590,9 @@ std::uint32_t VouchableInput(int fd, std::uint32_t events) {
   if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return 0;
   const BusSocketFn bus = UcanBusSocketState();
   std::uint32_t client = 0;
-  if (bus != nullptr && bus(fd, &client) != 0) return vt::BusSocketChannel(client);
+  const int state = bus != nullptr ? bus(fd, &client) : 0;
+  if (state == 3) return 0;
+  if (state != 0) return vt::BusSocketChannel(client);
   const int timer = VirtualTimerFdSlot(fd);
   return timer >= 0 ? vt::TimerChannel(timer) : 0;
 }
@@ -686,6 +688,7 @@ Vouch VouchFor(const pollfd* fds, nfds_t n, std::uint32_t* channels) {
     if (fds[i].events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
     std::uint32_t client = 0;
     const int state = bus(fd, &client);
+    if (state == 3) return Vouch::kNo;  // signal-driven bus input: SIGIO may end any wait
     if (state != 0) {
       *channels |= vt::BusSocketChannel(client);
       if (state == 2) v = Vouch::kReady;

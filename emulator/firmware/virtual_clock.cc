@@ -338,6 +338,9 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
 }
 
 void VirtualClock::FreeDeadThread(int slot) {
+  // A process that ends signals its parent (SIGCHLD), which may end a wait the library vouched
+  // for: the next look asks the kernel about every fd wait once.
+  NoteFdWakes(vt::kAnyChannel);
   vt::ThreadSlot& s = page_->threads[slot];
   if (s.pid.load() == first_pid_) threads_gone_ = true;
   // A thread gone: perhaps its whole process (the slot of an exited process is freed here,
@@ -402,6 +405,7 @@ bool VirtualClock::Blocked() {
       const Kernel k = KernelState(i, pid, tid, nullptr);
       if (k == Kernel::kGone) {
         FreeDeadThread(i);
+        blocked = false;  // look again (FreeDeadThread)
       } else if (k == Kernel::kRunning) {
         return false;
       }
@@ -414,6 +418,7 @@ bool VirtualClock::Blocked() {
     ProcFiles& f = files_[static_cast<std::size_t>(i)];
     if (k == Kernel::kGone) {
       FreeDeadThread(i);
+      blocked = false;  // look again (FreeDeadThread)
     } else if (k == Kernel::kRunning) {
       f.runs_seen = UINT64_MAX;
       return false;
