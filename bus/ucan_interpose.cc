@@ -36,6 +36,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -176,9 +177,25 @@ void Release(UcanSocket* s) {
   }
 }
 
+/// Before every call the broker sees on a socket rather than in a ring (a connection, a frame
+/// sent or received as a message, a doorbell for it, a close): the virtual clock's library
+/// (bus/vtime_interpose.cc) counts them, so the emulator knows when a look at the sockets can
+/// find nothing new from the firmware. Nothing without that library.
+void NoteBusCall() {
+  using Fn = void (*)();
+  static std::atomic<Fn> fn{nullptr};
+  static std::atomic<bool> looked{false};
+  if (!looked.load(std::memory_order_acquire)) {
+    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_bus_call")));
+    looked.store(true, std::memory_order_release);
+  }
+  if (Fn f = fn.load(std::memory_order_relaxed)) f();
+}
+
 /// Lock held. Drops fd's reference, if any.
 void DetachLocked(int fd) {
   if (fd < 0 || fd >= kMaxFds || g_sockets[fd] == nullptr) return;
+  NoteBusCall();
   __atomic_store_n(&g_is_ucan[fd], 0, __ATOMIC_RELEASE);
   Release(g_sockets[fd]);
   g_sockets[fd] = nullptr;
@@ -234,6 +251,7 @@ bool GetView(int fd, View* v) {
 /// Connects to the broker of the current runtime directory. -1 and errno when there is none
 /// (or the directory is not private).
 int ConnectBroker() {
+  NoteBusCall();
   std::string dir;
   try {
     dir = wheelhil::bus::ResolveUcanRuntimeDir();
@@ -603,6 +621,7 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   std::memcpy(msg + frame_len, &stamp, sizeof(stamp));
   const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
   if (tail - r.head.load(std::memory_order_acquire) >= h->slots) {
+    NoteBusCall();
     const ssize_t n = real_send()(fd, msg, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
     const int err = errno;
     pthread_mutex_unlock(&r.lock);
@@ -620,6 +639,7 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   // A doorbell too many (-1: the word kept changing) is harmless: they may be spurious.
   if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0 &&
       h->tx_drained_every_pass.load(std::memory_order_relaxed) == 0) {
+    NoteBusCall();
     const std::uint64_t bell = 1;
     if (real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT) < 0 &&
         (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) {
@@ -750,6 +770,7 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   ucan::TxStamp stamp;
   stamp.monotonic_ns = StampNow();
   std::memcpy(buf + total, &stamp, sizeof(stamp));
+  NoteBusCall();
   const ssize_t n = real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
   if (n < 0) {
     if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN) return Fail(ENETDOWN);
@@ -789,6 +810,7 @@ ssize_t RecvFrame(int fd, const View& v, msghdr* msg, int flags) {
   msghdr m{};
   m.msg_iov = &iov;
   m.msg_iovlen = 1;
+  if (v.rings == nullptr) NoteBusCall();  // room on the socket for the broker's next frame
   const ssize_t n = v.rings != nullptr
                         ? RingRecv(fd, v.rings->header, buf, sizeof(buf), flags)
                         : real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));

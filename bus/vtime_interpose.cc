@@ -1639,6 +1639,7 @@ void BeforeExec() {
   if (ExecIsThisProcess()) {
     g_page->processes[g_proc].exec_pending.store(1);
     g_page->processes[g_proc].state.store(vt::kProcStarting);
+    g_page->bus_calls.fetch_add(1);  // its close-on-exec sockets close with the exec
     Transition();
   }
 }
@@ -1885,6 +1886,12 @@ VTIME_EXPORT long syscall(long number, ...) {
     }
   }
   return real_syscall()(number, a1, a2, a3, a4, a5, a6);
+}
+
+// ---- the bus library's calls on its sockets (Page::bus_calls) ----
+
+VTIME_EXPORT void wheelhil_vtime_note_bus_call() {
+  if (g_page != nullptr) g_page->bus_calls.fetch_add(1);
 }
 
 // ---- signals between the firmware's threads: they may end a wait the host takes for vouched ----

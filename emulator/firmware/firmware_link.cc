@@ -209,7 +209,6 @@ bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet) {
   const std::uint64_t before = broker_->client_progress();
   const bool ok = quiet ? broker_->PumpQuiet() : broker_->Pump(timeout_ms);
   if (broker_->client_progress() != before) {
-    sockets_quiet_ = false;
     broker_->TakeWokenClients(&woken_);
     if (clock_ != nullptr) {
       std::uint32_t channels = woken_.other ? bus::vtime::kAnyChannel : 0u;
@@ -233,11 +232,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
-  // Blocked since the last pass looked at its sockets, and nothing woke it since: the first
-  // pass need not look (every process of it is on the clock: none runs on its own).
-  const bool quiet_first_pass =
-      sockets_quiet_ && !ended_waits && clock.UnregisteredProcess() == 0;
-  sockets_quiet_ = false;
+
   ++handovers_;
   // The limit is on running without blocking: a firmware that blocks and is woken again by
   // what it asked the bus for (a burst of socket opens, requests) makes progress, and starts
@@ -255,8 +250,20 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     return who;
   };
   // One broker pass; true when it wrote to a client (which may wake a firmware thread).
-  auto pass = [&](bool quiet = false) {
+  // A pass looks at the broker's sockets only when the firmware did something there since the
+  // last look (its frames travel in the rings), when a process of it is not on the clock, and
+  // at least every kSocketLookEveryNs of virtual time (programs off the clock on the bus: a
+  // candump the user attached).
+  auto pass = [&] {
     const std::uint64_t before = broker_->client_progress();
+    const std::uint64_t activity = clock.socket_activity();
+    const bool quiet = activity == activity_at_look_ &&
+                       clock.now_ns() - last_look_ns_ < kSocketLookEveryNs &&
+                       clock.UnregisteredProcess() == 0;
+    if (!quiet) {
+      activity_at_look_ = activity;
+      last_look_ns_ = clock.now_ns();
+    }
     Pump(0, quiet);
     bus::CanFrame f;
     while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
@@ -265,7 +272,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   // What the run sent since the last settle; if that reached the firmware, it runs now (and
   // cannot be blocked yet).
   // Waits it just ended run now as well: no look at the firmware can find it blocked yet.
-  bool woke = pass(quiet_first_pass) || ended_waits;
+  bool woke = pass() || ended_waits;
   for (;;) {
     if (run_.failed()) return false;
     if (!woke && clock.Blocked()) {
@@ -295,7 +302,6 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
         } while (WallSeconds(gone_at) < 2.0);
       }
       firmware_blocked_ = true;
-      sockets_quiet_ = true;
       return true;
     }
     const double wall = WallSeconds(t0);

@@ -108,9 +108,11 @@ class FirmwareLink {
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
-  // Virtual time: the firmware was blocked when a pass last looked at the clients' sockets,
-  // and no pass has written to a client since (nothing can have woken it).
-  bool sockets_quiet_ = false;
+  // Virtual time, Settle: VirtualClock::socket_activity and the clock's time at the last pass
+  // that looked at the broker's sockets.
+  static constexpr std::int64_t kSocketLookEveryNs = 10'000'000;
+  std::uint64_t activity_at_look_ = UINT64_MAX;
+  std::int64_t last_look_ns_ = 0;
   bool opened_once_ = false;  // the firmware bound a socket once (FirmwareConnected)
   std::uint64_t handovers_ = 0;
   std::chrono::steady_clock::time_point last_exit_check_{};

@@ -275,6 +275,10 @@ int VirtualClock::WakeDue() {
 
 void VirtualClock::NoteFdWakes(std::uint32_t channels) { vt::NoteWake(*page_, channels); }
 
+std::uint64_t VirtualClock::socket_activity() const {
+  return page_->bus_calls.load() + threads_freed_;
+}
+
 int VirtualClock::CopyOfFd(pid_t pid, int fd, std::uint64_t tag) {
   if (!fd_copies_work_ || pid <= 0 || fd < 0) return -1;
   for (const FdCopy& c : fd_copies_) {
@@ -341,6 +345,7 @@ void VirtualClock::FreeDeadThread(int slot) {
   // A process that ends signals its parent (SIGCHLD), which may end a wait the library vouched
   // for: the next look asks the kernel about every fd wait once.
   NoteFdWakes(vt::kAnyChannel);
+  ++threads_freed_;  // its process may have closed its sockets
   vt::ThreadSlot& s = page_->threads[slot];
   if (s.pid.load() == first_pid_) threads_gone_ = true;
   // A thread gone: perhaps its whole process (the slot of an exited process is freed here,

@@ -69,6 +69,10 @@ class VirtualClock {
   void NoteFdWakes(std::uint32_t channels);
   /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
   std::uint64_t kernel_looks() const { return kernel_looks_; }
+  /// Changes whenever the firmware made a call the broker sees on a socket rather than in a
+  /// ring (bus/vtime_protocol.h, Page::bus_calls) or a thread of it was found gone: while it
+  /// stays, a look at the broker's sockets finds nothing new from the firmware.
+  std::uint64_t socket_activity() const;
 
   /// True when every thread of the firmware is blocked (see above). A thread asleep in the
   /// kernel outside the library's waits counts once it was seen asleep twice without running
@@ -132,6 +136,7 @@ class VirtualClock {
   std::vector<ProcFiles> files_;
   std::uint32_t transitions_seen_ = 0;
   std::uint64_t kernel_looks_ = 0;
+  std::uint64_t threads_freed_ = 0;  // FreeDeadThread
   bool shares_cpu_ = false;
   // WaitForChange: yields in a row after which no thread had changed (then it sleeps).
   static constexpr int kYieldsBeforeSleep = 2;
