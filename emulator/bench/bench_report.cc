@@ -156,6 +156,10 @@ std::vector<std::string> DocumentedMetricKeys() {
   }
   std::vector<std::string> virtual_rows = VirtualTimeBenchScenarios();
   virtual_rows.insert(virtual_rows.end(), {"customer_c", "customer_python"});
+  for (const auto& s : VirtualTimeBenchScenarios()) {
+    keys.push_back(fmt::format("virtual_time.{}.vs_cooperative", s));
+    keys.push_back(fmt::format("virtual_time.{}.vs_physics_alone", s));
+  }
   for (const auto& s : virtual_rows) {
     keys.push_back(fmt::format("virtual_time.{}.rtf", s));
     for (const char* account : HandoverAccountKeys()) {

@@ -23,6 +23,7 @@
 #include "emulator/bench/bench_workloads.h"
 #include "emulator/campaign/campaign_spec.h"
 #include "emulator/campaign/scenario_writer.h"
+#include "emulator/scenario/scenario.h"
 
 extern char** environ;
 
@@ -185,6 +186,33 @@ LockstepRun RunLockstepScenario(const BenchOptions& o, const std::string& self_e
   return out;
 }
 
+/// `num / den` as the row `key` when both are positive numbers, else unavailable (`needs`).
+void SetRatio(nlohmann::json& report, const std::string& key, const nlohmann::json* num,
+              const nlohmann::json* den, const std::string& needs) {
+  if (num != nullptr && den != nullptr && num->is_number() && den->is_number() &&
+      den->get<double>() > 0) {
+    SetPath(report, key, num->get<double>() / den->get<double>());
+  } else {
+    SetPath(report, key, Unavailable(needs));
+  }
+}
+
+/// The physics row of a scenario's platform and floor ("physics.diff2.flat_rtf"); empty when
+/// the file does not load or its platform has no physics row.
+std::string PhysicsRowOf(const std::string& scenario_file) {
+  try {
+    const scenario::Scenario s = scenario::LoadScenarioFile(scenario_file);
+    const auto& platforms = BenchPlatforms();
+    if (std::find(platforms.begin(), platforms.end(), s.platform.name) == platforms.end()) {
+      return "";
+    }
+    return fmt::format("physics.{}.{}_rtf", s.platform.name,
+                       s.terrain.meshes.empty() ? "flat" : "mesh");
+  } catch (const std::exception&) {
+    return "";
+  }
+}
+
 /// virtual_time.<row>.wall (the run's accounting) and its documented hand-over figures: the
 /// run's numbers, else the run's reason (or that its report had none).
 void SetHandoverRows(nlohmann::json& report, const std::string& row, const LockstepRun& r) {
@@ -237,6 +265,13 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
           {{"timing.clock", "virtual", 0}, {"timing.sync_producer", "firmware", 0}});
       SetPath(report, vkey, v.rtf);
       SetHandoverRows(report, s, v);
+      SetRatio(report, fmt::format("virtual_time.{}.vs_cooperative", s), &v.rtf, &r.rtf,
+               "needs both lockstep rows of " + s);
+      const std::string physics_row = PhysicsRowOf(file);
+      SetRatio(report, fmt::format("virtual_time.{}.vs_physics_alone", s), &v.rtf,
+               physics_row.empty() ? nullptr : GetPath(report, physics_row),
+               physics_row.empty() ? "no physics row for the scenario's platform"
+                                   : "needs " + physics_row);
     }
   }
   // Firmwares written as customers write them (tests/customer_firmware/, built in the build tree
@@ -629,13 +664,8 @@ nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
     }
     SetPath(report, "bus.vcan_environment", "none");
   }
-  const nlohmann::json* u = GetPath(report, "bus.ucan_frames_per_s");
-  const nlohmann::json* v = GetPath(report, "bus.vcan_frames_per_s");
-  if (u && v && u->is_number() && v->is_number() && v->get<double>() > 0) {
-    SetPath(report, "bus.ucan_vs_vcan_ratio", u->get<double>() / v->get<double>());
-  } else {
-    SetPath(report, "bus.ucan_vs_vcan_ratio", Unavailable("needs both bus rates"));
-  }
+  SetRatio(report, "bus.ucan_vs_vcan_ratio", GetPath(report, "bus.ucan_frames_per_s"),
+           GetPath(report, "bus.vcan_frames_per_s"), "needs both bus rates");
 
   SetPath(report, "rss.realtime_mib",
           run("realtime", true, DocumentedKeysUnder("realtime.", "realtime.loaded_")));
