@@ -11,6 +11,7 @@
 
 #include "bus/ucan_runtime_dir.h"
 #include "bus/vtime_protocol.h"
+#include "emulator/sim/wall_account.h"
 #include "emulator/firmware/stale_run_dirs.h"
 
 namespace wheelhil::emulator::firmware {
@@ -232,8 +233,9 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
-
   ++handovers_;
+  double unaccounted = 0;
+  sim::WallTimer timer(handover_s_ != nullptr ? *handover_s_ : unaccounted);
   // The limit is on running without blocking: a firmware that blocks and is woken again by
   // what it asked the bus for (a burst of socket opens, requests) makes progress, and starts
   // the count again; only a far longer stay at one instant ends the run as well.

@@ -72,6 +72,9 @@ class FirmwareLink {
   /// Virtual time: the frames' receive stamps are the clock's CLOCK_REALTIME, and every broker
   /// pass that wrote to the firmware tells the clock (VirtualClock::NoteFdWakes).
   void UseVirtualClock(VirtualClock& clock);
+  /// Virtual time: the wall time of Settle's turns (not of a settle that finds the firmware
+  /// still blocked with nothing for it) is added to `seconds`.
+  void AccountHandoversIn(double& seconds) { handover_s_ = &seconds; }
   /// The firmware has a socket bound on the private bus (remembered: FailExited says whether it
   /// ever had one).
   bool FirmwareConnected();
@@ -99,6 +102,7 @@ class FirmwareLink {
   bool pumped_ = false;
   int local_port_ = -1;  // the emulator's port on the pumped bus
   VirtualClock* clock_ = nullptr;  // UseVirtualClock
+  double* handover_s_ = nullptr;   // AccountHandoversIn
   bus::UcanWokenClients woken_;    // PumpBroker's scratch
   static constexpr int kMaxUnpumpedFrames = 32;
   // Settle: wall time at one virtual instant for a firmware that keeps blocking and being woken
