@@ -489,9 +489,18 @@ struct UcanBroker::Impl {
 
   // ---- clients (mu held) ----
 
+  // Bounded (a broker nobody asks, on its own thread, would grow it forever): past
+  // kMaxWokenIds the record says only that something was woken.
   void NoteWoken(const Client* c) {
-    if (woken.ids.empty() || woken.ids.back() != c->id) woken.ids.push_back(c->id);
+    if (woken.other || (!woken.ids.empty() && woken.ids.back() == c->id)) return;
+    if (woken.ids.size() >= kMaxWokenIds) {
+      woken.ids.clear();
+      woken.other = true;
+      return;
+    }
+    woken.ids.push_back(c->id);
   }
+  static constexpr std::size_t kMaxWokenIds = 64;
 
   void Kill(Client* c) {
     if (c->dead) return;

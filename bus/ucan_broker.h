@@ -146,7 +146,8 @@ class UcanBroker {
   std::uint64_t client_progress() const;
   /// Who the passes since the last call woke (the same writes client_progress counts): the data
   /// clients written to (frames, doorbells), by the id their kOpen Reply gave them, and whether
-  /// anything else was (a reply, a connection accepted or refused, a client dropped).
+  /// anything else was (a reply, a connection accepted or refused, a client dropped, or more
+  /// clients than it keeps by id: then `ids` is empty).
   void TakeWokenClients(UcanWokenClients* out);
   /// The receive timestamps' clock (ns; default CLOCK_REALTIME), e.g. a run's virtual clock.
   /// Set it before traffic, or from the thread that pumps.

@@ -629,6 +629,12 @@ void ForgetEpoll(int fd) {
   pthread_mutex_unlock(&g_epoll_lock);
 }
 
+void ForgetEveryEpoll() {
+  pthread_mutex_lock(&g_epoll_lock);
+  for (EpollSet& e : g_epoll) e.tracked.store(0);
+  pthread_mutex_unlock(&g_epoll_lock);
+}
+
 void TrackNewEpoll(int fd) {
   if (fd < 0 || fd >= kMaxEpollFds) return;
   pthread_mutex_lock(&g_epoll_lock);
@@ -1608,6 +1614,11 @@ VTIME_EXPORT pid_t fork() {
   // host never takes the firmware for blocked while a child it has not seen yet runs.
   const int slot = ClaimProcessSlot(vt::kProcStarting, 0);
   const pid_t pid = real_fork()();
+  // An epoll set made before shares its members with the other process from here on, which
+  // this one's record would not see: such sets are no longer vouched for on either side. (The
+  // child's lock may have been held by a thread it does not have.)
+  if (pid == 0) g_epoll_lock = PTHREAD_MUTEX_INITIALIZER;
+  if (pid >= 0) ForgetEveryEpoll();
   if (pid == 0) {
     // The parent's wake eventfds are copies here, of threads this process does not have.
     for (int i = 0; i < vt::kMaxThreads; ++i) CloseWakeFd(i);
