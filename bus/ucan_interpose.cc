@@ -5,7 +5,8 @@
 // SOCK_SEQPACKET placeholder; bind() to a ucan bus replaces it (dup3) by a connection to the
 // broker, so poll/select/epoll/fcntl/dup work unchanged. The broker applies the filters; each
 // message it sends is a frame plus an RxTrailer, which the recv* wrappers strip, returning what
-// the kernel would (address, SCM_TIMESTAMP[NS], SO_RXQ_OVFL, MSG_DONTROUTE / MSG_CONFIRM).
+// the kernel would (address, SCM_TIMESTAMP[NS], SCM_TIMESTAMPING, SO_RXQ_OVFL, MSG_DONTROUTE /
+// MSG_CONFIRM).
 // bind() to a name that is not a ucan bus opens a real PF_CAN socket in place (options replayed)
 // or fails with the kernel's own error.
 //
@@ -20,6 +21,7 @@
 #include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
+#include <linux/net_tstamp.h>
 #include <linux/close_range.h>
 #include <net/if.h>
 #include <poll.h>
@@ -58,6 +60,8 @@ constexpr int kSoTimestampNsOld = 35;
 constexpr int kSoTimestampNew = 63;
 constexpr int kSoTimestampNsNew = 64;
 constexpr int kSoRxqOvfl = 40;
+constexpr int kSoTimestampingOld = 37;  // SCM_TIMESTAMPING_OLD: struct scm_timestamping
+constexpr int kSoTimestampingNew = 65;  // SCM_TIMESTAMPING_NEW: the same layout on 64-bit
 constexpr unsigned short kArphrdCan = 280;  // ARPHRD_CAN
 constexpr unsigned long kSiocgstampOld = 0x8906;
 constexpr unsigned long kSiocgstampNsOld = 0x8907;
@@ -129,6 +133,8 @@ struct UcanSocket {
   can_filter* filters = nullptr;  // options.filter_count entries (malloc'd)
   int timestamp_mode = 0;         // 0 none, 1 us, 2 ns
   int timestamp_cmsg = 0;         // SCM type to emit
+  int timestamping = 0;           // SO_TIMESTAMPING flags (SOF_TIMESTAMPING_*)
+  int timestamping_cmsg = 0;      // SCM_TIMESTAMPING type to emit (the option set)
   bool rxq_ovfl = false;
   MappedRings* rings = nullptr;  // bound with rings
 };
@@ -144,6 +150,8 @@ struct View {
   bool fd_frames = false;
   int timestamp_mode = 0;
   int timestamp_cmsg = 0;
+  int timestamping = 0;
+  int timestamping_cmsg = 0;
   bool rxq_ovfl = false;
   char name[ucan::kNameSize] = {};
   MappedRings* rings = nullptr;
@@ -234,6 +242,8 @@ bool GetView(int fd, View* v) {
     v->fd_frames = s->options.fd_frames != 0;
     v->timestamp_mode = s->timestamp_mode;
     v->timestamp_cmsg = s->timestamp_cmsg;
+    v->timestamping = s->timestamping;
+    v->timestamping_cmsg = s->timestamping_cmsg;
     v->rxq_ovfl = s->rxq_ovfl;
     std::memcpy(v->name, s->name, sizeof(v->name));
     if (s->rings != nullptr) {
@@ -436,11 +446,15 @@ int SwitchToKernel(int fd, const sockaddr* addr, socklen_t len) {
   if (!SnapshotOptions(fd, &opts, &filters, &type_flags, &client_id, &bound)) return ENOMEM;
   int timestamp_mode = 0;
   int timestamp_cmsg = 0;
+  int timestamping = 0;
+  int timestamping_cmsg = 0;
   bool rxq_ovfl = false;
   LockTable();
   if (UcanSocket* s = g_sockets[fd]) {
     timestamp_mode = s->timestamp_mode;
     timestamp_cmsg = s->timestamp_cmsg;
+    timestamping = s->timestamping;
+    timestamping_cmsg = s->timestamping_cmsg;
     rxq_ovfl = s->rxq_ovfl;
   }
   UnlockTable();
@@ -460,6 +474,9 @@ int SwitchToKernel(int fd, const sockaddr* addr, socklen_t len) {
   if (opts.fd_frames) set(k, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
   if (opts.join_filters) set(k, SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, &on, sizeof(on));
   if (timestamp_mode != 0) set(k, SOL_SOCKET, timestamp_cmsg, &on, sizeof(on));
+  if (timestamping != 0) {
+    set(k, SOL_SOCKET, timestamping_cmsg, &timestamping, sizeof(timestamping));
+  }
   if (rxq_ovfl) set(k, SOL_SOCKET, kSoRxqOvfl, &on, sizeof(on));
   free(filters);
   LockTable();
@@ -857,6 +874,14 @@ ssize_t RecvFrame(int fd, const View& v, msghdr* msg, int flags) {
     } ts{t.timestamp_ns / 1000000000, t.timestamp_ns % 1000000000};
     PutCmsg(msg, &used, SOL_SOCKET, v.timestamp_cmsg, &ts, sizeof(ts));
   }
+  if (v.timestamping & SOF_TIMESTAMPING_SOFTWARE) {
+    // struct scm_timestamping: the software receive stamp, then the legacy and the hardware
+    // ones, which a CAN bus without a clock of its own leaves zero (as vcan does).
+    struct {
+      std::int64_t sec, nsec;
+    } ts[3] = {{t.timestamp_ns / 1000000000, t.timestamp_ns % 1000000000}, {0, 0}, {0, 0}};
+    PutCmsg(msg, &used, SOL_SOCKET, v.timestamping_cmsg, &ts, sizeof(ts));
+  }
   if (v.rxq_ovfl && t.drops != 0) {
     PutCmsg(msg, &used, SOL_SOCKET, kSoRxqOvfl, &t.drops, sizeof(t.drops));
   }
@@ -1117,11 +1142,71 @@ UCAN_EXPORT char* if_indextoname(unsigned index, char* name) {
   return real_if_indextoname()(index, name);
 }
 
+namespace {
+
+/// SOL_SOCKET options a kernel CAN socket takes that the bus cannot honour (they would act on
+/// its connection to the broker instead): their errno, 0 for the others. Socket filters and
+/// SO_TXTIME are refused with ENOPROTOOPT; SO_PEEK_OFF gets the kernel's own answer for a CAN
+/// socket (EOPNOTSUPP).
+int UnsupportedSocketOption(int opt) {
+  switch (opt) {
+    case SO_ATTACH_FILTER:
+    case SO_DETACH_FILTER:
+    case SO_ATTACH_BPF:
+    case SO_LOCK_FILTER:
+    case SO_ATTACH_REUSEPORT_CBPF:
+    case SO_ATTACH_REUSEPORT_EBPF:
+    case SO_DETACH_REUSEPORT_BPF:
+    case SO_TXTIME:
+      return ENOPROTOOPT;
+    case SO_PEEK_OFF:
+      return EOPNOTSUPP;
+    default:
+      return 0;
+  }
+}
+
+/// SO_TIMESTAMPING[_NEW], checked as net/core/sock.c sock_set_timestamping() does: an int of
+/// SOF_TIMESTAMPING_* flags or a struct so_timestamping. Only software receive stamps exist on
+/// the bus; binding to a PTP clock is refused as on a socket bound to no device.
+int SetTimestamping(int fd, int opt, const void* val, socklen_t len) {
+  if (val == nullptr) return static_cast<int>(Fail(EFAULT));
+  so_timestamping ts{};
+  if (len == sizeof(ts)) {
+    std::memcpy(&ts, val, sizeof(ts));
+  } else if (len >= static_cast<socklen_t>(sizeof(int))) {
+    std::memcpy(&ts.flags, val, sizeof(int));
+  } else {
+    return static_cast<int>(Fail(EINVAL));
+  }
+  const int flags = ts.flags;
+  if (flags & ~SOF_TIMESTAMPING_MASK) return static_cast<int>(Fail(EINVAL));
+  if ((flags & SOF_TIMESTAMPING_OPT_STATS) && !(flags & SOF_TIMESTAMPING_OPT_TSONLY)) {
+    return static_cast<int>(Fail(EINVAL));
+  }
+  if (flags & SOF_TIMESTAMPING_BIND_PHC) return static_cast<int>(Fail(EOPNOTSUPP));
+  LockTable();
+  if (UcanSocket* s = g_sockets[fd]) {
+    s->timestamping = flags;
+    s->timestamping_cmsg = opt;
+  }
+  UnlockTable();
+  return 0;
+}
+
+}  // namespace
+
 UCAN_EXPORT int setsockopt(int fd, int level, int opt, const void* val, socklen_t len) {
   if (!IsUcan(fd) || (level != SOL_CAN_RAW && level != SOL_SOCKET)) {
     return real_setsockopt()(fd, level, opt, val, len);
   }
   if (level == SOL_SOCKET) {
+    if (opt == kSoTimestampingOld || opt == kSoTimestampingNew) {
+      return SetTimestamping(fd, opt, val, len);
+    }
+    if (const int err = UnsupportedSocketOption(opt); err != 0) {
+      return static_cast<int>(Fail(err));
+    }
     if (opt != kSoTimestampOld && opt != kSoTimestampNsOld && opt != kSoTimestampNew &&
         opt != kSoTimestampNsNew && opt != kSoRxqOvfl) {
       return real_setsockopt()(fd, level, opt, val, len);
@@ -1238,6 +1323,17 @@ UCAN_EXPORT int getsockopt(int fd, int level, int opt, void* val, socklen_t* len
       case kSoTimestampNsNew:
         ival = s && s->timestamp_mode == 2;
         break;
+      case kSoTimestampingOld:
+      case kSoTimestampingNew: {
+        // struct so_timestamping {flags, bind_phc}, cut to the caller's length (the kernel's).
+        const so_timestamping v{s ? s->timestamping : 0, 0};
+        UnlockTable();
+        if (val == nullptr) return static_cast<int>(Fail(EFAULT));
+        const socklen_t n = std::min<socklen_t>(*len, sizeof(v));
+        std::memcpy(val, &v, n);
+        *len = n;
+        return 0;
+      }
       default:
         handled = false;
         break;

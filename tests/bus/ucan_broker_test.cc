@@ -8,6 +8,8 @@
 #include <fcntl.h>
 #include <linux/can/error.h>
 #include <linux/close_range.h>
+#include <linux/filter.h>
+#include <linux/net_tstamp.h>
 #include <linux/sockios.h>
 #include <sys/epoll.h>
 #include <sys/ioctl.h>
@@ -313,6 +315,79 @@ TEST_F(UcanBusTest, TimestampsAreMonotonicAndMatchSiocgstamp) {
   EXPECT_GT(tv.tv_sec, 1600000000);
   EXPECT_LT(tv.tv_usec, 1000000);
   for (int s : {tx, rx, rx_us}) ::close(s);
+}
+
+// SO_TIMESTAMPING as on a kernel CAN socket: with SOF_TIMESTAMPING_SOFTWARE each frame carries
+// an SCM_TIMESTAMPING after the SCM_TIMESTAMPNS, whose software stamp equals it and whose
+// other two are zero (no hardware clock on the bus); the flags read back; flags the kernel
+// refuses are refused; without the reporting flag nothing is added. Options the bus cannot
+// honour are refused instead of acting on its connection to the broker.
+TEST_F(UcanBusTest, SoTimestampingDeliversTheSoftwareStampOfSoTimestampns) {
+  const int tx = OpenCan("ucan0"), rx = OpenCan("ucan0"), quiet = OpenCan("ucan0");
+  const int flags = SOF_TIMESTAMPING_RX_SOFTWARE | SOF_TIMESTAMPING_SOFTWARE;
+  ASSERT_TRUE(SetInt(rx, SOL_SOCKET, SO_TIMESTAMPNS, 1));
+  ASSERT_TRUE(SetInt(rx, SOL_SOCKET, SO_TIMESTAMPING, flags));
+  ASSERT_TRUE(SetInt(quiet, SOL_SOCKET, SO_TIMESTAMPING, SOF_TIMESTAMPING_RX_SOFTWARE));
+  so_timestamping back{};
+  socklen_t len = sizeof(back);
+  ASSERT_EQ(::getsockopt(rx, SOL_SOCKET, SO_TIMESTAMPING, &back, &len), 0);
+  EXPECT_EQ(len, sizeof(back));
+  EXPECT_EQ(back.flags, flags);
+  EXPECT_EQ(back.bind_phc, 0);
+  EXPECT_FALSE(SetInt(rx, SOL_SOCKET, SO_TIMESTAMPING, SOF_TIMESTAMPING_MASK + 1));
+  EXPECT_EQ(errno, EINVAL);
+  EXPECT_FALSE(SetInt(rx, SOL_SOCKET, SO_TIMESTAMPING, flags | SOF_TIMESTAMPING_OPT_STATS));
+  EXPECT_EQ(errno, EINVAL);
+  EXPECT_FALSE(SetInt(rx, SOL_SOCKET, SO_PEEK_OFF, 0));
+  EXPECT_EQ(errno, EOPNOTSUPP);
+  sock_filter accept_all{0x06, 0, 0, 0xFFFFFFFF};  // BPF_RET | BPF_K
+  sock_fprog prog{1, &accept_all};
+  EXPECT_NE(::setsockopt(rx, SOL_SOCKET, SO_ATTACH_FILTER, &prog, sizeof(prog)), 0);
+  EXPECT_EQ(errno, ENOPROTOOPT);
+
+  for (int i = 0; i < 20; ++i) ASSERT_TRUE(Send(tx, Frame(static_cast<canid_t>(i))));
+  for (int i = 0; i < 20; ++i) {
+    can_frame f{};
+    iovec iov{&f, sizeof(f)};
+    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(3 * sizeof(timespec))];
+    msghdr msg{};
+    msg.msg_iov = &iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = control;
+    msg.msg_controllen = sizeof(control);
+    ASSERT_TRUE(testing::Readable(rx, 2000));
+    ASSERT_EQ(::recvmsg(rx, &msg, 0), static_cast<ssize_t>(sizeof(f)));
+    EXPECT_EQ(msg.msg_flags & MSG_CTRUNC, 0);
+    cmsghdr* c = CMSG_FIRSTHDR(&msg);
+    ASSERT_NE(c, nullptr);
+    ASSERT_EQ(c->cmsg_type, SCM_TIMESTAMPNS);
+    timespec ns{};
+    std::memcpy(&ns, CMSG_DATA(c), sizeof(ns));
+    c = CMSG_NXTHDR(&msg, c);
+    ASSERT_NE(c, nullptr);
+    EXPECT_EQ(c->cmsg_level, SOL_SOCKET);
+    ASSERT_EQ(c->cmsg_type, SCM_TIMESTAMPING);
+    ASSERT_EQ(c->cmsg_len, CMSG_LEN(3 * sizeof(timespec)));
+    timespec ts[3]{};
+    std::memcpy(ts, CMSG_DATA(c), sizeof(ts));
+    EXPECT_EQ(ts[0].tv_sec, ns.tv_sec);
+    EXPECT_EQ(ts[0].tv_nsec, ns.tv_nsec);
+    EXPECT_GT(ts[0].tv_sec, 1600000000);  // CLOCK_REALTIME, like the kernel
+    for (int k : {1, 2}) EXPECT_EQ(ts[k].tv_sec + ts[k].tv_nsec, 0) << k;
+    EXPECT_EQ(CMSG_NXTHDR(&msg, c), nullptr);
+
+    // Stamps generated, none asked to be reported: no control message, as the kernel.
+    alignas(cmsghdr) char none[CMSG_SPACE(3 * sizeof(timespec))];
+    msghdr q{};
+    q.msg_iov = &iov;
+    q.msg_iovlen = 1;
+    q.msg_control = none;
+    q.msg_controllen = sizeof(none);
+    ASSERT_TRUE(testing::Readable(quiet, 2000));
+    ASSERT_EQ(::recvmsg(quiet, &q, 0), static_cast<ssize_t>(sizeof(f)));
+    EXPECT_EQ(q.msg_controllen, 0u);
+  }
+  for (int s : {tx, rx, quiet}) ::close(s);
 }
 
 TEST_F(UcanBusTest, PollAndEpollReportReadiness) {
