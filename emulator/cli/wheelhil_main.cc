@@ -15,6 +15,7 @@
 #include "emulator/cli/bus_commands.h"
 #include "emulator/cli/campaign_command.h"
 #include "emulator/cli/completion_command.h"
+#include "emulator/cli/log_command.h"
 #include "emulator/cli/run_command.h"
 
 namespace {
@@ -37,6 +38,7 @@ int main(int argc, char** argv) {
   wheelhil::emulator::BusCommands bus_commands(app);
   wheelhil::emulator::BenchCommand bench_command(app);
   wheelhil::emulator::CampaignCommand campaign_command(app);
+  wheelhil::emulator::LogCommand log_command(app);
   wheelhil::emulator::RunCommand run_command(app);
   wheelhil::emulator::CompletionCommand completion_command(app);
 
@@ -58,6 +60,7 @@ int main(int argc, char** argv) {
     if (auto code = bus_commands.Run()) return *code;
     if (auto code = bench_command.Run()) return *code;
     if (auto code = campaign_command.Run()) return *code;
+    if (auto code = log_command.Run()) return *code;
     if (auto code = run_command.Run()) return *code;
     if (auto code = completion_command.Run()) return *code;
   } catch (const std::invalid_argument& e) {
