@@ -111,6 +111,11 @@ RunCommand::RunCommand(CLI::App& app) {
                    "FW_Status handshake); overrides timing.clock. virtual makes the firmware the "
                    "SYNC producer unless --sync-producer emulator")
       ->check(CLI::IsMember({"virtual", "cooperative"}));
+  run_->add_option("--logs", logs_,
+                   "Also write the bus log in these formats beside can.log (asc: can.asc, blf: "
+                   "can.blf; Vector's formats); overrides the scenario's logs:")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"asc", "blf"}));
   run_->add_option("--sync-producer", sync_producer_,
                    "firmware or emulator; overrides timing.sync_producer")
       ->check(CLI::IsMember({"firmware", "emulator"}));
@@ -131,6 +136,7 @@ std::optional<int> RunCommand::Run() {
     sc.timing.firmware_produces_sync = sc.timing.virtual_clock;
     sc.timing.sync_producer_named = false;
   }
+  if (!logs_.empty()) sc.log_formats = logs_;
   if (!sync_producer_.empty()) {
     sc.timing.firmware_produces_sync = sync_producer_ == "firmware";
     sc.timing.sync_producer_named = true;

@@ -8,6 +8,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace wheelhil::emulator {
 
@@ -27,6 +28,7 @@ class RunCommand {
   bool realtime_ = false;
   std::optional<int> cpu_;
   std::string physics_thread_ = "auto";
+  std::vector<std::string> logs_;  // --logs
   std::string clock_;          // empty: the scenario's timing.clock
   std::string sync_producer_;  // empty: the scenario's timing.sync_producer
   bool quiet_ = false;

@@ -14,6 +14,7 @@
 
 #include "bus/canopen.h"
 #include "bus/dbc.h"
+#include "bus/vector_logs.h"
 #include "emulator/devices/device.h"
 #include "emulator/firmware/firmware_link.h"
 #include "emulator/firmware/firmware_process.h"
@@ -138,6 +139,8 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void RunPhases();
   void Progress(bool final);
   json Report(double wall_s);
+  // can.log again in the scenario's other formats (logs:), beside it.
+  void WriteOtherLogs();
   std::uint64_t MotionCycles() const { return handshake_->syncs_sent() - syncs_before_motion_; }
   // The time of an estimate: since the motion start, negative before it (not scored).
   double ScoredSeconds(std::int64_t t_ns) const {
@@ -535,6 +538,20 @@ void Run::Progress(bool final) {
              final || lines ? "\n" : "");
 }
 
+void Run::WriteOtherLogs() {
+  if (s_.log_formats.empty()) return;
+  const std::string log = out_ + "/can.log";
+  try {
+    const auto records = bus::ReadCanLog(log, bus::CanLogFormat::kCandump);
+    for (const std::string& format : s_.log_formats) {
+      bus::WriteCanLog(out_ + "/can." + format,
+                       format == "asc" ? bus::CanLogFormat::kAsc : bus::CanLogFormat::kBlf, records);
+    }
+  } catch (const std::invalid_argument& e) {
+    run_.Fail(fmt::format("the bus log in the formats of logs: {}", e.what()));
+  }
+}
+
 json Run::Report(double wall_s) {
   json r;
   r["scenario"] = s_.name;
@@ -631,6 +648,7 @@ RunResult Run::Execute() {
   }
   if (children_cpu_before_s_ >= 0) firmware_cpu_s_ = ChildrenCpuSeconds() - children_cpu_before_s_;
   hub_->CloseLog();
+  WriteOtherLogs();
   run_.TakeInterrupt();
   if (run_.failed()) {
     run_.events.push_back(json{

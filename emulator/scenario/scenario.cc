@@ -510,10 +510,31 @@ std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
   return names;
 }
 
+// `logs: [asc, blf]`: the bus log in these formats too, beside can.log.
+std::vector<std::string> ReadLogs(const Reader& r, const YAML::Node& n) {
+  std::vector<std::string> formats;
+  if (!Reader::Present(n)) return formats;
+  if (!n.IsSequence()) r.Fail(n, "logs", "must be a list of formats (asc, blf)");
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    const std::string f = fmt::format("logs[{}]", i);
+    const std::string format = r.ToString(n[i], f);
+    if (format != "asc" && format != "blf") {
+      r.Fail(n[i], f, fmt::format("'{}' is not a log format can.log is also written in (asc, blf)",
+                                  format));
+    }
+    if (std::find(formats.begin(), formats.end(), format) != formats.end()) {
+      r.Fail(n[i], f, fmt::format("'{}' is listed twice", format));
+    }
+    formats.push_back(format);
+  }
+  return formats;
+}
+
 Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   r.CheckKeys(root, "",
               {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "devices",
-               "faults", "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s"});
+               "faults", "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s",
+               "logs"});
   Scenario s;
   s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);
@@ -559,6 +580,7 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   CheckDrives(r, root, s);
   s.expectations = ReadExpectations(r, Reader::Get(root, "expectations"));
   s.metric_components = ReadScoring(r, Reader::Get(root, "scoring"));
+  s.log_formats = ReadLogs(r, Reader::Get(root, "logs"));
   if (root["slip_threshold_m_s"]) {
     s.slip_threshold_m_s = r.Number(root, "slip_threshold_m_s", "", 1e-6, 10, std::nullopt);
   }

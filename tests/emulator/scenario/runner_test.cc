@@ -20,6 +20,7 @@
 #include "bus/dbc.h"
 #include "bus/dbc_codec.h"
 #include "bus/ucan_runtime_dir.h"
+#include "bus/vector_logs.h"
 #include "emulator/devices/frame_checksum.h"
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
@@ -537,6 +538,28 @@ TEST_F(ScenarioRun, ClosedLoopDriveFaultsShowTheFirmwaresReaction) {
   ASSERT_TRUE(st["fault_detected"].get<bool>()) << st.dump();
   EXPECT_GT(st["fault_time_to_detect_s"].get<double>(), 25.0);
   EXPECT_LT(st["fault_time_to_detect_s"].get<double>(), 34.0);
+}
+
+// `logs: [asc, blf]`: can.asc and can.blf beside can.log, with its frames.
+TEST_F(ScenarioRun, LogsWritesTheBusLogInTheOtherFormatsToo) {
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/faults_demo.yaml");
+  s.log_formats = {"asc", "blf"};
+  const RunResult r = RunScenario(s, Options(dir_ / "logs"));
+  ASSERT_EQ(r.failure, "");
+  const auto can = bus::ReadCanLog((dir_ / "logs" / "can.log").string(), bus::CanLogFormat::kCandump);
+  ASSERT_GT(can.size(), 100u);
+  for (const auto& [name, format] : {std::pair{"can.asc", bus::CanLogFormat::kAsc},
+                                     std::pair{"can.blf", bus::CanLogFormat::kBlf}}) {
+    const auto other = bus::ReadCanLog((dir_ / "logs" / name).string(), format);
+    ASSERT_EQ(other.size(), can.size()) << name;
+    for (std::size_t i = 0; i < can.size(); ++i) {
+      EXPECT_EQ(other[i].timestamp_ns, can[i].timestamp_ns) << name << " " << i;
+      EXPECT_EQ(other[i].interface, can[i].interface) << name << " " << i;
+      if (!can[i].frame.error || format == bus::CanLogFormat::kBlf) {
+        EXPECT_TRUE(other[i].frame == can[i].frame) << name << " " << i;
+      }
+    }
+  }
 }
 
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {

@@ -62,6 +62,19 @@ TEST(ScenarioLoader, UnknownOrRepeatedMetricComponentIsNamed) {
               ThrowsMessage<std::invalid_argument>(HasSubstr("'pose' is listed twice")));
 }
 
+TEST(ScenarioLoader, LogsNameTheOtherFormatsOfTheBusLog) {
+  EXPECT_TRUE(ParseScenario(Minimal(), kFile).log_formats.empty());
+  EXPECT_EQ(ParseScenario(Minimal("logs: [blf, asc]\n"), kFile).log_formats,
+            (std::vector<std::string>{"blf", "asc"}));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: [asc, trc]\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("inline.yaml:10:13: logs[1]: 'trc' is not a log format")));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: [asc, asc]\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("'asc' is listed twice")));
+  EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: asc\n"), kFile); },
+              ThrowsMessage<std::invalid_argument>(HasSubstr("logs: must be a list")));
+}
+
 std::string DbcImu(const std::string& signal) {
   return "  dbc_imu:\n"
          "    dbc: ../tests/data/dbc/user_imu.dbc\n"
