@@ -113,9 +113,10 @@ RunCommand::RunCommand(CLI::App& app) {
       ->check(CLI::IsMember({"virtual", "cooperative"}));
   run_->add_option("--logs", logs_,
                    "Also write the bus log in these formats beside can.log (asc: can.asc, blf: "
-                   "can.blf; Vector's formats); overrides the scenario's logs:")
+                   "can.blf; Vector's formats), and mcap: the whole run as run.mcap (Foxglove); "
+                   "overrides the scenario's logs:")
       ->delimiter(',')
-      ->check(CLI::IsMember({"asc", "blf"}));
+      ->check(CLI::IsMember({"asc", "blf", "mcap"}));
   run_->add_option("--sync-producer", sync_producer_,
                    "firmware or emulator; overrides timing.sync_producer")
       ->check(CLI::IsMember({"firmware", "emulator"}));

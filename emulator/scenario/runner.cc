@@ -29,6 +29,7 @@
 #include "emulator/scoring/expectations.h"
 #include "emulator/scoring/metric_components.h"
 #include "emulator/scoring/run_artefacts.h"
+#include "emulator/scoring/run_mcap.h"
 #include "emulator/scoring/truth_recorder.h"
 #include "emulator/sim/bus_hub.h"
 #include "emulator/sim/cpu_placement.h"
@@ -544,6 +545,7 @@ void Run::WriteOtherLogs() {
   try {
     const auto records = bus::ReadCanLog(log, bus::CanLogFormat::kCandump);
     for (const std::string& format : s_.log_formats) {
+      if (format == "mcap") continue;  // after the artefacts it is made of
       bus::WriteCanLog(out_ + "/can." + format,
                        format == "asc" ? bus::CanLogFormat::kAsc : bus::CanLogFormat::kBlf, records);
     }
@@ -678,6 +680,14 @@ RunResult Run::Execute() {
   result.report = report;
   result.failure = run_.failure;
   result.exit_code = passed ? 0 : 1;
+  if (std::find(s_.log_formats.begin(), s_.log_formats.end(), "mcap") != s_.log_formats.end()) {
+    try {
+      scoring::WriteRunMcap(out_, robot);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "wheelhil run: run.mcap: {}\n", e.what());
+      result.exit_code = 1;
+    }
+  }
   link_->Close();
   return result;
 }

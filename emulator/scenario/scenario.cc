@@ -510,16 +510,17 @@ std::vector<std::string> ReadScoring(const Reader& r, const YAML::Node& n) {
   return names;
 }
 
-// `logs: [asc, blf]`: the bus log in these formats too, beside can.log.
+// `logs: [asc, blf, mcap]`: the bus log in these formats too, beside can.log; the whole run as
+// run.mcap.
 std::vector<std::string> ReadLogs(const Reader& r, const YAML::Node& n) {
   std::vector<std::string> formats;
   if (!Reader::Present(n)) return formats;
-  if (!n.IsSequence()) r.Fail(n, "logs", "must be a list of formats (asc, blf)");
+  if (!n.IsSequence()) r.Fail(n, "logs", "must be a list of formats (asc, blf, mcap)");
   for (std::size_t i = 0; i < n.size(); ++i) {
     const std::string f = fmt::format("logs[{}]", i);
     const std::string format = r.ToString(n[i], f);
-    if (format != "asc" && format != "blf") {
-      r.Fail(n[i], f, fmt::format("'{}' is not a log format can.log is also written in (asc, blf)",
+    if (format != "asc" && format != "blf" && format != "mcap") {
+      r.Fail(n[i], f, fmt::format("'{}' is not one of the run's other logs (asc, blf, mcap)",
                                   format));
     }
     if (std::find(formats.begin(), formats.end(), format) != formats.end()) {

@@ -273,7 +273,8 @@ struct Scenario {
   /// metric_components.h); empty: all of them.
   std::vector<std::string> metric_components;
   /// `logs:` the formats the bus log is also written in beside can.log ("asc" -> can.asc,
-  /// "blf" -> can.blf; bus/vector_logs.h); empty: can.log only.
+  /// "blf" -> can.blf; bus/vector_logs.h), and "mcap": the whole run as run.mcap
+  /// (emulator/scoring/run_mcap.h); empty: can.log only.
   std::vector<std::string> log_formats;
   /// Ground-truth slip for scoring: a drive wheel slips while its contact slip speed exceeds
   /// this (m/s); unset: the platform's solver.slip_threshold_m_s flag.

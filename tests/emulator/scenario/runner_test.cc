@@ -10,8 +10,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -560,6 +562,78 @@ TEST_F(ScenarioRun, LogsWritesTheBusLogInTheOtherFormatsToo) {
       }
     }
   }
+}
+
+// `logs: [mcap]`: run.mcap, read by @mcap/core's stream reader (an independent
+// implementation, CRCs checked; ./hil setup installs it into .cache/node): every frame of
+// can.log, every truth row, every estimate sample, every event, in their schemas.
+std::string RunAndCapture(const std::string& cmd) {
+  std::string out;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) return out;
+  char buf[4096];
+  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+  ::pclose(p);
+  return out;
+}
+
+TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
+  const std::string node_dir = std::string(WHEELHIL_SOURCE_DIR) + "/.cache/node";
+  if (std::system("command -v node >/dev/null 2>&1") != 0) GTEST_SKIP() << "no node";
+  if (!std::filesystem::exists(node_dir + "/node_modules/@mcap/core")) {
+    GTEST_SKIP() << "@mcap/core not in " << node_dir << " (./hil setup installs it with npm)";
+  }
+  Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper000_slip.yaml");
+  s.timing.duration_s = 12.0;  // one slip interval in
+  s.log_formats = {"mcap"};
+  const RunResult r = RunScenario(s, Options(dir_ / "mcap"));
+  ASSERT_EQ(r.failure, "");
+  const std::string out = RunAndCapture("node " + std::string(WHEELHIL_SOURCE_DIR) +
+                                        "/tests/emulator/scoring/scripts/mcap_read.js " +
+                                        node_dir + " " + (dir_ / "mcap" / "run.mcap").string() +
+                                        " 2>&1");
+  std::map<std::string, std::pair<std::string, long>> topics;  // schema, messages
+  bool json_ok = false;
+  std::istringstream lines(out);
+  for (std::string l; std::getline(lines, l);) {
+    std::istringstream f(l);
+    std::string topic, schema, schema_encoding, encoding;
+    long count = 0;
+    if (l == "json-ok") json_ok = true;
+    if (f >> topic >> schema >> schema_encoding >> encoding >> count && topic[0] == '/') {
+      EXPECT_EQ(schema_encoding, "jsonschema") << l;
+      EXPECT_EQ(encoding, "json") << l;
+      topics[topic] = {schema, count};
+    }
+  }
+  EXPECT_TRUE(json_ok) << out;
+  auto lines_of = [&](const char* file) {
+    std::ifstream in(dir_ / "mcap" / file);
+    long n = 0;
+    for (std::string l; std::getline(in, l);) ++n;
+    return n;
+  };
+  auto expect = [&](const std::string& topic, const std::string& schema, long count) {
+    ASSERT_TRUE(topics.count(topic)) << topic << "\n" << out;
+    EXPECT_EQ(topics[topic].first, schema) << topic;
+    EXPECT_EQ(topics[topic].second, count) << topic;
+  };
+  expect("/can", "wheelhil.CanFrame", lines_of("can.log"));
+  const long truth_rows = lines_of("truth.csv") - 1;
+  expect("/truth/pose", "foxglove.PoseInFrame", truth_rows);
+  expect("/truth/velocity", "wheelhil.BodyVelocity", truth_rows);
+  expect("/truth/wheels", "wheelhil.WheelSlip", truth_rows);
+  const long cycles = r.report["cycles"].get<long>();
+  expect("/estimate/pose/pose", "foxglove.PoseInFrame", cycles);
+  expect("/estimate/fused/velocity", "wheelhil.BodyVelocity", cycles);
+  expect("/events", "foxglove.Log", lines_of("events.jsonl"));
+  const std::string events = Slurp(dir_ / "mcap" / "events.jsonl");
+  long slips = 0;
+  for (std::size_t at = 0; (at = events.find("\"event\":\"slip\"", at)) != std::string::npos; ++at) {
+    ++slips;
+  }
+  ASSERT_GT(slips, 0);
+  expect("/slip", "wheelhil.SlipInterval", slips);
 }
 
 TEST_F(ScenarioRun, PhysicsThreadChangesNothing) {

@@ -68,7 +68,7 @@ TEST(ScenarioLoader, LogsNameTheOtherFormatsOfTheBusLog) {
             (std::vector<std::string>{"blf", "asc"}));
   EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: [asc, trc]\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("inline.yaml:10:13: logs[1]: 'trc' is not a log format")));
+                  HasSubstr("inline.yaml:10:13: logs[1]: 'trc' is not one of the run's other logs")));
   EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: [asc, asc]\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(HasSubstr("'asc' is listed twice")));
   EXPECT_THAT([] { (void)ParseScenario(Minimal("logs: asc\n"), kFile); },
