@@ -2,6 +2,8 @@
 
 #include <unistd.h>
 
+#include <cmath>
+
 #include <cstdlib>
 #include <filesystem>
 #include <stdexcept>
@@ -111,6 +113,11 @@ RunCommand::RunCommand(CLI::App& app) {
                    "FW_Status handshake); overrides timing.clock. virtual makes the firmware the "
                    "SYNC producer unless --sync-producer emulator")
       ->check(CLI::IsMember({"virtual", "cooperative"}));
+  run_->add_option("--stop-at", stop_at_s_,
+                   "Virtual clock: stop the firmware when virtual time (can.log's clock) reaches "
+                   "T seconds, for a debugger (it prints how to attach; virtual time waits for "
+                   "the firmware while it is stopped or traced)")
+      ->check(CLI::NonNegativeNumber);
   run_->add_option("--logs", logs_,
                    "Also write the bus log in these formats beside can.log (asc: can.asc, blf: "
                    "can.blf; Vector's formats), and mcap: the whole run as run.mcap (Foxglove); "
@@ -158,6 +165,7 @@ std::optional<int> RunCommand::Run() {
   o.physics_thread = physics_thread_ == "on"    ? scenario::RunOptions::PhysicsThread::kOn
                      : physics_thread_ == "off" ? scenario::RunOptions::PhysicsThread::kOff
                                                 : scenario::RunOptions::PhysicsThread::kAuto;
+  if (stop_at_s_) o.stop_firmware_at_ns = std::llround(*stop_at_s_ * 1e9);
   o.progress = !quiet_ && ::isatty(2);
   o.progress_lines_s = quiet_ ? 0 : 10;
   if (!quiet_) {

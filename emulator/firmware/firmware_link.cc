@@ -306,6 +306,12 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       firmware_blocked_ = true;
       return true;
     }
+    if (clock.FirmwareStopped()) {
+      // A debugger has it (or it was stopped for one): no limit, and no hurry to look again.
+      t0 = Clock::now();
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      continue;
+    }
     const double wall = WallSeconds(t0);
     if (wall > std::min(1.0, timeout_s / 2) && !checked_exit) {
       checked_exit = true;

@@ -335,6 +335,7 @@ VirtualClock::Kernel VirtualClock::KernelState(int slot, pid_t pid, pid_t tid,
   ++kernel_looks_;
   const char state = TaskState(ReadAt0(f.stat_fd));
   if (Gone(state)) return Kernel::kGone;
+  if (state == 'T' || state == 't') stopped_seen_ = true;
   if (runs != nullptr) {
     *runs = Timeslices(f.schedstat_fd >= 0 ? ReadAt0(f.schedstat_fd) : std::string());
   }
@@ -364,6 +365,7 @@ void VirtualClock::FreeDeadThread(int slot) {
 }
 
 bool VirtualClock::Blocked() {
+  stopped_seen_ = false;
   const std::uint32_t t0 = page_->transitions.load();
   transitions_seen_ = t0;
   for (int p = 0; p < vt::kMaxProcesses; ++p) {

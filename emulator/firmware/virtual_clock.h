@@ -67,6 +67,9 @@ class VirtualClock {
   /// fd wait on those `channels` (bus/vtime_protocol.h: BusSocketChannel of the clients
   /// written to, kAnyChannel for anything else) may have ended (ThreadSlot::vouched).
   void NoteFdWakes(std::uint32_t channels);
+  /// The last Blocked() found a thread stopped or traced (a debugger has it): the firmware
+  /// does not move until it is let go, however long that takes.
+  bool FirmwareStopped() const { return stopped_seen_; }
   /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
   std::uint64_t kernel_looks() const { return kernel_looks_; }
   /// Changes whenever the firmware made a call the broker sees on a socket rather than in a
@@ -137,6 +140,7 @@ class VirtualClock {
   std::uint32_t transitions_seen_ = 0;
   std::uint64_t kernel_looks_ = 0;
   std::uint64_t threads_freed_ = 0;  // FreeDeadThread
+  bool stopped_seen_ = false;         // FirmwareStopped
   bool shares_cpu_ = false;
   // WaitForChange: yields in a row after which no thread had changed (then it sleeps).
   static constexpr int kYieldsBeforeSleep = 2;

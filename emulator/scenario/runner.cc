@@ -1,5 +1,6 @@
 #include "emulator/scenario/runner.h"
 
+#include <signal.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -130,6 +131,8 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void StartFirmware();
   // Virtual clock: the firmware runs at the bus's instant until every thread of it is blocked.
   void SettleFirmware();
+  // --stop-at: stops the firmware's process group for a debugger and says how to attach.
+  void StopFirmwareForDebugger();
   // Virtual clock: runs the firmware alone (its clock moving to its own deadlines) until it has
   // opened the bus.
   void StartFirmwareOnVirtualClock();
@@ -182,6 +185,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // --physics-thread auto: when the run's thread took the steps back from the worker (-1: no).
   std::int64_t physics_inline_from_ns_ = -1;
   bool log_on_run_thread_ = false;
+  bool firmware_stopped_ = false;  // StopFirmwareForDebugger
   std::uint64_t progress_calls_ = 0;  // Progress(false)  // can.log written here again after the worker fell back
 };
 
@@ -273,6 +277,9 @@ void Run::WaitStatus(int cycle, std::int64_t k) {
 
 void Run::SettleFirmware() {
   if (run_.failed() || !firmware_.running()) return;
+  if (o_.stop_firmware_at_ns >= 0 && !firmware_stopped_ && hub_->now_ns() >= o_.stop_firmware_at_ns) {
+    StopFirmwareForDebugger();
+  }
   clock_->SetNow(hub_->now_ns());
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
@@ -286,6 +293,24 @@ void Run::SettleFirmware() {
   };
   warn("firmware_host_clock_wait", clock_->TakeHostClockWaits());
   warn("firmware_off_the_clock", clock_->TakeProcessesOffTheClock());
+}
+
+void Run::StopFirmwareForDebugger() {
+  firmware_stopped_ = true;
+  const pid_t pid = firmware_.pid();
+  ::kill(-pid, SIGSTOP);
+  const double t_s = static_cast<double>(hub_->now_ns()) * 1e-9;
+  run_.events.push_back(json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                             {"event", "firmware_stopped"},
+                             {"pid", pid},
+                             {"bus_time_s", t_s}});
+  fmt::print(stderr,
+             "wheelhil run: the firmware (pid {}) is stopped at t = {:.6f} s of virtual time (can.log's "
+             "clock); virtual time waits for it. Attach: gdb -p {} -ex 'handle SIG64 nostop "
+             "noprint pass' (the virtual clock's wake-up signal), then continue; or let it go "
+             "on without a debugger: kill -CONT -{}\n",
+             pid, t_s, pid, pid);
+  if (o_.on_firmware_stopped) o_.on_firmware_stopped(pid);
 }
 
 void Run::StartFirmwareOnVirtualClock() {
@@ -616,6 +641,12 @@ RunResult Run::Execute() {
   }
   lockstep_ = s_.timing.lockstep && !o_.realtime;
   ResolveClock();
+  if (o_.stop_firmware_at_ns >= 0 && !virtual_time_) {
+    throw std::invalid_argument(fmt::format(
+        "{}: --stop-at stops the firmware on the virtual clock, which this run does not have "
+        "(it needs lockstep, the private bus and a firmware.command)",
+        s_.source_path));
+  }
   if (lockstep_) cpus_.ConfineToOneCpu(o_.cpu);
   wall0_ = Clock::now();
   last_progress_ = wall0_;

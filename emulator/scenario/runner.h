@@ -45,6 +45,12 @@ struct RunOptions {
   /// Called once the private userspace bus is up, before the firmware starts: its name and
   /// runtime directory (where other SocketCAN programs can attach to watch it).
   std::function<void(const std::string& bus, const std::string& runtime_dir)> on_private_bus;
+  /// Virtual clock: the firmware's process group is stopped (SIGSTOP) once the bus's clock
+  /// reaches this many ns (can.log's time; -1: never), for a debugger to attach; virtual time
+  /// then waits for it for as long as it is stopped or traced (docs/virtual-time.md,
+  /// "Debugging"). `on_firmware_stopped` is called with its pid then.
+  std::int64_t stop_firmware_at_ns = -1;
+  std::function<void(pid_t pid)> on_firmware_stopped;
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.
   /// Lockstep only: the CPU the run (emulator, bus and firmware process) is confined to.

@@ -4,16 +4,22 @@
 // the reference firmware runs with its shipped config (SYNC producer, cycle deadline on).
 // Same scenario and seed -> byte-identical can.log; a firmware that never blocks ends the run
 // with its thread named.
+#include <signal.h>
+
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -362,6 +368,57 @@ TEST_F(VirtualTimeRun, WaitsOnlyTheEmulatorCanEndNeedNoLookInTheKernel) {
       << piped.dump();
   EXPECT_EQ(Slurp(dir_ / "vouched" / "can.log"), Slurp(dir_ / "piped" / "can.log"));
   EXPECT_EQ(Slurp(dir_ / "vouched" / "estimate.csv"), Slurp(dir_ / "piped" / "estimate.csv"));
+}
+
+// --stop-at: the firmware is stopped at a virtual instant; gdb (batch mode) attaches, breaks in
+// the C firmware's frame handler, prints a variable and detaches; virtual time waited for it
+// all along, so verdict, can.log and estimate.csv are those of a run without the debugger.
+TEST_F(VirtualTimeRun, AFirmwareStoppedForADebuggerIsWaitedForAndChangesNothing) {
+  if (std::system("command -v gdb >/dev/null 2>&1") != 0) GTEST_SKIP() << "no gdb";
+  auto run = [&](const std::string& name, bool debug, std::string* gdb_out) {
+    Scenario s = LoadScenarioFile(kCustomerC);
+    s.timing.duration_s = 1.0;
+    s.expectations.clear();
+    RunOptions o = testing::BuildTreeRunOptions(dir_ / name);
+    std::thread gdb;
+    if (debug) {
+      o.stop_firmware_at_ns = 800'000'000;
+      o.on_firmware_stopped = [&](pid_t pid) {
+        gdb = std::thread([pid, gdb_out] {
+          const std::string cmd = fmt::format(
+              "gdb -p {} -batch -ex 'handle SIG64 nostop noprint pass' "
+              "-ex 'break c_epoll_odometry.c:87' -ex continue "
+              "-ex 'print g_nodes[0].have_position' -ex delete -ex detach 2>&1",
+              pid);
+          FILE* p = ::popen(cmd.c_str(), "r");
+          char buf[4096];
+          while (p != nullptr && std::fgets(buf, sizeof buf, p) != nullptr) *gdb_out += buf;
+          if (p != nullptr) ::pclose(p);
+          ::kill(-pid, SIGCONT);  // as the printed hint says, should the detach leave it stopped
+        });
+      };
+    }
+    const RunResult r = RunScenario(s, o);
+    if (gdb.joinable()) gdb.join();
+    return r;
+  };
+  std::string gdb_out;
+  const RunResult plain = run("plain", false, nullptr);
+  const RunResult debugged = run("debugged", true, &gdb_out);
+  if (gdb_out.find("ptrace: Operation not permitted") != std::string::npos) {
+    GTEST_SKIP() << "this host does not let gdb attach (ptrace scope): " << gdb_out;
+  }
+  ASSERT_EQ(plain.failure, "");
+  ASSERT_EQ(debugged.failure, "") << gdb_out;
+  EXPECT_THAT(gdb_out, HasSubstr("Breakpoint 1 at"));
+  EXPECT_THAT(gdb_out, HasSubstr("$1 = 1")) << gdb_out;  // the encoders' TPDOs are coming in
+  EXPECT_THAT(gdb_out, HasSubstr("detached"));
+  EXPECT_EQ(debugged.report["verdict"], plain.report["verdict"]);
+  EXPECT_EQ(debugged.report["metrics"], plain.report["metrics"]);
+  for (const char* f : {"can.log", "estimate.csv", "truth.csv"}) {
+    EXPECT_EQ(Slurp(dir_ / "debugged" / f), Slurp(dir_ / "plain" / f)) << f;
+  }
+  EXPECT_THAT(Slurp(dir_ / "debugged" / "events.jsonl"), HasSubstr("\"event\":\"firmware_stopped\""));
 }
 
 // A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
