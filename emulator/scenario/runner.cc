@@ -713,7 +713,7 @@ RunResult Run::Execute() {
   result.exit_code = passed ? 0 : 1;
   if (std::find(s_.log_formats.begin(), s_.log_formats.end(), "mcap") != s_.log_formats.end()) {
     try {
-      scoring::WriteRunMcap(out_, robot);
+      scoring::WriteRunMcap(out_, robot, *truth_);
     } catch (const std::exception& e) {
       fmt::print(stderr, "wheelhil run: run.mcap: {}\n", e.what());
       result.exit_code = 1;

@@ -172,10 +172,15 @@ const json& CanSchema() {
   return s;
 }
 const json& WheelSchema() {
-  static const json s =
-      Object({{"timestamp", Time()},
-              {"slipping", {{"type", "array"}, {"items", {{"type", "string"}}}}},
-              {"mask", {{"type", "integer"}}}});
+  static const json wheel = Object({{"name", {{"type", "string"}}},
+                                    {"omega_rad_s", Number()},
+                                    {"slip_speed_m_s", Number()},
+                                    {"normal_load_n", Number()},
+                                    {"motor_torque_nm", Number()},
+                                    {"in_contact", {{"type", "boolean"}}},
+                                    {"slipping", {{"type", "boolean"}}}});
+  static const json s = Object({{"timestamp", Time()},
+                                {"wheels", {{"type", "array"}, {"items", wheel}}}});
   return s;
 }
 const json& SlipSchema() {
@@ -221,7 +226,7 @@ std::int64_t Ns(double seconds) { return std::llround(seconds * 1e9); }
 
 }  // namespace
 
-void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot) {
+void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const TruthRecorder& truth) {
   const fs::path dir(out_dir);
   McapFile mcap;
   // The motion's t = 0 on can.log's clock.
@@ -264,7 +269,9 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot) {
   const std::uint16_t truth_pose = mcap.Channel("/truth/pose", "foxglove.PoseInFrame", PoseSchema());
   const std::uint16_t truth_vel =
       mcap.Channel("/truth/velocity", "wheelhil.BodyVelocity", VelocitySchema());
-  const std::uint16_t wheels = mcap.Channel("/truth/wheels", "wheelhil.WheelSlip", WheelSchema());
+  const std::uint16_t wheels = mcap.Channel("/truth/wheels", "wheelhil.WheelStates", WheelSchema());
+  const auto& states = truth.wheel_states();
+  std::size_t row = 0;
   for (const auto& c : ReadCsv(dir / "truth.csv")) {
     if (c.size() < 9) continue;
     const std::int64_t t = at(std::stod(c[0]));
@@ -275,12 +282,21 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot) {
                   {"vx_m_s", std::stod(c[5])},
                   {"vy_m_s", std::stod(c[6])},
                   {"omega_rad_s", std::stod(c[7])}});
-    const long mask = std::stol(c[8]);
-    json slipping = json::array();
-    for (const auto& w : robot.wheels) {
-      if (w.slip_bit >= 0 && (mask >> w.slip_bit & 1)) slipping.push_back(w.name);
+    if (row < states.size()) {
+      json list = json::array();
+      for (std::size_t w = 0; w < states[row].size(); ++w) {
+        const WheelState& st = states[row][w];
+        list.push_back({{"name", w < robot.wheels.size() ? robot.wheels[w].name : std::to_string(w)},
+                        {"omega_rad_s", st.omega_rad_s},
+                        {"slip_speed_m_s", st.slip_speed_m_s},
+                        {"normal_load_n", st.normal_load_n},
+                        {"motor_torque_nm", st.motor_torque_nm},
+                        {"in_contact", st.in_contact},
+                        {"slipping", st.slipping}});
+      }
+      mcap.Message(wheels, t, {{"timestamp", Stamp(t)}, {"wheels", list}});
     }
-    mcap.Message(wheels, t, {{"timestamp", Stamp(t)}, {"slipping", slipping}, {"mask", mask}});
+    ++row;
   }
 
   // estimate.csv: t_s,cycle,stream,<x or vx>,<y or vy>,<theta or omega>; pose streams are the

@@ -7,7 +7,8 @@
 ///   /can                      wheelhil.CanFrame         every frame of can.log
 ///   /truth/pose               foxglove.PoseInFrame      truth.csv (frame "world")
 ///   /truth/velocity           wheelhil.BodyVelocity     truth.csv (body frame)
-///   /truth/wheels             wheelhil.WheelSlip        truth.csv: which wheels slip
+///   /truth/wheels             wheelhil.WheelStates      every wheel at each truth row: spin
+///                             rate, slip speed, load, motor torque, contact, slipping
 ///   /estimate/<stream>/pose   foxglove.PoseInFrame      estimate.csv, its pose streams
 ///   /estimate/<stream>/velocity wheelhil.BodyVelocity   estimate.csv, its velocity streams
 ///   /slip                     wheelhil.SlipInterval     the ground-truth slip intervals
@@ -23,6 +24,7 @@
 
 namespace wheelhil::emulator::scoring {
 
-void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot);
+/// `truth`: the run's recorder, for the wheels' states (its rows are truth.csv's).
+void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const TruthRecorder& truth);
 
 }  // namespace wheelhil::emulator::scoring

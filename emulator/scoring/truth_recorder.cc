@@ -9,6 +9,7 @@ void TruthRecorder::StartMotion(std::int64_t t0_ns, const physics::BodyTruth& bo
   p0_ = body.p_WB;
   yaw0_ = body.yaw_rad;
   rows_.clear();
+  wheel_states_.clear();
   pose_.clear();
   vel_.clear();
 }
@@ -35,6 +36,11 @@ void TruthRecorder::Record(std::int64_t t_ns, const physics::BodyTruth& b,
   }
   if (!rows_.empty() && rows_.back().t_s == t) return;
   rows_.push_back(r);
+  auto& states = wheel_states_.emplace_back();
+  for (const physics::WheelTruth& w : wt) {
+    states.push_back({w.omega_rad_s, w.slip_speed_m_s, w.normal_load_n, w.motor_torque_nm,
+                      w.in_contact, Slipping(w)});
+  }
   pose_.push_back({t, r.x_m, r.y_m, r.theta_rad});
   vel_.push_back({t, r.vx_m_s, r.vy_m_s, r.omega_rad_s});
 }

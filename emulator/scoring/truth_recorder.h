@@ -27,6 +27,16 @@ struct TruthRecorderOptions {
   std::int64_t step_ns = 1'000'000;    ///< Physics step.
 };
 
+/// A wheel's state at a truth row (for run.mcap): spin rate, contact slip speed, load, motor.
+struct WheelState {
+  double omega_rad_s = 0;
+  double slip_speed_m_s = 0;
+  double normal_load_n = 0;
+  double motor_torque_nm = 0;
+  bool in_contact = false;
+  bool slipping = false;
+};
+
 class TruthRecorder {
  public:
   explicit TruthRecorder(TruthRecorderOptions options) : o_(std::move(options)) {}
@@ -47,6 +57,8 @@ class TruthRecorder {
   double step_s() const { return static_cast<double>(o_.step_ns) * 1e-9; }
 
   const std::vector<TruthRow>& rows() const { return rows_; }
+  /// Per row, every wheel's state (vehicle order).
+  const std::vector<std::vector<WheelState>>& wheel_states() const { return wheel_states_; }
   const std::vector<PoseSample>& poses() const { return pose_; }
   const std::vector<VelocitySample>& velocities() const { return vel_; }
   /// Per motion step: its start (s since the motion start) and whether a drive wheel slipped.
@@ -65,6 +77,7 @@ class TruthRecorder {
   Eigen::Vector3d p0_ = Eigen::Vector3d::Zero();
   double yaw0_ = 0;
   std::vector<TruthRow> rows_;
+  std::vector<std::vector<WheelState>> wheel_states_;
   std::vector<PoseSample> pose_;
   std::vector<VelocitySample> vel_;
   std::vector<double> step_t_;

@@ -622,7 +622,7 @@ TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
   const long truth_rows = lines_of("truth.csv") - 1;
   expect("/truth/pose", "foxglove.PoseInFrame", truth_rows);
   expect("/truth/velocity", "wheelhil.BodyVelocity", truth_rows);
-  expect("/truth/wheels", "wheelhil.WheelSlip", truth_rows);
+  expect("/truth/wheels", "wheelhil.WheelStates", truth_rows);
   const long cycles = r.report["cycles"].get<long>();
   expect("/estimate/pose/pose", "foxglove.PoseInFrame", cycles);
   expect("/estimate/fused/velocity", "wheelhil.BodyVelocity", cycles);
