@@ -21,8 +21,8 @@
 #include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
-#include <linux/net_tstamp.h>
 #include <linux/close_range.h>
+#include <linux/net_tstamp.h>
 #include <net/if.h>
 #include <poll.h>
 #include <pthread.h>
@@ -60,8 +60,8 @@ constexpr int kSoTimestampNsOld = 35;
 constexpr int kSoTimestampNew = 63;
 constexpr int kSoTimestampNsNew = 64;
 constexpr int kSoRxqOvfl = 40;
-constexpr int kSoTimestampingOld = 37;  // SCM_TIMESTAMPING_OLD: struct scm_timestamping
-constexpr int kSoTimestampingNew = 65;  // SCM_TIMESTAMPING_NEW: the same layout on 64-bit
+constexpr int kSoTimestampingOld = 37;      // SCM_TIMESTAMPING_OLD: struct scm_timestamping
+constexpr int kSoTimestampingNew = 65;      // SCM_TIMESTAMPING_NEW: the same layout on 64-bit
 constexpr unsigned short kArphrdCan = 280;  // ARPHRD_CAN
 constexpr unsigned long kSiocgstampOld = 0x8906;
 constexpr unsigned long kSiocgstampNsOld = 0x8907;
@@ -683,7 +683,7 @@ ssize_t RingRecv(int fd, ucan::RingHeader* h, std::uint8_t* buf, std::size_t cap
   ucan::RingIndex& r = h->rx;
   bool may_block = (flags & MSG_DONTWAIT) == 0;
   bool checked_mode = false;
-  bool polled = false;  // the socket was found readable by the poll below
+  bool polled = false;            // the socket was found readable by the poll below
   std::int64_t deadline_ns = -1;  // SO_RCVTIMEO
   for (;;) {
     LockRing(r);
@@ -911,8 +911,7 @@ std::atomic<bool> g_signals_on_input{false};
 
 int DupFcntl(int fd, int cmd, int rc, void* arg) {
   if (rc >= 0 && (cmd == F_DUPFD || cmd == F_DUPFD_CLOEXEC) && IsUcan(fd)) ShareFd(fd, rc);
-  if (rc >= 0 && cmd == F_SETFL && (reinterpret_cast<std::intptr_t>(arg) & O_ASYNC) &&
-      IsUcan(fd)) {
+  if (rc >= 0 && cmd == F_SETFL && (reinterpret_cast<std::intptr_t>(arg) & O_ASYNC) && IsUcan(fd)) {
     g_signals_on_input.store(true);
   }
   return rc;
@@ -938,8 +937,8 @@ UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd, std::uint32_t* client_id)
   ucan::RingIndex& rx = v.rings->header->rx;
   LockRing(rx);
   const std::uint64_t bell = rx.bell.load();
-  const bool empty = rx.tail.load() == rx.head.load() && (bell & 1) == 0 &&
-                     rx.bells_taken >= (bell >> 1);
+  const bool empty =
+      rx.tail.load() == rx.head.load() && (bell & 1) == 0 && rx.bells_taken >= (bell >> 1);
   pthread_mutex_unlock(&rx.lock);
   return empty ? 1 : 2;
 }

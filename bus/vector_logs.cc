@@ -55,7 +55,8 @@ std::string ChannelName(const std::map<int, std::string>& names, int channel) {
 
 std::string Hex(std::span<const std::uint8_t> bytes) {
   std::string out;
-  for (std::size_t i = 0; i < bytes.size(); ++i) out += fmt::format("{}{:02X}", i ? " " : "", bytes[i]);
+  for (std::size_t i = 0; i < bytes.size(); ++i)
+    out += fmt::format("{}{:02X}", i ? " " : "", bytes[i]);
   return out;
 }
 
@@ -137,9 +138,9 @@ bool ParseHexId(std::string_view s, CanFrame& f) {
   std::uint32_t id = 0;
   for (char c : s) {
     const int v = std::isdigit(static_cast<unsigned char>(c)) ? c - '0'
-                  : (c >= 'A' && c <= 'F')                   ? c - 'A' + 10
-                  : (c >= 'a' && c <= 'f')                   ? c - 'a' + 10
-                                                             : -1;
+                  : (c >= 'A' && c <= 'F')                    ? c - 'A' + 10
+                  : (c >= 'a' && c <= 'f')                    ? c - 'a' + 10
+                                                              : -1;
     if (v < 0) return false;
     id = id << 4 | static_cast<std::uint32_t>(v);
   }
@@ -188,13 +189,15 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
     if (tok[i + 1] == "1") f.fd_flags |= 0x02;
     char* end = nullptr;
     const long len = std::strtol(tok[i + 3].c_str(), &end, 10);
-    if (end != tok[i + 3].c_str() + tok[i + 3].size()) return (why = "a bad CANFD data length", false);
+    if (end != tok[i + 3].c_str() + tok[i + 3].size())
+      return (why = "a bad CANFD data length", false);
     if (len < 0 || !IsValidFdLength(static_cast<std::size_t>(len)) ||
         i + 4 + static_cast<std::size_t>(len) > tok.size()) {
       return (why = "a bad CANFD data length", false);
     }
     for (long k = 0; k < len; ++k) {
-      if (!ParseHexByte(tok[i + 4 + static_cast<std::size_t>(k)], f.data[static_cast<std::size_t>(k)])) {
+      if (!ParseHexByte(tok[i + 4 + static_cast<std::size_t>(k)],
+                        f.data[static_cast<std::size_t>(k)])) {
         return (why = "a bad data byte", false);
       }
     }
@@ -228,9 +231,11 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
     f.rtr = true;
     f.len = static_cast<std::uint8_t>(dlc);
   } else if (tok[4] == "d") {
-    if (tok.size() < 6 + static_cast<std::size_t>(dlc)) return (why = "fewer data bytes than the DLC", false);
+    if (tok.size() < 6 + static_cast<std::size_t>(dlc))
+      return (why = "fewer data bytes than the DLC", false);
     for (int k = 0; k < dlc; ++k) {
-      if (!ParseHexByte(tok[6 + static_cast<std::size_t>(k)], f.data[static_cast<std::size_t>(k)])) {
+      if (!ParseHexByte(tok[6 + static_cast<std::size_t>(k)],
+                        f.data[static_cast<std::size_t>(k)])) {
         return (why = "a bad data byte", false);
       }
     }
@@ -324,8 +329,8 @@ void PutSystemTime(std::string& b, std::int64_t ns) {
   const std::time_t s = static_cast<std::time_t>(ns / kNsPerS);
   std::tm t{};
   ::gmtime_r(&s, &t);
-  for (int v : {t.tm_year + 1900, t.tm_mon + 1, t.tm_wday, t.tm_mday, t.tm_hour, t.tm_min,
-                t.tm_sec, static_cast<int>(ns % kNsPerS / kNsPerMs)}) {
+  for (int v : {t.tm_year + 1900, t.tm_mon + 1, t.tm_wday, t.tm_mday, t.tm_hour, t.tm_min, t.tm_sec,
+                static_cast<int>(ns % kNsPerS / kNsPerMs)}) {
     Put16(b, static_cast<std::uint16_t>(v));
   }
 }
@@ -364,8 +369,8 @@ void PutObject(std::string& out, std::uint32_t type, std::uint64_t t_ns, const s
 std::string FrameObject(const CanFrame& f, int channel, char direction, std::uint32_t* type) {
   std::string d;
   std::uint32_t id = f.id | (f.extended ? kExtendedIdFlag : 0u);
-  const std::uint8_t flags = static_cast<std::uint8_t>((f.rtr ? kRemoteFlag : 0) |
-                                                       (direction == 'T' ? kTxFlag : 0));
+  const std::uint8_t flags =
+      static_cast<std::uint8_t>((f.rtr ? kRemoteFlag : 0) | (direction == 'T' ? kTxFlag : 0));
   if (f.error) {
     *type = kCanErrorExt;
     Put16(d, static_cast<std::uint16_t>(channel));
@@ -428,12 +433,14 @@ void ParseBlfObjects(std::string_view data, std::int64_t start, const std::strin
     const auto size = Get<std::uint32_t>(data, pos + 8);
     const auto type = Get<std::uint32_t>(data, pos + 12);
     if (size < header_size || pos + size > data.size() || header_size < 32) {
-      throw std::invalid_argument(fmt::format("{}: an object of {} bytes does not fit", path, size));
+      throw std::invalid_argument(
+          fmt::format("{}: an object of {} bytes does not fit", path, size));
     }
     const std::uint32_t tflags = Get<std::uint32_t>(data, pos + 16);
     const std::uint64_t t = Get<std::uint64_t>(data, pos + 24);
     const std::int64_t t_ns =
-        start + static_cast<std::int64_t>(tflags == kTimeOneNs ? t : (version == 1 ? t * 10000 : t));
+        start +
+        static_cast<std::int64_t>(tflags == kTimeOneNs ? t : (version == 1 ? t * 10000 : t));
     const std::string_view d = data.substr(pos + header_size, size - header_size);
     pos += size;
     CandumpRecord r;
@@ -459,7 +466,9 @@ void ParseBlfObjects(std::string_view data, std::int64_t start, const std::strin
       f.id = id & CanFrame::kMaxExtendedId;
       f.fd = (fd_flags & 0x1) != 0;
       f.rtr = !f.fd && (flags & kRemoteFlag) != 0;
-      if (f.fd) f.fd_flags = static_cast<std::uint8_t>((fd_flags & 0x2 ? 0x01 : 0) | (fd_flags & 0x4 ? 0x02 : 0));
+      if (f.fd)
+        f.fd_flags =
+            static_cast<std::uint8_t>((fd_flags & 0x2 ? 0x01 : 0) | (fd_flags & 0x4 ? 0x02 : 0));
       f.len = std::min<std::uint8_t>(Get<std::uint8_t>(d, 14), f.fd ? 64 : 8);
       std::memcpy(f.data.data(), d.data() + 20, f.len);
       r.direction = flags & kTxFlag ? 'T' : 'R';
@@ -498,13 +507,15 @@ std::vector<CandumpRecord> ParseBlf(std::string_view file, const std::string& pa
   std::string objects;
   while (pos + 16 <= file.size()) {
     if (file.substr(pos, 4) != "LOBJ") {
-      throw std::invalid_argument(fmt::format("{}: byte {}: no object where one should begin", path, pos));
+      throw std::invalid_argument(
+          fmt::format("{}: byte {}: no object where one should begin", path, pos));
     }
     const auto size = Get<std::uint32_t>(file, pos + 8);
     const auto type = Get<std::uint32_t>(file, pos + 12);
     const auto header_size = Get<std::uint16_t>(file, pos + 4);
     if (size < header_size || pos + size > file.size()) {
-      throw std::invalid_argument(fmt::format("{}: byte {}: an object runs past the end", path, pos));
+      throw std::invalid_argument(
+          fmt::format("{}: byte {}: an object runs past the end", path, pos));
     }
     if (type == kLogContainer && size >= header_size + 16u) {
       const std::string_view c = file.substr(pos + header_size, size - header_size);
@@ -519,7 +530,8 @@ std::vector<CandumpRecord> ParseBlf(std::string_view file, const std::string& pa
         if (::uncompress(reinterpret_cast<Bytef*>(raw.data()), &n,
                          reinterpret_cast<const Bytef*>(payload.data()),
                          static_cast<uLong>(payload.size())) != Z_OK) {
-          throw std::invalid_argument(fmt::format("{}: byte {}: a container zlib cannot inflate", path, pos));
+          throw std::invalid_argument(
+              fmt::format("{}: byte {}: a container zlib cannot inflate", path, pos));
         }
         raw.resize(n);
         objects += raw;
@@ -569,11 +581,13 @@ std::string FormatAsc(const std::vector<CandumpRecord>& records) {
     } else if (f.fd) {
       // python-can's ASCWriter layout (its reader and CANoe's take it); no symbolic name, no
       // bit timing: zeros.
-      line = fmt::format("CANFD {:>3} {:<4} {:>8}  {:>32} {} {} {:x} {:>2} {}{}{:>8} {:>4} {:>8X} {:>8} {:>8} {:>8} {:>8} {:>8}",
-                         ch, dir, id, "", f.fd_flags & 0x01 ? 1 : 0, f.fd_flags & 0x02 ? 1 : 0,
-                         LengthToDlc(f.len), f.len, Hex(f.payload()), f.len ? " " : "", 0, 0,
-                         0x1000 | (f.fd_flags & 0x01 ? 0x2000 : 0) | (f.fd_flags & 0x02 ? 0x4000 : 0),
-                         0, 0, 0, 0, 0);
+      line = fmt::format(
+          "CANFD {:>3} {:<4} {:>8}  {:>32} {} {} {:x} {:>2} {}{}{:>8} {:>4} {:>8X} {:>8} {:>8} "
+          "{:>8} {:>8} {:>8}",
+          ch, dir, id, "", f.fd_flags & 0x01 ? 1 : 0, f.fd_flags & 0x02 ? 1 : 0, LengthToDlc(f.len),
+          f.len, Hex(f.payload()), f.len ? " " : "", 0, 0,
+          0x1000 | (f.fd_flags & 0x01 ? 0x2000 : 0) | (f.fd_flags & 0x02 ? 0x4000 : 0), 0, 0, 0, 0,
+          0);
     } else if (f.rtr) {
       line = fmt::format("{}  {:<15} {:<4} r {:x}", ch, id, dir, f.len);
     } else {
@@ -583,9 +597,10 @@ std::string FormatAsc(const std::vector<CandumpRecord>& records) {
     body += AscTime(r.timestamp_ns - start) + " " + line + "\n";
   }
   const std::string date = AscDate(start);
-  std::string out = fmt::format("date {}\nbase hex  timestamps absolute\ninternal events logged\n"
-                                "// version 9.0.0\n",
-                                date);
+  std::string out = fmt::format(
+      "date {}\nbase hex  timestamps absolute\ninternal events logged\n"
+      "// version 9.0.0\n",
+      date);
   for (std::size_t i = 0; i < channels.names().size(); ++i) {
     out += fmt::format("// channel {} {}\n", i + 1, channels.names()[i]);
   }
@@ -604,7 +619,8 @@ std::string FormatBlf(const std::vector<CandumpRecord>& records) {
     const int ch = channels.Of(r.interface);
     const auto t = static_cast<std::uint64_t>(std::max<std::int64_t>(0, r.timestamp_ns - base));
     if (channels.names().size() > known) {
-      PutObject(objects, kAppText, t, AppText(fmt::format("{}{} {}", kChannelText, ch, r.interface)));
+      PutObject(objects, kAppText, t,
+                AppText(fmt::format("{}{} {}", kChannelText, ch, r.interface)));
       ++count;
     }
     std::uint32_t type = 0;
@@ -619,7 +635,8 @@ std::string FormatBlf(const std::vector<CandumpRecord>& records) {
     uLongf n = ::compressBound(static_cast<uLong>(raw.size()));
     std::string z(n, '\0');
     if (::compress(reinterpret_cast<Bytef*>(z.data()), &n,
-                   reinterpret_cast<const Bytef*>(raw.data()), static_cast<uLong>(raw.size())) != Z_OK) {
+                   reinterpret_cast<const Bytef*>(raw.data()),
+                   static_cast<uLong>(raw.size())) != Z_OK) {
       throw std::runtime_error("zlib cannot compress a BLF container");
     }
     z.resize(n);

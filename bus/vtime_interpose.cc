@@ -268,9 +268,8 @@ struct WaitTarget {
 /// Publishes this thread's wait. A wait begun while the thread is in another (a signal
 /// handler's, or the spin cost's sleep) saves the one it interrupts; EndWait hands it back.
 /// `vouched`, `entry_wakes`: see ThreadSlot.
-void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline,
-               WaitTarget target = {}, bool vouched = false, std::uint32_t entry_wakes = 0,
-               std::uint32_t channels = 0) {
+void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline, WaitTarget target = {},
+               bool vouched = false, std::uint32_t entry_wakes = 0, std::uint32_t channels = 0) {
   const int depth = t_wait_depth;
   // Counted before the slot is written: a handler that runs from here on saves and restores
   // what it finds, and this wait then finishes writing its own.

@@ -11,8 +11,8 @@
 
 #include "bus/ucan_runtime_dir.h"
 #include "bus/vtime_protocol.h"
-#include "emulator/sim/wall_account.h"
 #include "emulator/firmware/stale_run_dirs.h"
+#include "emulator/sim/wall_account.h"
 
 namespace wheelhil::emulator::firmware {
 

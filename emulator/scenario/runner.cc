@@ -184,9 +184,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   double firmware_cpu_s_ = -1;
   // --physics-thread auto: when the run's thread took the steps back from the worker (-1: no).
   std::int64_t physics_inline_from_ns_ = -1;
-  bool log_on_run_thread_ = false;
-  bool firmware_stopped_ = false;  // StopFirmwareForDebugger
-  std::uint64_t progress_calls_ = 0;  // Progress(false)  // can.log written here again after the worker fell back
+  bool log_on_run_thread_ = false;    // can.log written here again after the worker fell back
+  bool firmware_stopped_ = false;     // StopFirmwareForDebugger
+  std::uint64_t progress_calls_ = 0;  // Progress(false)
 };
 
 void Run::CommandDrives() {
@@ -277,7 +277,8 @@ void Run::WaitStatus(int cycle, std::int64_t k) {
 
 void Run::SettleFirmware() {
   if (run_.failed() || !firmware_.running()) return;
-  if (o_.stop_firmware_at_ns >= 0 && !firmware_stopped_ && hub_->now_ns() >= o_.stop_firmware_at_ns) {
+  if (o_.stop_firmware_at_ns >= 0 && !firmware_stopped_ &&
+      hub_->now_ns() >= o_.stop_firmware_at_ns) {
     StopFirmwareForDebugger();
   }
   clock_->SetNow(hub_->now_ns());
@@ -304,12 +305,13 @@ void Run::StopFirmwareForDebugger() {
                              {"event", "firmware_stopped"},
                              {"pid", pid},
                              {"bus_time_s", t_s}});
-  fmt::print(stderr,
-             "wheelhil run: the firmware (pid {}) is stopped at t = {:.6f} s of virtual time (can.log's "
-             "clock); virtual time waits for it. Attach: gdb -p {} -ex 'handle SIG64 nostop "
-             "noprint pass' (the virtual clock's wake-up signal), then continue; or let it go "
-             "on without a debugger: kill -CONT -{}\n",
-             pid, t_s, pid, pid);
+  fmt::print(
+      stderr,
+      "wheelhil run: the firmware (pid {}) is stopped at t = {:.6f} s of virtual time (can.log's "
+      "clock); virtual time waits for it. Attach: gdb -p {} -ex 'handle SIG64 nostop "
+      "noprint pass' (the virtual clock's wake-up signal), then continue; or let it go "
+      "on without a debugger: kill -CONT -{}\n",
+      pid, t_s, pid, pid);
   if (o_.on_firmware_stopped) o_.on_firmware_stopped(pid);
 }
 
@@ -572,7 +574,8 @@ void Run::WriteOtherLogs() {
     for (const std::string& format : s_.log_formats) {
       if (format == "mcap") continue;  // after the artefacts it is made of
       bus::WriteCanLog(out_ + "/can." + format,
-                       format == "asc" ? bus::CanLogFormat::kAsc : bus::CanLogFormat::kBlf, records);
+                       format == "asc" ? bus::CanLogFormat::kAsc : bus::CanLogFormat::kBlf,
+                       records);
     }
   } catch (const std::invalid_argument& e) {
     run_.Fail(fmt::format("the bus log in the formats of logs: {}", e.what()));
@@ -606,24 +609,23 @@ json Run::Report(double wall_s) {
   const double virtual_s = static_cast<double>(run_.now_ns) * 1e-9;
   const std::uint64_t handovers = link_ ? link_->handovers() : 0;
   const double staged_s = wall_.physics_s + wall_.devices_bus_s + wall_.handover_s;
-  r["wall"] = json{{"wall_time_s", wall_s},
-                   {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
-                   {"cpu", cpus_.cpu()},
-                   {"physics_thread", physics_->worker_used()},
-                   {"physics_inline_from_s",
-                    physics_inline_from_ns_ >= 0
-                        ? json(run_.MotionSeconds(physics_inline_from_ns_))
-                        : json()},
-                   {"virtual_s", virtual_s},
-                   {"handovers", handovers},
-                   {"handovers_per_sim_s", virtual_s > 0 ? handovers / virtual_s : 0.0},
-                   {"handover_s", wall_.handover_s},
-                   {"handover_us_each", handovers > 0 ? wall_.handover_s / handovers * 1e6 : 0.0},
-                   {"firmware_cpu_s", firmware_cpu_s_ >= 0 ? json(firmware_cpu_s_) : json()},
-                   {"kernel_looks", clock_ ? json(clock_->kernel_looks()) : json()},
-                   {"physics_s", wall_.physics_s},
-                   {"devices_bus_s", wall_.devices_bus_s},
-                   {"other_s", std::max(0.0, wall_s - staged_s)}};
+  r["wall"] = json{
+      {"wall_time_s", wall_s},
+      {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
+      {"cpu", cpus_.cpu()},
+      {"physics_thread", physics_->worker_used()},
+      {"physics_inline_from_s",
+       physics_inline_from_ns_ >= 0 ? json(run_.MotionSeconds(physics_inline_from_ns_)) : json()},
+      {"virtual_s", virtual_s},
+      {"handovers", handovers},
+      {"handovers_per_sim_s", virtual_s > 0 ? handovers / virtual_s : 0.0},
+      {"handover_s", wall_.handover_s},
+      {"handover_us_each", handovers > 0 ? wall_.handover_s / handovers * 1e6 : 0.0},
+      {"firmware_cpu_s", firmware_cpu_s_ >= 0 ? json(firmware_cpu_s_) : json()},
+      {"kernel_looks", clock_ ? json(clock_->kernel_looks()) : json()},
+      {"physics_s", wall_.physics_s},
+      {"devices_bus_s", wall_.devices_bus_s},
+      {"other_s", std::max(0.0, wall_s - staged_s)}};
   return r;
 }
 

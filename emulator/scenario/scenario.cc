@@ -520,8 +520,8 @@ std::vector<std::string> ReadLogs(const Reader& r, const YAML::Node& n) {
     const std::string f = fmt::format("logs[{}]", i);
     const std::string format = r.ToString(n[i], f);
     if (format != "asc" && format != "blf" && format != "mcap") {
-      r.Fail(n[i], f, fmt::format("'{}' is not one of the run's other logs (asc, blf, mcap)",
-                                  format));
+      r.Fail(n[i], f,
+             fmt::format("'{}' is not one of the run's other logs (asc, blf, mcap)", format));
     }
     if (std::find(formats.begin(), formats.end(), format) != formats.end()) {
       r.Fail(n[i], f, fmt::format("'{}' is listed twice", format));
@@ -532,10 +532,10 @@ std::vector<std::string> ReadLogs(const Reader& r, const YAML::Node& n) {
 }
 
 Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
-  r.CheckKeys(root, "",
-              {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "devices",
-               "faults", "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s",
-               "logs"});
+  r.CheckKeys(
+      root, "",
+      {"name", "description", "seed", "platform", "terrain", "motion", "sensors", "devices",
+       "faults", "firmware", "timing", "expectations", "scoring", "slip_threshold_m_s", "logs"});
   Scenario s;
   s.source_path = r.file();
   s.name = r.String(root, "name", "", std::nullopt);

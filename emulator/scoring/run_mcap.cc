@@ -134,11 +134,10 @@ const json& PoseSchema() {  // foxglove.PoseInFrame
   static const json s = Object(
       {{"timestamp", Time()},
        {"frame_id", {{"type", "string"}}},
-       {"pose", Object({{"position", Object({{"x", Number()}, {"y", Number()}, {"z", Number()}})},
-                        {"orientation", Object({{"x", Number()},
-                                                {"y", Number()},
-                                                {"z", Number()},
-                                                {"w", Number()}})}})}});
+       {"pose",
+        Object({{"position", Object({{"x", Number()}, {"y", Number()}, {"z", Number()}})},
+                {"orientation",
+                 Object({{"x", Number()}, {"y", Number()}, {"z", Number()}, {"w", Number()}})}})}});
   return s;
 }
 const json& VelocitySchema() {
@@ -179,8 +178,8 @@ const json& WheelSchema() {
                                     {"motor_torque_nm", Number()},
                                     {"in_contact", {{"type", "boolean"}}},
                                     {"slipping", {{"type", "boolean"}}}});
-  static const json s = Object({{"timestamp", Time()},
-                                {"wheels", {{"type", "array"}, {"items", wheel}}}});
+  static const json s =
+      Object({{"timestamp", Time()}, {"wheels", {{"type", "array"}, {"items", wheel}}}});
   return s;
 }
 const json& SlipSchema() {
@@ -226,7 +225,8 @@ std::int64_t Ns(double seconds) { return std::llround(seconds * 1e9); }
 
 }  // namespace
 
-void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const TruthRecorder& truth) {
+void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot,
+                  const TruthRecorder& truth) {
   const fs::path dir(out_dir);
   McapFile mcap;
   // The motion's t = 0 on can.log's clock.
@@ -266,7 +266,8 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const Tr
   }
 
   // truth.csv: t_s,x_m,y_m,z_m,theta_rad,vx_m_s,vy_m_s,omega_rad_s,slipping_wheels
-  const std::uint16_t truth_pose = mcap.Channel("/truth/pose", "foxglove.PoseInFrame", PoseSchema());
+  const std::uint16_t truth_pose =
+      mcap.Channel("/truth/pose", "foxglove.PoseInFrame", PoseSchema());
   const std::uint16_t truth_vel =
       mcap.Channel("/truth/velocity", "wheelhil.BodyVelocity", VelocitySchema());
   const std::uint16_t wheels = mcap.Channel("/truth/wheels", "wheelhil.WheelStates", WheelSchema());
@@ -286,13 +287,14 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const Tr
       json list = json::array();
       for (std::size_t w = 0; w < states[row].size(); ++w) {
         const WheelState& st = states[row][w];
-        list.push_back({{"name", w < robot.wheels.size() ? robot.wheels[w].name : std::to_string(w)},
-                        {"omega_rad_s", st.omega_rad_s},
-                        {"slip_speed_m_s", st.slip_speed_m_s},
-                        {"normal_load_n", st.normal_load_n},
-                        {"motor_torque_nm", st.motor_torque_nm},
-                        {"in_contact", st.in_contact},
-                        {"slipping", st.slipping}});
+        list.push_back(
+            {{"name", w < robot.wheels.size() ? robot.wheels[w].name : std::to_string(w)},
+             {"omega_rad_s", st.omega_rad_s},
+             {"slip_speed_m_s", st.slip_speed_m_s},
+             {"normal_load_n", st.normal_load_n},
+             {"motor_torque_nm", st.motor_torque_nm},
+             {"in_contact", st.in_contact},
+             {"slipping", st.slipping}});
       }
       mcap.Message(wheels, t, {{"timestamp", Stamp(t)}, {"wheels", list}});
     }
@@ -310,9 +312,9 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot, const Tr
     const bool pose = fs::exists(dir / ("estimate_" + stream + ".tum"));
     const double a = std::stod(c[3]), b = std::stod(c[4]), h = std::stod(c[5]);
     if (pose) {
-      mcap.Message(mcap.Channel("/estimate/" + stream + "/pose", "foxglove.PoseInFrame",
-                                PoseSchema()),
-                   t, Pose(t, a, b, 0.0, h));
+      mcap.Message(
+          mcap.Channel("/estimate/" + stream + "/pose", "foxglove.PoseInFrame", PoseSchema()), t,
+          Pose(t, a, b, 0.0, h));
     } else {
       mcap.Message(mcap.Channel("/estimate/" + stream + "/velocity", "wheelhil.BodyVelocity",
                                 VelocitySchema()),

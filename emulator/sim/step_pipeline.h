@@ -29,9 +29,9 @@
 // not counted), the worker is stopped between two steps and the consumer computes the rest
 // itself, in the same order (the same bits).
 #include <immintrin.h>
-#include <time.h>
 #include <pthread.h>
 #include <sched.h>
+#include <time.h>
 
 #include <atomic>
 #include <chrono>
@@ -132,9 +132,8 @@ class StepPipeline {
     const std::int64_t waited = std::exchange(wait_ns_window_, 0);
     if (cpu_steps <= 0 || next_ <= static_cast<std::uint64_t>(kJudgeSteps)) return;
     const double cpu_per_step = static_cast<double>(cpu_ns) / static_cast<double>(cpu_steps);
-    losing_windows_ = static_cast<double>(waited) > 1.5 * cpu_per_step * kJudgeSteps
-                          ? losing_windows_ + 1
-                          : 0;
+    losing_windows_ =
+        static_cast<double>(waited) > 1.5 * cpu_per_step * kJudgeSteps ? losing_windows_ + 1 : 0;
     if (losing_windows_ >= 2) StopWorker();
   }
 

@@ -66,7 +66,9 @@ std::vector<CandumpRecord> AllKinds(std::int64_t t0) {
   return out;
 }
 
-std::string TempPath(const std::string& name) { return ::testing::TempDir() + "/vector_logs_" + name; }
+std::string TempPath(const std::string& name) {
+  return ::testing::TempDir() + "/vector_logs_" + name;
+}
 
 // What a format keeps: ASC's ErrorFrame line has no class bits and no data.
 CandumpRecord AsKept(CandumpRecord r, CanLogFormat format) {
@@ -92,8 +94,8 @@ TEST_P(VectorLogs, EveryKindOfFrameRoundTrips) {
       EXPECT_EQ(back[i].timestamp_ns, want.timestamp_ns) << i;
       EXPECT_EQ(back[i].interface, want.interface) << i;
       EXPECT_EQ(back[i].direction, want.frame.error ? back[i].direction : want.direction) << i;
-      EXPECT_TRUE(back[i].frame == want.frame) << i << ": " << ToCanUtilsString(back[i].frame)
-                                               << " vs " << ToCanUtilsString(want.frame);
+      EXPECT_TRUE(back[i].frame == want.frame)
+          << i << ": " << ToCanUtilsString(back[i].frame) << " vs " << ToCanUtilsString(want.frame);
     }
   }
 }
@@ -129,11 +131,10 @@ TEST_P(VectorLogs, PythonCanReadsOurFiles) {
   const std::string path = TempPath(asc ? "py.asc" : "py.blf");
   WriteCanLog(path, GetParam(), records);
   int status = 0;
-  const std::string out =
-      RunAndCapture("TZ=UTC " + python + " " + WHEELHIL_SOURCE_DIR +
-                        "/tests/bus/scripts/vector_python_can_read.py " + (asc ? "asc " : "blf ") +
-                        path + " 2>&1",
-                    status);
+  const std::string out = RunAndCapture("TZ=UTC " + python + " " + WHEELHIL_SOURCE_DIR +
+                                            "/tests/bus/scripts/vector_python_can_read.py " +
+                                            (asc ? "asc " : "blf ") + path + " 2>&1",
+                                        status);
   ASSERT_EQ(status, 0) << out;
   std::istringstream lines(out);
   std::size_t i = 0;
@@ -146,7 +147,8 @@ TEST_P(VectorLogs, PythonCanReadsOurFiles) {
     long long t_us = 0;
     int channel = 0, ext = 0, rtr = 0, fd = 0, brs = 0, esi = 0, err = 0, tx = 0, dlc = 0;
     std::string id_hex, data;
-    fields >> t_us >> channel >> id_hex >> ext >> rtr >> fd >> brs >> esi >> err >> tx >> dlc >> data;
+    fields >> t_us >> channel >> id_hex >> ext >> rtr >> fd >> brs >> esi >> err >> tx >> dlc >>
+        data;
     ASSERT_FALSE(fields.fail()) << l;
     EXPECT_EQ(t_us, asc ? r.timestamp_ns / 1000 - start_us : r.timestamp_ns / 1000) << l;
     EXPECT_EQ(channel, r.interface == "ucan0" ? 0 : 1) << l;

@@ -548,7 +548,8 @@ TEST_F(ScenarioRun, LogsWritesTheBusLogInTheOtherFormatsToo) {
   s.log_formats = {"asc", "blf"};
   const RunResult r = RunScenario(s, Options(dir_ / "logs"));
   ASSERT_EQ(r.failure, "");
-  const auto can = bus::ReadCanLog((dir_ / "logs" / "can.log").string(), bus::CanLogFormat::kCandump);
+  const auto can =
+      bus::ReadCanLog((dir_ / "logs" / "can.log").string(), bus::CanLogFormat::kCandump);
   ASSERT_GT(can.size(), 100u);
   for (const auto& [name, format] : {std::pair{"can.asc", bus::CanLogFormat::kAsc},
                                      std::pair{"can.blf", bus::CanLogFormat::kBlf}}) {
@@ -589,9 +590,8 @@ TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
   const RunResult r = RunScenario(s, Options(dir_ / "mcap"));
   ASSERT_EQ(r.failure, "");
   const std::string out = RunAndCapture("node " + std::string(WHEELHIL_SOURCE_DIR) +
-                                        "/tests/emulator/scoring/scripts/mcap_read.js " +
-                                        node_dir + " " + (dir_ / "mcap" / "run.mcap").string() +
-                                        " 2>&1");
+                                        "/tests/emulator/scoring/scripts/mcap_read.js " + node_dir +
+                                        " " + (dir_ / "mcap" / "run.mcap").string() + " 2>&1");
   std::map<std::string, std::pair<std::string, long>> topics;  // schema, messages
   bool json_ok = false;
   std::istringstream lines(out);
@@ -629,7 +629,8 @@ TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
   expect("/events", "foxglove.Log", lines_of("events.jsonl"));
   const std::string events = Slurp(dir_ / "mcap" / "events.jsonl");
   long slips = 0;
-  for (std::size_t at = 0; (at = events.find("\"event\":\"slip\"", at)) != std::string::npos; ++at) {
+  for (std::size_t at = 0; (at = events.find("\"event\":\"slip\"", at)) != std::string::npos;
+       ++at) {
     ++slips;
   }
   ASSERT_GT(slips, 0);

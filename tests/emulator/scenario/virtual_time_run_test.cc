@@ -418,7 +418,8 @@ TEST_F(VirtualTimeRun, AFirmwareStoppedForADebuggerIsWaitedForAndChangesNothing)
   for (const char* f : {"can.log", "estimate.csv", "truth.csv"}) {
     EXPECT_EQ(Slurp(dir_ / "debugged" / f), Slurp(dir_ / "plain" / f)) << f;
   }
-  EXPECT_THAT(Slurp(dir_ / "debugged" / "events.jsonl"), HasSubstr("\"event\":\"firmware_stopped\""));
+  EXPECT_THAT(Slurp(dir_ / "debugged" / "events.jsonl"),
+              HasSubstr("\"event\":\"firmware_stopped\""));
 }
 
 // A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
