@@ -7,6 +7,8 @@
 #include <ostream>
 #include <stdexcept>
 
+#include "bus/internal/hex.h"
+
 namespace wheelhil::bus {
 namespace {
 
@@ -14,12 +16,7 @@ constexpr std::uint32_t kCanErrFlag = 0x20000000;  // CAN_ERR_FLAG in linux/can.
 // Largest whole second whose nanosecond count (plus a fraction) fits an int64 (year 2262).
 constexpr std::int64_t kMaxSeconds = 9'223'372'035LL;
 
-int HexValue(char c) noexcept {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  return -1;
-}
+using internal::HexValue;
 
 bool IsSpace(char c) noexcept { return c == ' ' || c == '\t'; }
 

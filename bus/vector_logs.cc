@@ -14,6 +14,9 @@
 #include <stdexcept>
 #include <string_view>
 
+#include "bus/internal/hex.h"
+#include "bus/internal/input_file.h"
+
 namespace wheelhil::bus {
 namespace {
 
@@ -23,6 +26,14 @@ constexpr std::uint32_t kCanErrBusError = 0x080;  // CAN_ERR_BUSERROR in linux/c
 // Before 1990 a start is not a date (a run's own time from 0): the files then say so (BLF: a
 // zero SYSTEMTIME, as python-can writes one).
 constexpr std::int64_t kFirstDateNs = 631152000LL * kNsPerS;
+// What a reader takes, so that every start plus every time since it fits int64 nanoseconds
+// (year 2262): a start up to the end of 2199, times since it up to about 31 years.
+constexpr int kLastYear = 2199;
+constexpr std::int64_t kMaxSinceStartNs = 1'000'000'000LL * kNsPerS;
+constexpr std::int64_t kEndOfLastYearNs = 7'258'118'400LL * kNsPerS;  // 2200-01-01T00:00:00Z
+// A log read whole, and a BLF container inflated (python-can writes 128 KiB ones).
+constexpr std::size_t kMaxLogBytes = std::size_t{2} << 30;
+constexpr std::uint32_t kMaxContainerInflated = 64u << 20;
 
 // ---- channels ----
 
@@ -91,6 +102,10 @@ std::int64_t ParseAscDate(std::string_view text) {
   if (mon < 0 || std::sscanf(clock.c_str(), "%d:%d:%d.%d", &h, &mi, &sec, &ms) < 3) return -1;
   for (char& c : ampm) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (ampm != "am" && ampm != "pm") return -1;
+  if (year < 1970 || year > kLastYear || mon < 0 || day < 1 || day > 31 || h > 12 || mi > 59 ||
+      sec > 60 || ms < 0 || ms > 999) {
+    return -1;
+  }
   h = h % 12 + (ampm == "pm" ? 12 : 0);
   std::tm t{};
   t.tm_year = year - 1900;
@@ -117,6 +132,7 @@ bool ParseSeconds(std::string_view s, std::int64_t& ns) {
   for (char c : w) {
     if (!std::isdigit(static_cast<unsigned char>(c))) return false;
     whole = whole * 10 + (c - '0');
+    if (whole > kMaxSinceStartNs / kNsPerS) return false;
   }
   int digits = 0;
   if (dot != std::string_view::npos) {
@@ -137,10 +153,7 @@ bool ParseHexId(std::string_view s, CanFrame& f) {
   if (s.empty() || s.size() > 8) return false;
   std::uint32_t id = 0;
   for (char c : s) {
-    const int v = std::isdigit(static_cast<unsigned char>(c)) ? c - '0'
-                  : (c >= 'A' && c <= 'F')                    ? c - 'A' + 10
-                  : (c >= 'a' && c <= 'f')                    ? c - 'a' + 10
-                                                              : -1;
+    const int v = internal::HexValue(c);
     if (v < 0) return false;
     id = id << 4 | static_cast<std::uint32_t>(v);
   }
@@ -149,11 +162,10 @@ bool ParseHexId(std::string_view s, CanFrame& f) {
 }
 
 bool ParseHexByte(const std::string& s, std::uint8_t& out) {
-  if (s.size() != 2) return false;
-  char* end = nullptr;
-  const unsigned long v = std::strtoul(s.c_str(), &end, 16);
-  if (end != s.c_str() + 2) return false;
-  out = static_cast<std::uint8_t>(v);
+  const int hi = s.size() == 2 ? internal::HexValue(s[0]) : -1;
+  const int lo = s.size() == 2 ? internal::HexValue(s[1]) : -1;
+  if (hi < 0 || lo < 0) return false;
+  out = static_cast<std::uint8_t>(hi << 4 | lo);
   return true;
 }
 
@@ -166,7 +178,12 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
   std::vector<std::string> tok;
   for (std::string t; in >> t;) tok.push_back(t);
   std::int64_t t_ns = 0;
-  if (tok.size() < 3 || !ParseSeconds(tok[0], t_ns)) return true;
+  if (tok.size() < 3) return true;
+  if (!ParseSeconds(tok[0], t_ns)) {
+    // Not a time: not a frame line. A number that is one but out of range is an error.
+    if (!std::isdigit(static_cast<unsigned char>(tok[0][0]))) return true;
+    return (why = "a time that is not seconds (up to 31 years) since the start", false);
+  }
   r = CandumpRecord{};
   r.timestamp_ns = t_ns;
   CanFrame& f = r.frame;
@@ -202,6 +219,7 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
       }
     }
     f.len = static_cast<std::uint8_t>(len);
+    if (!f.IsValid()) return (why = "not a valid CAN FD frame (its id)", false);
     r.interface = ChannelName(names, ch);
     r.direction = tok[3] == "Tx" ? 'T' : 'R';
     skipped = false;
@@ -222,11 +240,10 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
   r.direction = tok[3] == "Tx" ? 'T' : 'R';
   int dlc = 0;
   if (tok.size() > 5) {
-    char* end = nullptr;
-    dlc = static_cast<int>(std::strtol(tok[5].c_str(), &end, 16));
-    if (end != tok[5].c_str() + tok[5].size()) return (why = "a bad DLC", false);
+    dlc = tok[5].size() == 1 ? internal::HexValue(tok[5][0]) : -1;
+    if (dlc < 0) return (why = "a bad DLC", false);
   }
-  if (dlc < 0 || dlc > 8) return (why = "a DLC above 8", false);
+  if (dlc > 8) return (why = "a DLC above 8", false);
   if (tok[4] == "r") {
     f.rtr = true;
     f.len = static_cast<std::uint8_t>(dlc);
@@ -243,6 +260,7 @@ bool ParseAscLine(const std::string& line, const std::map<int, std::string>& nam
   } else {
     return true;
   }
+  if (!f.IsValid()) return (why = "not a valid CAN frame (its id)", false);
   skipped = false;
   return true;
 }
@@ -301,6 +319,7 @@ constexpr std::uint32_t kCanFdMessage64 = 101;
 constexpr std::uint32_t kExtendedIdFlag = 0x80000000;
 constexpr std::uint8_t kRemoteFlag = 0x80;
 constexpr std::uint8_t kTxFlag = 0x01;
+constexpr std::uint32_t kTimeTenUs = 1;  // object time flags: 10 us units, else ns
 constexpr std::uint32_t kTimeOneNs = 2;
 constexpr std::size_t kFileHeaderSize = 144;
 constexpr std::size_t kMaxContainerBytes = 128 * 1024;
@@ -335,18 +354,25 @@ void PutSystemTime(std::string& b, std::int64_t ns) {
   }
 }
 
+// The inverse of PutSystemTime; 0 (times from 0) for a SYSTEMTIME that is no date from 1970
+// to kLastYear, as python-can's reader takes one it cannot convert.
 std::int64_t GetSystemTime(std::string_view b, std::size_t at) {
-  const int year = Get<std::uint16_t>(b, at);
-  if (year == 0) return 0;
+  const int year = Get<std::uint16_t>(b, at), month = Get<std::uint16_t>(b, at + 2);
+  const int day = Get<std::uint16_t>(b, at + 6), hour = Get<std::uint16_t>(b, at + 8);
+  const int minute = Get<std::uint16_t>(b, at + 10), second = Get<std::uint16_t>(b, at + 12);
+  const int ms = Get<std::uint16_t>(b, at + 14);
+  if (year < 1970 || year > kLastYear || month < 1 || month > 12 || day < 1 || day > 31 ||
+      hour > 23 || minute > 59 || second > 60 || ms > 999) {
+    return 0;
+  }
   std::tm t{};
   t.tm_year = year - 1900;
-  t.tm_mon = Get<std::uint16_t>(b, at + 2) - 1;
-  t.tm_mday = Get<std::uint16_t>(b, at + 6);
-  t.tm_hour = Get<std::uint16_t>(b, at + 8);
-  t.tm_min = Get<std::uint16_t>(b, at + 10);
-  t.tm_sec = Get<std::uint16_t>(b, at + 12);
-  return static_cast<std::int64_t>(::timegm(&t)) * kNsPerS +
-         std::int64_t{Get<std::uint16_t>(b, at + 14)} * kNsPerMs;
+  t.tm_mon = month - 1;
+  t.tm_mday = day;
+  t.tm_hour = hour;
+  t.tm_min = minute;
+  t.tm_sec = second;
+  return static_cast<std::int64_t>(::timegm(&t)) * kNsPerS + std::int64_t{ms} * kNsPerMs;
 }
 
 // One object (v1 header, ns timestamps since the start) appended to `out`, padded as
@@ -418,33 +444,39 @@ std::string AppText(const std::string& text) {
   return d + text;
 }
 
-// Frames from the objects in `data` (the containers' contents, joined).
+// Frames from the objects in `data` (the containers' contents, joined), each with its channel
+// number in `channels`; channel names from the app-text objects into `names`.
 void ParseBlfObjects(std::string_view data, std::int64_t start, const std::string& path,
-                     std::map<int, std::string>& names, std::vector<CandumpRecord>& out) {
+                     std::vector<CandumpRecord>& out, std::vector<int>& channels,
+                     std::map<int, std::string>& names) {
   std::size_t pos = 0;
   while (pos + 16 <= data.size()) {
     const std::size_t at = data.substr(pos, 12).find("LOBJ");
     if (at == std::string_view::npos) {
-      throw std::invalid_argument(fmt::format("{}: no object where one should begin", path));
+      throw std::invalid_argument(
+          fmt::format("{}: after frame {}: no object where one should begin", path, out.size()));
     }
     pos += at;
     const auto header_size = Get<std::uint16_t>(data, pos + 4);
-    const auto version = Get<std::uint16_t>(data, pos + 6);
     const auto size = Get<std::uint32_t>(data, pos + 8);
     const auto type = Get<std::uint32_t>(data, pos + 12);
-    if (size < header_size || pos + size > data.size() || header_size < 32) {
-      throw std::invalid_argument(
-          fmt::format("{}: an object of {} bytes does not fit", path, size));
+    if (header_size < 32 || size < header_size || size > data.size() - pos) {
+      throw std::invalid_argument(fmt::format("{}: an object of {} bytes (header {}) does not fit",
+                                              path, size, header_size));
     }
+    // v1 and v2 headers keep the time flags and the time at the same places.
     const std::uint32_t tflags = Get<std::uint32_t>(data, pos + 16);
     const std::uint64_t t = Get<std::uint64_t>(data, pos + 24);
-    const std::int64_t t_ns =
-        start +
-        static_cast<std::int64_t>(tflags == kTimeOneNs ? t : (version == 1 ? t * 10000 : t));
+    const std::uint64_t unit = tflags == kTimeTenUs ? 10'000 : 1;
+    if (t > static_cast<std::uint64_t>(kMaxSinceStartNs) / unit) {
+      throw std::invalid_argument(fmt::format(
+          "{}: an object's time ({} units of {} ns) is more than 31 years from the start", path, t,
+          unit));
+    }
     const std::string_view d = data.substr(pos + header_size, size - header_size);
     pos += size;
     CandumpRecord r;
-    r.timestamp_ns = t_ns;
+    r.timestamp_ns = start + static_cast<std::int64_t>(t * unit);
     CanFrame& f = r.frame;
     int channel = 0;
     if ((type == kCanMessage || type == kCanMessage2) && d.size() >= 16) {
@@ -466,12 +498,35 @@ void ParseBlfObjects(std::string_view data, std::int64_t start, const std::strin
       f.id = id & CanFrame::kMaxExtendedId;
       f.fd = (fd_flags & 0x1) != 0;
       f.rtr = !f.fd && (flags & kRemoteFlag) != 0;
-      if (f.fd)
+      if (f.fd) {
         f.fd_flags =
             static_cast<std::uint8_t>((fd_flags & 0x2 ? 0x01 : 0) | (fd_flags & 0x4 ? 0x02 : 0));
+      }
       f.len = std::min<std::uint8_t>(Get<std::uint8_t>(d, 14), f.fd ? 64 : 8);
       std::memcpy(f.data.data(), d.data() + 20, f.len);
       r.direction = flags & kTxFlag ? 'T' : 'R';
+    } else if (type == kCanFdMessage64 && d.size() >= 40) {
+      // channel u8, dlc u8, valid bytes u8, tx count u8, id, frame length, flags (EDL 0x1000,
+      // BRS 0x2000, ESI 0x4000, remote 0x0010), four bit-timing words, bit count u16, dir u8
+      // (at 34), ext data offset u8, crc; the data follows at 40.
+      channel = Get<std::uint8_t>(d, 0);
+      const std::uint32_t id = Get<std::uint32_t>(d, 4);
+      const std::uint32_t flags = Get<std::uint32_t>(d, 12);
+      f.extended = (id & kExtendedIdFlag) != 0;
+      f.id = id & CanFrame::kMaxExtendedId;
+      f.fd = (flags & 0x1000) != 0;
+      f.rtr = !f.fd && (flags & 0x0010) != 0;
+      if (f.fd) {
+        f.fd_flags =
+            static_cast<std::uint8_t>((flags & 0x2000 ? 0x01 : 0) | (flags & 0x4000 ? 0x02 : 0));
+      }
+      f.len = std::min<std::uint8_t>(Get<std::uint8_t>(d, 2), f.fd ? 64 : 8);
+      if (d.size() < 40u + (f.rtr ? 0 : f.len)) {
+        throw std::invalid_argument(
+            fmt::format("{}: a CAN_FD_MESSAGE_64 shorter than its {} data bytes", path, f.len));
+      }
+      std::memcpy(f.data.data(), d.data() + 40, f.rtr ? 0 : f.len);
+      r.direction = Get<std::uint8_t>(d, 34) != 0 ? 'T' : 'R';
     } else if (type == kCanErrorExt && d.size() >= 32) {
       channel = Get<std::uint16_t>(d, 0);
       f.error = true;
@@ -493,8 +548,12 @@ void ParseBlfObjects(std::string_view data, std::int64_t start, const std::strin
     } else {
       continue;  // another object type (statistics, markers, other buses)
     }
-    r.interface = std::to_string(channel);  // named once every object is read
+    if (!f.IsValid()) {
+      throw std::invalid_argument(fmt::format("{}: frame {} (id {:X}) is not a valid CAN frame",
+                                              path, out.size() + 1, f.id));
+    }
     out.push_back(r);
+    channels.push_back(channel);
   }
 }
 
@@ -513,7 +572,7 @@ std::vector<CandumpRecord> ParseBlf(std::string_view file, const std::string& pa
     const auto size = Get<std::uint32_t>(file, pos + 8);
     const auto type = Get<std::uint32_t>(file, pos + 12);
     const auto header_size = Get<std::uint16_t>(file, pos + 4);
-    if (size < header_size || pos + size > file.size()) {
+    if (header_size < 16 || size < header_size || size > file.size() - pos) {
       throw std::invalid_argument(
           fmt::format("{}: byte {}: an object runs past the end", path, pos));
     }
@@ -525,6 +584,12 @@ std::vector<CandumpRecord> ParseBlf(std::string_view file, const std::string& pa
       if (method == 0) {
         objects.append(payload);
       } else if (method == 2) {
+        if (raw_size > kMaxContainerInflated) {
+          throw std::invalid_argument(
+              fmt::format("{}: byte {}: a container of {} MiB inflated, more than the {} MiB a "
+                          "reader takes",
+                          path, pos, raw_size >> 20, kMaxContainerInflated >> 20));
+        }
         std::string raw(raw_size, '\0');
         uLongf n = raw_size;
         if (::uncompress(reinterpret_cast<Bytef*>(raw.data()), &n,
@@ -540,18 +605,11 @@ std::vector<CandumpRecord> ParseBlf(std::string_view file, const std::string& pa
     pos += size + size % 4;
   }
   std::vector<CandumpRecord> out;
+  std::vector<int> channels;
   std::map<int, std::string> names;
-  ParseBlfObjects(objects, start, path, names, out);
-  for (CandumpRecord& r : out) r.interface = ChannelName(names, std::stoi(r.interface));
+  ParseBlfObjects(objects, start, path, out, channels, names);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i].interface = ChannelName(names, channels[i]);
   return out;
-}
-
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::invalid_argument(path + ": cannot be opened");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 }  // namespace
@@ -673,6 +731,14 @@ void WriteCanLog(const std::string& path, CanLogFormat format,
     if (!records[i].frame.IsValid()) {
       throw std::invalid_argument(fmt::format("{}: record {} is not a valid frame", path, i + 1));
     }
+    // What the readers take back: dates up to kLastYear, times up to ~31 years after the first.
+    const std::int64_t t = records[i].timestamp_ns;
+    if (format != CanLogFormat::kCandump &&
+        (t < 0 || t >= kEndOfLastYearNs || t - records.front().timestamp_ns > kMaxSinceStartNs)) {
+      throw std::invalid_argument(fmt::format(
+          "{}: record {}: its time is not between 1970 and {} and within 31 years of the first",
+          path, i + 1, kLastYear));
+    }
   }
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) throw std::invalid_argument(path + ": cannot be written");
@@ -688,18 +754,26 @@ void WriteCanLog(const std::string& path, CanLogFormat format,
   if (!out.flush()) throw std::invalid_argument(path + ": cannot be written");
 }
 
+std::vector<CandumpRecord> ParseCanLog(std::string_view bytes, CanLogFormat format,
+                                       const std::string& name) {
+  if (format == CanLogFormat::kBlf) return ParseBlf(bytes, name);
+  if (format == CanLogFormat::kAsc) {
+    std::istringstream in{std::string(bytes)};
+    return ParseAsc(in, name);
+  }
+  throw std::invalid_argument(name + ": ParseCanLog reads ASC and BLF (candump: CandumpReader)");
+}
+
 std::vector<CandumpRecord> ReadCanLog(const std::string& path, CanLogFormat format) {
   if (format == CanLogFormat::kCandump) {
     CandumpLog log = LoadCandumpFile(path);
     if (!log.errors.empty()) throw std::invalid_argument(log.errors.front());
     return std::move(log.records);
   }
-  if (format == CanLogFormat::kAsc) {
-    std::ifstream in(path);
-    if (!in) throw std::invalid_argument(path + ": cannot be opened");
-    return ParseAsc(in, path);
-  }
-  return ParseBlf(ReadAll(path), path);
+  const char* kind = format == CanLogFormat::kAsc ? "ASC" : "BLF";
+  return ParseCanLog(
+      internal::ReadInputFile(path, kind, kMaxLogBytes, "a log is read whole; convert it in parts"),
+      format, path);
 }
 
 }  // namespace wheelhil::bus

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "bus/candump_log.h"
@@ -34,13 +35,20 @@ enum class CanLogFormat { kCandump, kAsc, kBlf };
 CanLogFormat CanLogFormatOf(const std::string& path);
 
 /// Writes `records` (in their order) to `path` in `format`. Throws std::invalid_argument naming
-/// the file when it cannot be written or a record's frame is invalid.
+/// the file when it cannot be written, a record's frame is invalid, or (ASC, BLF) a record's
+/// time is not from 1970 to 2199 and within ~31 years of the first (what the readers take).
 void WriteCanLog(const std::string& path, CanLogFormat format,
                  const std::vector<CandumpRecord>& records);
 
-/// Reads a log in `format`. Throws std::invalid_argument naming the file and the line (ASC) or
-/// byte offset (BLF) of the first thing it cannot read.
+/// Reads a log in `format`. Throws std::invalid_argument naming the file and the line (ASC),
+/// byte offset or frame (BLF) of the first thing it cannot read: a frame no controller could
+/// send, a time past the year 2262 in int64 ns, a BLF object or container that does not fit
+/// (a container is inflated up to 64 MiB). The file is read whole (up to 2 GiB), a regular file
+/// only.
 std::vector<CandumpRecord> ReadCanLog(const std::string& path, CanLogFormat format);
+/// The same for a log's bytes in memory, ASC or BLF; `name` stands for the file in errors.
+std::vector<CandumpRecord> ParseCanLog(std::string_view bytes, CanLogFormat format,
+                                       const std::string& name);
 
 /// The ASC text of `records` (WriteCanLog's, for tests and streams).
 std::string FormatAsc(const std::vector<CandumpRecord>& records);

@@ -5,6 +5,7 @@
 // the line (ASC) or byte (BLF) of the problem.
 #include "bus/vector_logs.h"
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -184,6 +185,126 @@ INSTANTIATE_TEST_SUITE_P(Formats, VectorLogs,
                            return info.param == CanLogFormat::kAsc ? "Asc" : "Blf";
                          });
 
+// An ASC written by another tool (tests/data/candump/can_utils_input.asc, beside what can-utils'
+// asc2log made of it): the same frames, channels and spacing in time.
+TEST(VectorLogsAsc, ReadsWhatCanUtilsAsc2LogReads) {
+  const std::string dir = std::string(WHEELHIL_SOURCE_DIR) + "/tests/data/candump/";
+  const auto ours = ReadCanLog(dir + "can_utils_input.asc", CanLogFormat::kAsc);
+  const CandumpLog theirs = LoadCandumpFile(dir + "can_utils_asc2log.log");
+  ASSERT_TRUE(theirs.errors.empty());
+  ASSERT_EQ(ours.size(), theirs.records.size());
+  for (std::size_t i = 0; i < ours.size(); ++i) {
+    const CandumpRecord& t = theirs.records[i];
+    EXPECT_EQ(ours[i].interface, t.interface) << i;
+    EXPECT_EQ(ours[i].direction, t.direction) << i;
+    EXPECT_EQ(ours[i].timestamp_ns - ours[0].timestamp_ns,
+              t.timestamp_ns - theirs.records[0].timestamp_ns)
+        << i;
+    if (!t.frame.error) {  // asc2log gives its ErrorFrame class bits of its own
+      EXPECT_TRUE(ours[i].frame == t.frame)
+          << i << ": " << ToCanUtilsString(ours[i].frame) << " vs " << ToCanUtilsString(t.frame);
+    }
+    EXPECT_EQ(ours[i].frame.error, t.frame.error) << i;
+  }
+}
+
+// A BLF file of one uncompressed container holding `objects` (as a reader meets third-party
+// files: nothing of FormatBlf's).
+std::string BlfWith(const std::string& objects) {
+  auto put = [](std::string& b, auto v) { b.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  std::string file = "LOGG";
+  put(file, std::uint32_t{144});
+  file.resize(144, '\0');
+  file += "LOBJ";
+  put(file, std::uint16_t{16});
+  put(file, std::uint16_t{1});
+  put(file, static_cast<std::uint32_t>(32 + objects.size()));
+  put(file, std::uint32_t{10});  // LOG_CONTAINER
+  put(file, std::uint16_t{0});   // no compression
+  file.append(6, '\0');
+  put(file, static_cast<std::uint32_t>(objects.size()));
+  file.append(4, '\0');
+  return file + objects;
+}
+
+// One object with a v1 header: its type, time flags (1: 10 us units, 2: ns), time and data.
+std::string BlfObject(std::uint32_t type, std::uint32_t time_flags, std::uint64_t t,
+                      const std::string& data) {
+  auto put = [](std::string& b, auto v) { b.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  std::string o = "LOBJ";
+  put(o, std::uint16_t{32});
+  put(o, std::uint16_t{1});
+  put(o, static_cast<std::uint32_t>(32 + data.size()));
+  put(o, type);
+  put(o, time_flags);
+  put(o, std::uint32_t{0});
+  put(o, t);
+  return o + data;
+}
+
+// CAN_FD_MESSAGE_64, which CANoe writes for CAN FD and FormatBlf does not: read as python-can
+// reads it (flags EDL/BRS/ESI, the direction byte, the data after the 40-byte head), its time
+// in 10 us units.
+TEST(VectorLogsBlf, CanFdMessage64IsRead) {
+  auto put = [](std::string& b, auto v) { b.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  std::string d;
+  for (std::uint8_t v : {2, 9, 12, 0}) put(d, v);  // channel 2, DLC 9, 12 bytes, tx count
+  put(d, std::uint32_t{0x80012345});               // extended id
+  put(d, std::uint32_t{0});                        // frame length
+  put(d, std::uint32_t{0x1000 | 0x2000});          // EDL, BRS
+  d.append(16, '\0');                              // bit timing
+  put(d, std::uint16_t{0});                        // bit count
+  put(d, std::uint8_t{1});                         // dir: Tx
+  put(d, std::uint8_t{0});
+  put(d, std::uint32_t{0});  // crc
+  for (int i = 0; i < 12; ++i) d.push_back(static_cast<char>(0xA0 + i));
+  const auto records =
+      ParseCanLog(BlfWith(BlfObject(101, 1, 250, d)), CanLogFormat::kBlf, "third.blf");
+  ASSERT_EQ(records.size(), 1u);
+  const CandumpRecord& r = records[0];
+  EXPECT_EQ(r.timestamp_ns, 2'500'000);  // 250 x 10 us
+  EXPECT_EQ(r.interface, "can1");
+  EXPECT_EQ(r.direction, 'T');
+  EXPECT_TRUE(r.frame.fd);
+  EXPECT_TRUE(r.frame.extended);
+  EXPECT_EQ(r.frame.id, 0x12345u);
+  EXPECT_EQ(r.frame.fd_flags, 0x01);
+  ASSERT_EQ(r.frame.len, 12);
+  EXPECT_EQ(r.frame.data[11], 0xAB);
+}
+
+// What a hostile or broken BLF file gets: a message naming where, never a hang, an outsized
+// allocation or an overflowing time.
+TEST(VectorLogsBlf, BrokenFilesAreNamedWithWhere) {
+  auto error_of = [](const std::string& bytes) {
+    try {
+      (void)ParseCanLog(bytes, CanLogFormat::kBlf, "x.blf");
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("read");
+  };
+  std::string empty_object = BlfWith("");
+  empty_object.replace(144 + 4, 2, std::string(2, '\0'));  // header size 0
+  empty_object.replace(144 + 8, 4, std::string(4, '\0'));  // object size 0: no progress
+  EXPECT_EQ(error_of(empty_object), "x.blf: byte 144: an object runs past the end");
+  std::string huge = BlfWith("");
+  huge.replace(144 + 16, 2, std::string("\x02\x00", 2));          // zlib
+  huge.replace(144 + 24, 4, std::string("\x00\x00\x00\xC0", 4));  // 3 GiB inflated
+  EXPECT_EQ(error_of(huge),
+            "x.blf: byte 144: a container of 3072 MiB inflated, more than the 64 MiB a reader "
+            "takes");
+  std::string classic(16, '\0');
+  classic[0] = 1;                                             // channel 1
+  classic[3] = 1;                                             // DLC 1
+  classic.replace(4, 4, std::string("\x00\x08\x00\x00", 4));  // id 0x800, not extended
+  EXPECT_EQ(error_of(BlfWith(BlfObject(1, 2, 0, classic))),
+            "x.blf: frame 1 (id 800) is not a valid CAN frame");
+  classic.replace(4, 4, std::string("\x23\x01\x00\x00", 4));
+  EXPECT_THAT(error_of(BlfWith(BlfObject(1, 1, ~std::uint64_t{0} / 2, classic))),
+              ::testing::HasSubstr("is more than 31 years from the start"));
+}
+
 TEST(VectorLogsErrors, AFileThatCannotBeReadIsNamedWithWhere) {
   const auto records = AllKinds(0);
   const std::string asc = TempPath("bad.asc");
@@ -210,6 +331,41 @@ TEST(VectorLogsErrors, AFileThatCannotBeReadIsNamedWithWhere) {
               std::string::npos)
         << e.what();
   }
+  // A frame no controller could send, a time beyond int64 nanoseconds.
+  text = FormatAsc(records);
+  const std::size_t id = text.find(" 123 ");
+  ASSERT_NE(id, std::string::npos);
+  text.replace(id, 5, " 923 ");
+  std::ofstream(asc) << text;
+  EXPECT_THROW(
+      {
+        try {
+          (void)ReadCanLog(asc, CanLogFormat::kAsc);
+        } catch (const std::invalid_argument& e) {
+          EXPECT_NE(std::string(e.what()).find(asc + ":9: not a valid CAN frame (its id)"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      std::invalid_argument);
+  text = FormatAsc(records);
+  const std::size_t t = text.find("   0.000234 ");  // the first frame
+  ASSERT_NE(t, std::string::npos) << text;
+  text.replace(t, 12, " 99999999999999999999.000001 ");
+  std::ofstream(asc) << text;
+  EXPECT_THROW(
+      {
+        try {
+          (void)ReadCanLog(asc, CanLogFormat::kAsc);
+        } catch (const std::invalid_argument& e) {
+          EXPECT_NE(std::string(e.what()).find(asc + ":9: a time that is not seconds"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      std::invalid_argument);
   EXPECT_THROW((void)CanLogFormatOf("run.trc"), std::invalid_argument);
   EXPECT_EQ(CanLogFormatOf("RUN.BLF"), CanLogFormat::kBlf);
 }
