@@ -187,6 +187,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   bool log_on_run_thread_ = false;    // can.log written here again after the worker fell back
   bool firmware_stopped_ = false;     // StopFirmwareForDebugger
   std::uint64_t progress_calls_ = 0;  // Progress(false)
+  std::vector<bus::CandumpRecord> bus_log_;  // can.log read back for logs: (WriteOtherLogs)
 };
 
 void Run::CommandDrives() {
@@ -568,14 +569,15 @@ void Run::Progress(bool final) {
 
 void Run::WriteOtherLogs() {
   if (s_.log_formats.empty()) return;
-  const std::string log = out_ + "/can.log";
   try {
-    const auto records = bus::ReadCanLog(log, bus::CanLogFormat::kCandump);
+    // can.log is the bus log's one record (formatted as the frames completed): read once, for
+    // every other format and run.mcap.
+    bus_log_ = bus::ReadCanLog(out_ + "/can.log", bus::CanLogFormat::kCandump);
     for (const std::string& format : s_.log_formats) {
-      if (format == "mcap") continue;  // after the artefacts it is made of
+      if (format == "mcap") continue;  // after the scoring it also holds
       bus::WriteCanLog(out_ + "/can." + format,
                        format == "asc" ? bus::CanLogFormat::kAsc : bus::CanLogFormat::kBlf,
-                       records);
+                       bus_log_);
     }
   } catch (const std::invalid_argument& e) {
     run_.Fail(fmt::format("the bus log in the formats of logs: {}", e.what()));
@@ -715,7 +717,9 @@ RunResult Run::Execute() {
   result.exit_code = passed ? 0 : 1;
   if (std::find(s_.log_formats.begin(), s_.log_formats.end(), "mcap") != s_.log_formats.end()) {
     try {
-      scoring::WriteRunMcap(out_, robot, *truth_);
+      scoring::WriteRunMcap(
+          out_ + "/run.mcap",
+          scoring::RunRecord{bus_log_, run_.motion0_ns, *truth_, *estimates_, run_.events}, robot);
     } catch (const std::exception& e) {
       fmt::print(stderr, "wheelhil run: run.mcap: {}\n", e.what());
       result.exit_code = 1;

@@ -7,10 +7,8 @@
 
 #include <cmath>
 #include <cstdint>
-#include <filesystem>
 #include <fstream>
 #include <map>
-#include <sstream>
 #include <stdexcept>
 #include <vector>
 
@@ -20,7 +18,6 @@ namespace wheelhil::emulator::scoring {
 namespace {
 
 using nlohmann::json;
-namespace fs = std::filesystem;
 
 // ---- MCAP records (https://mcap.dev/spec): little-endian, strings as u32 length + bytes ----
 
@@ -204,51 +201,17 @@ json Pose(std::int64_t ns, double x, double y, double z, double yaw) {
              {{"x", 0.0}, {"y", 0.0}, {"z", std::sin(yaw / 2)}, {"w", std::cos(yaw / 2)}}}}}};
 }
 
-// ---- the artefacts ----
-
-std::vector<std::vector<std::string>> ReadCsv(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path.string() + ": cannot be read");
-  std::vector<std::vector<std::string>> rows;
-  std::string line;
-  std::getline(in, line);  // the header
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::stringstream s(line);
-    for (std::string c; std::getline(s, c, ',');) cells.push_back(c);
-    rows.push_back(std::move(cells));
-  }
-  return rows;
-}
-
 std::int64_t Ns(double seconds) { return std::llround(seconds * 1e9); }
 
 }  // namespace
 
-void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot,
-                  const TruthRecorder& truth) {
-  const fs::path dir(out_dir);
+void WriteRunMcap(const std::string& path, const RunRecord& run, const ReplayRobot& robot) {
   McapFile mcap;
-  // The motion's t = 0 on can.log's clock.
-  std::int64_t motion_ns = 0;
-  std::vector<json> events;
-  {
-    std::ifstream in(dir / "events.jsonl");
-    if (!in) throw std::runtime_error((dir / "events.jsonl").string() + ": cannot be read");
-    for (std::string line; std::getline(in, line);) {
-      json e = json::parse(line, nullptr, false);
-      if (e.is_discarded()) continue;
-      if (e.value("event", "") == "motion_start" && e.contains("bus_time_s")) {
-        motion_ns = Ns(e["bus_time_s"].get<double>());
-      }
-      events.push_back(std::move(e));
-    }
-  }
-  auto at = [&](double motion_s) { return motion_ns + Ns(motion_s); };
+  // Times since the motion start on can.log's clock.
+  auto at = [&](double motion_s) { return run.motion0_ns + Ns(motion_s); };
 
-  const bus::CandumpLog can = bus::LoadCandumpFile((dir / "can.log").string());
   const std::uint16_t can_channel = mcap.Channel("/can", "wheelhil.CanFrame", CanSchema());
-  for (const bus::CandumpRecord& r : can.records) {
+  for (const bus::CandumpRecord& r : run.bus_log) {
     std::string hex;
     for (const std::uint8_t b : r.frame.payload()) hex += fmt::format("{:02X}", b);
     mcap.Message(can_channel, r.timestamp_ns,
@@ -265,72 +228,68 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot,
                   {"data", hex}});
   }
 
-  // truth.csv: t_s,x_m,y_m,z_m,theta_rad,vx_m_s,vy_m_s,omega_rad_s,slipping_wheels
   const std::uint16_t truth_pose =
       mcap.Channel("/truth/pose", "foxglove.PoseInFrame", PoseSchema());
   const std::uint16_t truth_vel =
       mcap.Channel("/truth/velocity", "wheelhil.BodyVelocity", VelocitySchema());
   const std::uint16_t wheels = mcap.Channel("/truth/wheels", "wheelhil.WheelStates", WheelSchema());
-  const auto& states = truth.wheel_states();
-  std::size_t row = 0;
-  for (const auto& c : ReadCsv(dir / "truth.csv")) {
-    if (c.size() < 9) continue;
-    const std::int64_t t = at(std::stod(c[0]));
-    mcap.Message(truth_pose, t,
-                 Pose(t, std::stod(c[1]), std::stod(c[2]), std::stod(c[3]), std::stod(c[4])));
+  const auto& rows = run.truth.rows();
+  const auto& states = run.truth.wheel_states();
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const TruthRow& r = rows[i];
+    const std::int64_t t = at(r.t_s);
+    mcap.Message(truth_pose, t, Pose(t, r.x_m, r.y_m, r.z_m, r.theta_rad));
     mcap.Message(truth_vel, t,
                  {{"timestamp", Stamp(t)},
-                  {"vx_m_s", std::stod(c[5])},
-                  {"vy_m_s", std::stod(c[6])},
-                  {"omega_rad_s", std::stod(c[7])}});
-    if (row < states.size()) {
-      json list = json::array();
-      for (std::size_t w = 0; w < states[row].size(); ++w) {
-        const WheelState& st = states[row][w];
-        list.push_back(
-            {{"name", w < robot.wheels.size() ? robot.wheels[w].name : std::to_string(w)},
-             {"omega_rad_s", st.omega_rad_s},
-             {"slip_speed_m_s", st.slip_speed_m_s},
-             {"normal_load_n", st.normal_load_n},
-             {"motor_torque_nm", st.motor_torque_nm},
-             {"in_contact", st.in_contact},
-             {"slipping", st.slipping}});
-      }
-      mcap.Message(wheels, t, {{"timestamp", Stamp(t)}, {"wheels", list}});
+                  {"vx_m_s", r.vx_m_s},
+                  {"vy_m_s", r.vy_m_s},
+                  {"omega_rad_s", r.omega_rad_s}});
+    json list = json::array();
+    for (std::size_t w = 0; w < states[i].size(); ++w) {
+      const WheelState& st = states[i][w];
+      list.push_back({{"name", w < robot.wheels.size() ? robot.wheels[w].name : std::to_string(w)},
+                      {"omega_rad_s", st.omega_rad_s},
+                      {"slip_speed_m_s", st.slip_speed_m_s},
+                      {"normal_load_n", st.normal_load_n},
+                      {"motor_torque_nm", st.motor_torque_nm},
+                      {"in_contact", st.in_contact},
+                      {"slipping", st.slipping}});
     }
-    ++row;
+    mcap.Message(wheels, t, {{"timestamp", Stamp(t)}, {"wheels", list}});
   }
 
-  // estimate.csv: t_s,cycle,stream,<x or vx>,<y or vy>,<theta or omega>; pose streams are the
-  // ones with an estimate_<stream>.tum.
-  for (const auto& c : ReadCsv(dir / "estimate.csv")) {
-    if (c.size() < 6) continue;
-    const double t_s = std::stod(c[0]);
-    if (t_s < 0) continue;  // before the motion: not scored
-    const std::int64_t t = at(t_s);
-    const std::string& stream = c[2];
-    const bool pose = fs::exists(dir / ("estimate_" + stream + ".tum"));
-    const double a = std::stod(c[3]), b = std::stod(c[4]), h = std::stod(c[5]);
-    if (pose) {
-      mcap.Message(
-          mcap.Channel("/estimate/" + stream + "/pose", "foxglove.PoseInFrame", PoseSchema()), t,
-          Pose(t, a, b, 0.0, h));
-    } else {
-      mcap.Message(mcap.Channel("/estimate/" + stream + "/velocity", "wheelhil.BodyVelocity",
-                                VelocitySchema()),
-                   t, {{"timestamp", Stamp(t)}, {"vx_m_s", a}, {"vy_m_s", b}, {"omega_rad_s", h}});
+  // The firmware's scored streams (from the motion start on).
+  for (const auto& [stream, samples] : run.estimates.pose_streams()) {
+    const std::uint16_t c =
+        mcap.Channel("/estimate/" + stream + "/pose", "foxglove.PoseInFrame", PoseSchema());
+    for (const PoseSample& p : samples) {
+      mcap.Message(c, at(p.t_s), Pose(at(p.t_s), p.x_m, p.y_m, 0.0, p.theta_rad));
+    }
+  }
+  for (const auto& [stream, samples] : run.estimates.velocity_streams()) {
+    const std::uint16_t c = mcap.Channel("/estimate/" + stream + "/velocity",
+                                         "wheelhil.BodyVelocity", VelocitySchema());
+    for (const VelocitySample& v : samples) {
+      const std::int64_t t = at(v.t_s);
+      mcap.Message(c, t,
+                   {{"timestamp", Stamp(t)},
+                    {"vx_m_s", v.vx_m_s},
+                    {"vy_m_s", v.vy_m_s},
+                    {"omega_rad_s", v.omega_rad_s}});
     }
   }
 
   const std::uint16_t slip = mcap.Channel("/slip", "wheelhil.SlipInterval", SlipSchema());
   const std::uint16_t log = mcap.Channel("/events", "foxglove.Log", LogSchema());
-  // Events before motion_start count their t_s from the run's start (scoring::MotionSeconds).
+  // Events before motion_start count their t_s from the run's start (sim::RunContext::
+  // MotionSeconds).
   bool in_motion = false;
-  for (const json& e : events) {
-    if (e.value("event", "") == "motion_start") in_motion = true;
+  for (const json& e : run.events) {
+    const std::string kind = e.value("event", "");
+    if (kind == "motion_start") in_motion = true;
     const double t_s = e.contains("t_s") && e["t_s"].is_number() ? e["t_s"].get<double>() : 0.0;
     const std::int64_t t = in_motion ? at(t_s) : Ns(t_s);
-    if (e.value("event", "") == "slip" && e.contains("start_s") && e.contains("end_s")) {
+    if (kind == "slip" && e.contains("start_s") && e.contains("end_s")) {
       const double start = e["start_s"].get<double>(), end = e["end_s"].get<double>();
       mcap.Message(slip, t,
                    {{"timestamp", Stamp(t)},
@@ -338,8 +297,7 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot,
                     {"end_s", end},
                     {"duration_s", end - start}});
     }
-    const std::string kind = e.value("event", "");
-    const int level = kind == "failure" ? 4 : kind.find("warning") != std::string::npos ? 3 : 2;
+    const int level = kind == "failure" ? 4 : 2;  // foxglove.Log: ERROR, INFO
     mcap.Message(log, t,
                  {{"timestamp", Stamp(t)},
                   {"level", level},
@@ -349,10 +307,9 @@ void WriteRunMcap(const std::string& out_dir, const ReplayRobot& robot,
                   {"line", 0}});
   }
 
-  const fs::path path = dir / "run.mcap";
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out << mcap.Finish();
-  if (!out.flush()) throw std::runtime_error(path.string() + ": cannot be written");
+  if (!out.flush()) throw std::runtime_error(path + ": cannot be written");
 }
 
 }  // namespace wheelhil::emulator::scoring

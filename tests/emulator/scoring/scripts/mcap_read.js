@@ -5,7 +5,7 @@
 // Usage: node mcap_read.js MODULE_DIR FILE (MODULE_DIR: where node_modules/@mcap/core is).
 const path = require("path");
 const fs = require("fs");
-const { McapStreamReader } = require(path.join(process.argv[2], "node_modules", "@mcap", "core"));
+const { McapStreamReader } = require(path.resolve(process.argv[2], "node_modules", "@mcap", "core"));
 
 const reader = new McapStreamReader({ validateCrcs: true });
 reader.append(new Uint8Array(fs.readFileSync(process.argv[3])));
