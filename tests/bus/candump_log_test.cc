@@ -1,4 +1,5 @@
 #include "bus/candump_log.h"
+#include "tests/command_output.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -373,26 +374,13 @@ std::string WriteAllKindsLog(const std::string& name, bool fd_and_error) {
   return path;
 }
 
-std::string RunAndCapture(const std::string& cmd, int& status) {
-  std::string out;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) {
-    status = -1;
-    return out;
-  }
-  char buf[4096];
-  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
-  status = pclose(p);
-  return out;
-}
-
 TEST(CandumpCompatTest, CanUtilsLog2AscReadsOurOutput) {
   if (std::system("command -v log2asc >/dev/null 2>&1") != 0) {
     GTEST_SKIP() << "can-utils log2asc not installed (./hil setup installs can-utils)";
   }
   const std::string path = WriteAllKindsLog("ours_for_log2asc.log", true);
   int status = 0;
-  const std::string asc = RunAndCapture("log2asc -I " + path + " can0 can1 2>&1", status);
+  const std::string asc = test_support::CommandOutput("log2asc -I " + path + " can0 can1 2>&1", &status);
   ASSERT_EQ(status, 0) << asc;
   // One ASC line per frame (3 header lines; log2asc skips error frames in FD mode only).
   std::istringstream lines(asc);
@@ -412,19 +400,13 @@ TEST(CandumpCompatTest, CanUtilsLog2AscReadsOurOutput) {
 }
 
 TEST(CandumpCompatTest, PythonCanReadsOurOutput) {
-  std::string python;
-  for (const char* py : {"/usr/bin/python3", "python3"}) {
-    if (std::system((std::string(py) + " -c 'import can' >/dev/null 2>&1").c_str()) == 0) {
-      python = py;
-      break;
-    }
-  }
+  const std::string python = test_support::PythonWithCan();
   if (python.empty()) GTEST_SKIP() << "python3-can not installed (./hil setup installs it)";
   const std::string path = WriteAllKindsLog("ours_for_python_can.log", true);
   int status = 0;
-  const std::string out = RunAndCapture(
+  const std::string out = test_support::CommandOutput(
       python + " " + WHEELHIL_SOURCE_DIR + "/tests/bus/scripts/candump_python_can_read.py " + path,
-      status);
+      &status);
   ASSERT_EQ(status, 0) << out;
   const auto ours = LoadCandumpFile(path);
   ASSERT_TRUE(ours.errors.empty());

@@ -4,6 +4,7 @@
 // frames, ids, flags, data and timestamps from our files; a file we cannot read is named with
 // the line (ASC) or byte (BLF) of the problem.
 #include "bus/vector_logs.h"
+#include "tests/command_output.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -101,30 +102,8 @@ TEST_P(VectorLogs, EveryKindOfFrameRoundTrips) {
   }
 }
 
-std::string Python() {
-  for (const char* py : {"/usr/bin/python3", "python3"}) {
-    if (std::system((std::string(py) + " -c 'import can' >/dev/null 2>&1").c_str()) == 0) {
-      return py;
-    }
-  }
-  return "";
-}
-
-std::string RunAndCapture(const std::string& cmd, int& status) {
-  std::string out;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (p == nullptr) {
-    status = -1;
-    return out;
-  }
-  char buf[4096];
-  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
-  status = ::pclose(p);
-  return out;
-}
-
 TEST_P(VectorLogs, PythonCanReadsOurFiles) {
-  const std::string python = Python();
+  const std::string python = test_support::PythonWithCan();
   if (python.empty()) GTEST_SKIP() << "python3-can not installed (./hil setup installs it)";
   const bool asc = GetParam() == CanLogFormat::kAsc;
   const std::int64_t t0 = 1'700'000'000'123'000'000LL;
@@ -132,10 +111,9 @@ TEST_P(VectorLogs, PythonCanReadsOurFiles) {
   const std::string path = TempPath(asc ? "py.asc" : "py.blf");
   WriteCanLog(path, GetParam(), records);
   int status = 0;
-  const std::string out = RunAndCapture("TZ=UTC " + python + " " + WHEELHIL_SOURCE_DIR +
+  const std::string out = test_support::CommandOutput("TZ=UTC " + python + " " + WHEELHIL_SOURCE_DIR +
                                             "/tests/bus/scripts/vector_python_can_read.py " +
-                                            (asc ? "asc " : "blf ") + path + " 2>&1",
-                                        status);
+                                            (asc ? "asc " : "blf ") + path + " 2>&1", &status);
   ASSERT_EQ(status, 0) << out;
   std::istringstream lines(out);
   std::size_t i = 0;

@@ -27,6 +27,7 @@
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 #include "tests/emulator/scenario/runner_test_support.h"
+#include "tests/command_output.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
@@ -568,16 +569,6 @@ TEST_F(ScenarioRun, LogsWritesTheBusLogInTheOtherFormatsToo) {
 // `logs: [mcap]`: run.mcap, read by @mcap/core's stream reader (an independent
 // implementation, CRCs checked; ./hil setup installs it into .cache/node): every frame of
 // can.log, every truth row, every estimate sample, every event, in their schemas.
-std::string RunAndCapture(const std::string& cmd) {
-  std::string out;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (p == nullptr) return out;
-  char buf[4096];
-  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
-  ::pclose(p);
-  return out;
-}
-
 TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
   const std::string node_dir = std::string(WHEELHIL_SOURCE_DIR) + "/.cache/node";
   if (std::system("command -v node >/dev/null 2>&1") != 0) GTEST_SKIP() << "no node";
@@ -589,7 +580,7 @@ TEST_F(ScenarioRun, RunMcapHoldsTheRunForAnIndependentReader) {
   s.log_formats = {"mcap"};
   const RunResult r = RunScenario(s, Options(dir_ / "mcap"));
   ASSERT_EQ(r.failure, "");
-  const std::string out = RunAndCapture("node " + std::string(WHEELHIL_SOURCE_DIR) +
+  const std::string out = test_support::CommandOutput("node " + std::string(WHEELHIL_SOURCE_DIR) +
                                         "/tests/emulator/scoring/scripts/mcap_read.js " + node_dir +
                                         " " + (dir_ / "mcap" / "run.mcap").string() + " 2>&1");
   std::map<std::string, std::pair<std::string, long>> topics;  // schema, messages

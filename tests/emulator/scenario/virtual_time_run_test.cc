@@ -27,6 +27,7 @@
 #include "emulator/scenario/runner.h"
 #include "emulator/scenario/scenario.h"
 #include "tests/emulator/scenario/runner_test_support.h"
+#include "tests/command_output.h"
 
 namespace wheelhil::emulator::scenario {
 namespace {
@@ -390,10 +391,7 @@ TEST_F(VirtualTimeRun, AFirmwareStoppedForADebuggerIsWaitedForAndChangesNothing)
               "-ex 'break c_epoll_odometry.c:87' -ex continue "
               "-ex 'print g_nodes[0].have_position' -ex delete -ex detach 2>&1",
               pid);
-          FILE* p = ::popen(cmd.c_str(), "r");
-          char buf[4096];
-          while (p != nullptr && std::fgets(buf, sizeof buf, p) != nullptr) *gdb_out += buf;
-          if (p != nullptr) ::pclose(p);
+          *gdb_out = test_support::CommandOutput(cmd);
           ::kill(-pid, SIGCONT);  // as the printed hint says, should the detach leave it stopped
         });
       };
