@@ -583,17 +583,41 @@ int VirtualTimerFdSlot(int fd) {
   return -1;
 }
 
-/// An fd only the host or an agent makes ready, waited on for input (ThreadSlot::vouched): its
-/// wake channels, 0 when it is not one.
-std::uint32_t VouchableInput(int fd, std::uint32_t events) {
-  if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return 0;
+/// Whether only the host or an agent can make a wait ready (ThreadSlot::vouched): input from
+/// bus sockets of the broker, virtual timerfds and epoll sets of those; output is the kernel's
+/// to tell. kYes: none ready, known from memory; kLook: vouchable once a look in the kernel
+/// found none ready (a timerfd's count, an epoll set, a bus socket without rings); kReady: one
+/// may be ready already (a bus socket's ring). A wait of several fds takes the highest.
+enum class Vouch { kNo, kYes, kLook, kReady };
+
+std::uint32_t EpollVouchable(int epfd);
+
+/// One fd waited on for `events` (`epoll_sets`: an epoll set of this process counts too); its
+/// wake channels into `*channels`.
+Vouch VouchForFd(int fd, std::uint32_t events, bool epoll_sets, std::uint32_t* channels) {
+  if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
   const BusSocketFn bus = UcanBusSocketState();
+  if (bus == nullptr || g_proc < 0) return Vouch::kNo;
   std::uint32_t client = 0;
-  const int state = bus != nullptr ? bus(fd, &client) : 0;
-  if (state == 3) return 0;
-  if (state != 0) return vt::BusSocketChannel(client);
+  const int state = bus(fd, &client);
+  if (state == 3) return Vouch::kNo;  // signal-driven bus input: SIGIO may end any wait
+  if (state != 0) {
+    *channels |= vt::BusSocketChannel(client);
+    return state == 2 ? Vouch::kReady : Vouch::kYes;
+  }
   const int timer = VirtualTimerFdSlot(fd);
-  return timer >= 0 ? vt::TimerChannel(timer) : 0;
+  const std::uint32_t of = timer >= 0   ? vt::TimerChannel(timer)
+                           : epoll_sets ? EpollVouchable(fd)
+                                        : 0;
+  if (of == 0) return Vouch::kNo;
+  *channels |= of;
+  return Vouch::kLook;
+}
+
+/// An epoll member: its wake channels, 0 when it is not vouchable (nor is an epoll set in it).
+std::uint32_t VouchableInput(int fd, std::uint32_t events) {
+  std::uint32_t channels = 0;
+  return VouchForFd(fd, events, false, &channels) == Vouch::kNo ? 0 : channels;
 }
 
 // The epoll sets this process made through the library, by fd number: the members it added
@@ -675,35 +699,17 @@ void TrackEpollCtl(int epfd, int op, int fd, const epoll_event* ev) {
   pthread_mutex_unlock(&g_epoll_lock);
 }
 
-/// Whether only the host or an agent can make the program's `fds` ready (ThreadSlot::vouched):
-/// input from bus sockets of the broker and from virtual timerfds; output is the kernel's to
-/// tell. kLook: vouchable once a look in the kernel found none ready (a timerfd's count, an
-/// epoll set of such fds, a bus socket without rings); kReady: one may be ready already (a bus
-/// socket's ring).
-enum class Vouch { kNo, kYes, kLook, kReady };
-/// `*channels`: the wake channels of the fds.
+/// The program's `fds` (see Vouch); `*channels`: their wake channels.
 Vouch VouchFor(const pollfd* fds, nfds_t n, std::uint32_t* channels) {
-  const BusSocketFn bus = UcanBusSocketState();
-  if (bus == nullptr || g_proc < 0) return Vouch::kNo;
-  Vouch v = Vouch::kYes;
   *channels = 0;
+  if (UcanBusSocketState() == nullptr || g_proc < 0) return Vouch::kNo;
+  Vouch v = Vouch::kYes;
   for (nfds_t i = 0; i < n; ++i) {
-    const int fd = fds[i].fd;
-    if (fd < 0) continue;  // poll ignores it
-    if (fds[i].events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
-    std::uint32_t client = 0;
-    const int state = bus(fd, &client);
-    if (state == 3) return Vouch::kNo;  // signal-driven bus input: SIGIO may end any wait
-    if (state != 0) {
-      *channels |= vt::BusSocketChannel(client);
-      if (state == 2) v = Vouch::kReady;
-      continue;
-    }
-    const int timer = VirtualTimerFdSlot(fd);
-    const std::uint32_t of_set = timer >= 0 ? vt::TimerChannel(timer) : EpollVouchable(fd);
-    if (of_set == 0) return Vouch::kNo;
-    *channels |= of_set;
-    if (v == Vouch::kYes) v = Vouch::kLook;
+    if (fds[i].fd < 0) continue;  // poll ignores it
+    const Vouch fd = VouchForFd(fds[i].fd, static_cast<std::uint16_t>(fds[i].events), true,
+                                channels);
+    if (fd == Vouch::kNo) return Vouch::kNo;
+    v = std::max(v, fd);
   }
   return v;
 }
