@@ -310,6 +310,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       // A debugger has it (or it was stopped for one): no limit, and no hurry to look again.
       t0 = Clock::now();
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      woke = false;  // the next round looks again
       continue;
     }
     const double wall = WallSeconds(t0);

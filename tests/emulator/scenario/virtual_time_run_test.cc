@@ -420,6 +420,18 @@ TEST_F(VirtualTimeRun, AFirmwareStoppedForADebuggerIsWaitedForAndChangesNothing)
               HasSubstr("\"event\":\"firmware_stopped\""));
 }
 
+// --stop-at needs the virtual clock: on the cooperative handshake the run is refused with why.
+TEST_F(VirtualTimeRun, StopAtOffTheVirtualClockIsRefused) {
+  Scenario s = LoadScenarioFile(kCustomerC);
+  testing::UseCooperativeClock(s);
+  RunOptions o = testing::BuildTreeRunOptions(dir_ / "coop");
+  o.stop_firmware_at_ns = 1'000'000'000;
+  EXPECT_THAT([&] { (void)RunScenario(s, o); },
+              ThrowsMessage<std::invalid_argument>(
+                  HasSubstr("--stop-at stops the firmware on the virtual clock, which this run "
+                            "does not have")));
+}
+
 // A run on the virtual clock leaves nothing in the temporary directory: its private bus, clock
 // page and whatever the firmware put there go with it.
 TEST_F(VirtualTimeRun, ARunLeavesNothingInTheTemporaryDirectory) {
