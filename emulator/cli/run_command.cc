@@ -118,6 +118,10 @@ RunCommand::RunCommand(CLI::App& app) {
                    "T seconds, for a debugger (it prints how to attach; virtual time waits for "
                    "the firmware while it is stopped or traced)")
       ->check(CLI::NonNegativeNumber);
+  run_->add_flag("--check-runahead", check_runahead_,
+                 "Virtual clock: forecast the bus at every turn that ends the firmware's run "
+                 "through frames, check the run hands it exactly those, and count the hand-overs "
+                 "runahead would leave (report.json wall.runahead_check; docs/virtual-time.md)");
   run_->add_option("--logs", logs_,
                    "Also write the bus log in these formats beside can.log (asc: can.asc, blf: "
                    "can.blf; Vector's formats), and mcap: the whole run as run.mcap (Foxglove); "
@@ -166,6 +170,7 @@ std::optional<int> RunCommand::Run() {
                      : physics_thread_ == "off" ? scenario::RunOptions::PhysicsThread::kOff
                                                 : scenario::RunOptions::PhysicsThread::kAuto;
   if (stop_at_s_) o.stop_firmware_at_ns = std::llround(*stop_at_s_ * 1e9);
+  o.check_runahead = check_runahead_;
   o.progress = !quiet_ && ::isatty(2);
   o.progress_lines_s = quiet_ ? 0 : 10;
   if (!quiet_) {

@@ -30,6 +30,7 @@ class RunCommand {
   std::string physics_thread_ = "auto";
   std::vector<std::string> logs_;  // --logs
   std::optional<double> stop_at_s_;  // --stop-at
+  bool check_runahead_ = false;
   std::string clock_;          // empty: the scenario's timing.clock
   std::string sync_producer_;  // empty: the scenario's timing.sync_producer
   bool quiet_ = false;

@@ -25,6 +25,23 @@ Accel4Device::Accel4Device(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
 
 Accel4Device::~Accel4Device() = default;
 
+// Once the worker reads ahead, it alone samples the sensors and walks ahead_next_ns_: a copy
+// shares the first (and never samples them) and does not read the second.
+Accel4Device::Accel4Device(const Accel4Device& other)
+    : Device(other),
+      name_(other.name_),
+      params_(other.params_),
+      node_(other.node_),
+      ahead_(other.ahead_),
+      ahead_next_ns_(other.ahead_ ? 0 : other.ahead_next_ns_),
+      faults_(CopyOf(other.faults_)) {
+  if (!ahead_) node_.OwnSensors();
+}
+
+std::unique_ptr<Device> Accel4Device::Clone() const {
+  return std::unique_ptr<Device>(new Accel4Device(*this));
+}
+
 std::vector<std::string> Accel4Device::sensor_channels() const {
   return {"accel4.1", "accel4.2", "accel4.3", "accel4.4"};
 }

@@ -25,6 +25,7 @@ class Accel4Device final : public Device {
   Accel4Device(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
                const std::array<AccelerometerParams, 4>& sensors, std::int64_t first_sample_ns);
   ~Accel4Device() override;
+  std::unique_ptr<Device> Clone() const override;
 
   const std::string& name() const override { return name_; }
   std::string fault_name() const override { return "accel4"; }
@@ -40,6 +41,8 @@ class Accel4Device final : public Device {
                          std::vector<double>& out) override;
 
  private:
+  Accel4Device(const Accel4Device& other);
+
   std::string name_ = "accel4";
   std::array<AccelerometerParams, 4> params_;
   Accel4Node node_;

@@ -42,7 +42,9 @@ std::array<AccelerometerParams, 4> Paper002AccelParams(double radius_m, double r
 Accel4Node::Accel4Node(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
                        const std::array<AccelerometerParams, 4>& sensors,
                        std::int64_t first_sample_ns)
-    : dbc_(std::move(accel4_dbc)), next_ns_(first_sample_ns) {
+    : dbc_(std::move(accel4_dbc)),
+      sensors_(std::make_shared<std::vector<AccelerometerModel>>()),
+      next_ns_(first_sample_ns) {
   if (!dbc_) throw std::invalid_argument("accel4_node: a DBC database is required");
   msg_ = dbc_->FindMessage("ACC4_Data");
   if (!msg_) throw std::invalid_argument("accel4_node: the DBC has no message ACC4_Data");
@@ -64,7 +66,7 @@ Accel4Node::Accel4Node(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
           "all four",
           i, sensors[i].rate_hz, sensors[0].rate_hz));
     }
-    sensors_.emplace_back(sensors[i]);
+    sensors_->emplace_back(sensors[i]);
   }
   const double period = 1e9 / sensors[0].rate_hz;
   if (!(period >= 1.0) || std::abs(period - std::round(period)) > 1e-6 * period) {
@@ -76,7 +78,7 @@ Accel4Node::Accel4Node(std::shared_ptr<const bus::DbcDatabase> accel4_dbc,
 
 std::array<double, 4> Accel4Node::SampleSensors(const BodyKinematics& k) {
   std::array<double, 4> a{};
-  for (std::size_t i = 0; i < 4; ++i) a[i] = sensors_[i].Sample(k)[0];
+  for (std::size_t i = 0; i < 4; ++i) a[i] = (*sensors_)[i].Sample(k)[0];
   return a;
 }
 

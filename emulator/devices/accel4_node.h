@@ -49,6 +49,10 @@ class Accel4Node {
   bool Sample(const BodyKinematics& k, bus::CanFrame& out);
 
   const bus::DbcMessage& message() const { return *msg_; }
+  /// A copy shares its four sensor models (their noise streams) with the node it was copied
+  /// from, so that copying never reads them (a worker may be sampling them): this gives the
+  /// node a copy of its own, for a copy that samples.
+  void OwnSensors() { sensors_ = std::make_shared<std::vector<AccelerometerModel>>(*sensors_); }
   std::uint64_t samples() const { return samples_; }
   std::uint64_t saturated() const { return saturated_; }
 
@@ -58,7 +62,7 @@ class Accel4Node {
   std::array<const bus::DbcSignal*, 4> channels_{};
   const bus::DbcSignal* counter_ = nullptr;
   const bus::DbcSignal* checksum_ = nullptr;
-  std::vector<AccelerometerModel> sensors_;
+  std::shared_ptr<std::vector<AccelerometerModel>> sensors_;
   std::int64_t period_ns_ = 0;
   std::int64_t next_ns_ = 0;
   std::uint64_t counter_value_ = 0;

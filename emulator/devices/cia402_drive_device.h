@@ -30,6 +30,9 @@ class Cia402DriveDevice final : public Device {
  public:
   explicit Cia402DriveDevice(const Cia402DriveDeviceConfig& config);
   ~Cia402DriveDevice() override;
+  std::unique_ptr<Device> Clone() const override {
+    return std::unique_ptr<Device>(new Cia402DriveDevice(*this));
+  }
 
   const std::string& name() const override { return config_.name; }
   std::int64_t NextEventNs() const override;
@@ -51,6 +54,7 @@ class Cia402DriveDevice final : public Device {
   const Cia402DriveNode& node() const { return node_; }
 
  private:
+  Cia402DriveDevice(const Cia402DriveDevice&) = default;
   void Send(std::vector<NodeFrame> frames, bool from_poll, DevicePort& port);
   void ApplyDriveFaults(std::int64_t t_ns, DevicePort& port);
   void Track(std::int64_t t_ns, DevicePort& port);

@@ -32,6 +32,21 @@ Cia406EncoderDevice::Cia406EncoderDevice(const Cia406EncoderDeviceConfig& config
 
 Cia406EncoderDevice::~Cia406EncoderDevice() = default;
 
+Cia406EncoderDevice::Cia406EncoderDevice(const Cia406EncoderDevice& other)
+    : Device(other),
+      config_(other.config_),
+      name_(other.name_),
+      channel_(other.channel_),
+      codec_(other.codec_),
+      model_(other.model_),
+      node_(CopyOf(other.node_)),
+      sensor_fault_(CopyOf(other.sensor_fault_)),
+      last_state_(other.last_state_) {}
+
+std::unique_ptr<Device> Cia406EncoderDevice::Clone() const {
+  return std::unique_ptr<Device>(new Cia406EncoderDevice(*this));
+}
+
 double Cia406EncoderDevice::channel_noise_std(const std::string&) const {
   return 1.0 / std::sqrt(12.0);
 }

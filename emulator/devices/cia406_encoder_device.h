@@ -33,6 +33,7 @@ class Cia406EncoderDevice final : public Device {
   Cia406EncoderDevice(const Cia406EncoderDeviceConfig& config,
                       std::shared_ptr<const Cia406Codec> codec);
   ~Cia406EncoderDevice() override;
+  std::unique_ptr<Device> Clone() const override;
 
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override { return node_->NextEventNs(); }
@@ -61,6 +62,7 @@ class Cia406EncoderDevice final : public Device {
   }
 
  private:
+  Cia406EncoderDevice(const Cia406EncoderDevice& other);
   void Send(std::vector<NodeFrame> frames, bool from_poll, DevicePort& port);
 
   Cia406EncoderDeviceConfig config_;

@@ -252,6 +252,29 @@ DbcDevice::DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDevic
 
 DbcDevice::~DbcDevice() = default;
 
+DbcDevice::DbcDevice(const DbcDevice& other)
+    : Device(other),
+      name_(other.name_),
+      dbc_(other.dbc_),
+      config_(other.config_),
+      messages_(other.messages_),
+      shared_counter_(other.shared_counter_),
+      imu_(CopyOf(other.imu_)),
+      frames_sent_(other.frames_sent_),
+      clamped_(other.clamped_),
+      received_(other.received_),
+      channels_(other.channels_),
+      last_setpoint_ns_(other.last_setpoint_ns_),
+      setpoint_timed_out_(other.setpoint_timed_out_),
+      setpoint_frames_(other.setpoint_frames_),
+      rejected_frames_(other.rejected_frames_),
+      clamped_setpoints_(other.clamped_setpoints_),
+      nonfinite_setpoints_(other.nonfinite_setpoints_) {}
+
+std::unique_ptr<Device> DbcDevice::Clone() const {
+  return std::unique_ptr<Device>(new DbcDevice(*this));
+}
+
 // A frame carries one multiplexer value's signals; bound signals of two values in one frame
 // would put one value's bits under the other's switch. So each bound value gets its own frame,
 // and the switch is the device's to set.

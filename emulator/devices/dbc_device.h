@@ -139,6 +139,7 @@ class DbcDevice final : public Device {
   /// or checksum its signal cannot carry, a message larger than a classic CAN frame.
   DbcDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcDeviceConfig& config);
   ~DbcDevice() override;
+  std::unique_ptr<Device> Clone() const override;
 
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override;
@@ -205,6 +206,8 @@ class DbcDevice final : public Device {
     bool enabled = false;
   };
   /// One frame of `m`; `mux_value`: the multiplexer value it carries (the switch set to it).
+  // The copy's bindings point into this device's configuration (it must outlive the copy).
+  DbcDevice(const DbcDevice& other);
   void Encode(Message& m, std::optional<int> mux_value, const Sample& s, const DeviceWorld& world,
               bus::CanFrame& out);
   void SplitByMultiplexerValue(Message& m);

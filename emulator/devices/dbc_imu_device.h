@@ -38,6 +38,9 @@ class DbcImuDevice final : public Device {
   /// the sensor models refuse.
   DbcImuDevice(std::shared_ptr<const bus::DbcDatabase> dbc, const DbcImuDeviceConfig& config);
   ~DbcImuDevice() override;
+  std::unique_ptr<Device> Clone() const override {
+    return std::unique_ptr<Device>(new DbcImuDevice(*this));
+  }
 
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override { return node_.NextEventNs(); }
@@ -47,6 +50,8 @@ class DbcImuDevice final : public Device {
   void ArmFaults(DeviceFaults faults) override;
 
  private:
+  DbcImuDevice(const DbcImuDevice&) = default;
+
   std::string name_ = "dbc_imu";
   DbcImuNode node_;
   SixAxisImu imu_;  // along the body axes

@@ -8,6 +8,9 @@ namespace wheelhil::emulator {
 Device::Device() = default;
 Device::~Device() = default;
 
+Device::Device(const Device& other)
+    : silent_(other.silent_), device_faults_(CopyOf(other.device_faults_)) {}
+
 void Device::EndStep(std::int64_t t_ns) {
   if (device_faults_) device_faults_->AdvanceTo(t_ns);
 }

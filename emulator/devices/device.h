@@ -7,6 +7,7 @@
 /// block, never throw after construction and never read the wall clock. Thread-compatible: the
 /// run's thread calls everything, except TakeReadingsAhead (see there).
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -26,6 +27,18 @@ namespace wheelhil::emulator {
 
 class DeviceFaultInjector;
 class SensorFaultInjector;
+
+/// A deep copy of what `p` owns (nullptr for nullptr), for the copies Device::Clone makes.
+template <typename T>
+std::unique_ptr<T> CopyOf(const std::unique_ptr<T>& p) {
+  return p ? std::make_unique<T>(*p) : nullptr;
+}
+template <typename T, std::size_t N>
+std::array<std::unique_ptr<T>, N> CopyOf(const std::array<std::unique_ptr<T>, N>& a) {
+  std::array<std::unique_ptr<T>, N> copy;
+  for (std::size_t i = 0; i < N; ++i) copy[i] = CopyOf(a[i]);
+  return copy;
+}
 
 /// The vehicle after the latest physics step (world frame W, body frame B).
 struct DeviceWorld {
@@ -66,8 +79,15 @@ class Device {
  public:
   Device();
   virtual ~Device();
-  Device(const Device&) = delete;
   Device& operator=(const Device&) = delete;
+
+  /// A copy of the device as it is now (protocol state, sensor models and their noise streams,
+  /// faults), for a forecast of what it will send: polled with the same worlds and frames, the
+  /// copy sends what the device would. What the physics worker samples for a device that reads
+  /// ahead is shared, not copied (the worker may be using it): a copy of such a device takes
+  /// its readings from DeviceWorld::readings only. Fault windows' start/end events of the copy
+  /// go to the same FaultEventLog as the device's.
+  virtual std::unique_ptr<Device> Clone() const = 0;
 
   /// The bus node's name: "encoder1", "imu", "accel4", ...
   virtual const std::string& name() const = 0;
@@ -135,6 +155,7 @@ class Device {
   }
 
  protected:
+  Device(const Device& other);
   /// Keeps the device faults of `faults` (ArmFaults): SendThroughDeviceFaults applies them, and
   /// EndStep advances their windows.
   void TakeDeviceFaults(DeviceFaults& faults);

@@ -13,6 +13,17 @@ Mm5GyroDevice::Mm5GyroDevice(std::shared_ptr<const bus::DbcDatabase> mm5_dbc,
 
 Mm5GyroDevice::~Mm5GyroDevice() = default;
 
+Mm5GyroDevice::Mm5GyroDevice(const Mm5GyroDevice& other)
+    : Device(other),
+      name_(other.name_),
+      gyro_(other.gyro_),
+      node_(other.node_),
+      gyro_fault_(CopyOf(other.gyro_fault_)) {}
+
+std::unique_ptr<Device> Mm5GyroDevice::Clone() const {
+  return std::unique_ptr<Device>(new Mm5GyroDevice(*this));
+}
+
 double Mm5GyroDevice::channel_noise_std(const std::string&) const {
   return gyro_.noise_density_rad_s_sqrt_hz * std::sqrt(gyro_.rate_hz);
 }

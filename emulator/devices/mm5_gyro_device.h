@@ -20,6 +20,7 @@ class Mm5GyroDevice final : public Device {
   Mm5GyroDevice(std::shared_ptr<const bus::DbcDatabase> mm5_dbc, const GyroParams& gyro,
                 std::int64_t first_sample_ns);
   ~Mm5GyroDevice() override;
+  std::unique_ptr<Device> Clone() const override;
 
   const std::string& name() const override { return name_; }
   std::string fault_name() const override { return "gyro"; }
@@ -30,6 +31,8 @@ class Mm5GyroDevice final : public Device {
   void ArmFaults(DeviceFaults faults) override;
 
  private:
+  Mm5GyroDevice(const Mm5GyroDevice& other);
+
   std::string name_ = "imu";
   GyroParams gyro_;
   Mm5ImuNode node_;

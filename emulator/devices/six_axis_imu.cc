@@ -31,6 +31,12 @@ SixAxisImu::SixAxisImu(std::string name, const GyroParams& gyro,
 
 SixAxisImu::~SixAxisImu() = default;
 
+SixAxisImu::SixAxisImu(const SixAxisImu& other)
+    : name_(other.name_),
+      gyros_(other.gyros_),
+      accel_(CopyOf(other.accel_)),
+      faults_(CopyOf(other.faults_)) {}
+
 bool SixAxisImu::Sample(const physics::BodyTruth& body, std::int64_t t_ns,
                         std::array<double, 6>& out) {
   const BodyKinematics k = AccelKinematics(body);

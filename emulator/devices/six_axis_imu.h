@@ -28,6 +28,8 @@ class SixAxisImu {
              const Eigen::Matrix3d& R_BS, const Eigen::Vector3d& r_BS_B, double rate_hz,
              std::uint64_t seed);
   ~SixAxisImu();
+  SixAxisImu(const SixAxisImu& other);
+  SixAxisImu& operator=(const SixAxisImu&) = delete;
 
   /// One sample of the six channels from the body (rate x y z, accel x y z) at t_ns, through
   /// the channels' faults; false when a fault drops it (the models advance all the same).

@@ -42,6 +42,16 @@ std::string_view BusFaultKindName(BusFaultKind kind) noexcept {
   return "?";
 }
 
+FaultyCanBus::FaultyCanBus(const FaultyCanBus& other, CanBusModel& bus)
+    : bus_(bus),
+      states_(other.states_),
+      log_(other.log_),
+      flood_node_(other.flood_node_),
+      error_node_(other.error_node_),
+      dropped_bus_off_(other.dropped_bus_off_),
+      flood_frames_(other.flood_frames_),
+      error_frames_(other.error_frames_) {}
+
 FaultyCanBus::FaultyCanBus(CanBusModel& bus, std::vector<BusFault> faults, StuffingMode stuffing,
                            FaultEventLog* log)
     : bus_(bus), log_(log) {

@@ -56,6 +56,10 @@ class FaultyCanBus {
   /// std::invalid_argument ("bus_faults[i].field: problem"). `bus` must outlive this object.
   FaultyCanBus(CanBusModel& bus, std::vector<BusFault> faults,
                StuffingMode stuffing = StuffingMode::kExact, FaultEventLog* log = nullptr);
+  /// `other` in its present state, around `bus` (a copy of other's bus model).
+  FaultyCanBus(const FaultyCanBus& other, CanBusModel& bus);
+  FaultyCanBus(const FaultyCanBus&) = delete;
+  FaultyCanBus& operator=(const FaultyCanBus&) = delete;
 
   /// CanBusModel::Enqueue unless the node is bus-off at ready_ns (then false, counted).
   [[nodiscard]] bool Enqueue(int node, const bus::CanFrame& frame, std::int64_t ready_ns) noexcept;

@@ -42,6 +42,11 @@ class FaultEventLog {
   /// Events sorted by time (stable: same-time events keep their recording order).
   std::vector<FaultEvent> SortedByTime() const;
   void Clear() { events_.clear(); }
+  std::size_t size() const { return events_.size(); }
+  /// Back to its first `n` events (what a forecast's copies of the injectors recorded goes).
+  void Truncate(std::size_t n) {
+    if (n < events_.size()) events_.resize(n);
+  }
 
  private:
   std::vector<FaultEvent> events_;

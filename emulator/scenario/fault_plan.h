@@ -33,6 +33,8 @@ class FaultPlan {
   /// The node faults' window edges at the end of the motion step that ended at t_ns.
   void StepNodeFaults(std::int64_t t_ns, std::int64_t step_ns,
                       std::vector<std::unique_ptr<Device>>& devices, sim::RunContext& run);
+  /// The injectors' log of start/end events (a forecast's copies of them record there too).
+  FaultEventLog& log() { return log_; }
   /// The injectors' start/end events, recorded so far, into the run's events.
   void FlushEvents(sim::RunContext& run);
   /// report.json's "faults" block; nullopt when the scenario has no library fault.

@@ -247,6 +247,13 @@ bool PhysicsStage::Step(std::int64_t t_ns, bool motion) {
   return true;
 }
 
+std::optional<PhysicsStage::StepAhead> PhysicsStage::PeekMotionStep(std::int64_t ahead) {
+  if (!pipeline_) return std::nullopt;
+  const StepResult* r = pipeline_->Peek(ahead);
+  if (r == nullptr) return std::nullopt;
+  return StepAhead{&r->body, &r->wheels, &r->readings};
+}
+
 std::span<const double> PhysicsStage::readings(std::size_t device) const {
   if (slot_ == nullptr || device >= slot_->readings.size()) return {};
   return slot_->readings[device];

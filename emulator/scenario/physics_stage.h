@@ -53,6 +53,16 @@ class PhysicsStage {
   /// Device d's readings taken ahead for the latest step (empty without a worker).
   std::span<const double> readings(std::size_t device) const;
 
+  /// A motion step ahead of the latest, not taken (the steps a worker makes only): the vehicle
+  /// and the devices' readings after the step that ends `ahead` steps (>= 1) after the latest.
+  /// nullopt without a worker, past its last step or further ahead than its ring holds.
+  struct StepAhead {
+    const physics::BodyTruth* body = nullptr;
+    const std::vector<physics::WheelTruth>* wheels = nullptr;
+    const std::vector<std::vector<double>>* readings = nullptr;  ///< By device.
+  };
+  std::optional<StepAhead> PeekMotionStep(std::int64_t ahead);
+
   /// Runs the next `steps` motion steps on a worker on `cpus` (nullptr: inherited), taking the
   /// readings ahead for the devices that allow it. Call after StartMotion. `fall_back`: when
   /// the worker makes the run wait longer than its steps cost it (its CPU taken by another

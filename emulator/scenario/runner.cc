@@ -22,6 +22,7 @@
 #include "emulator/firmware/lockstep_handshake.h"
 #include "emulator/firmware/virtual_clock.h"
 #include "emulator/firmware/wheelhil_fw_config.h"
+#include "emulator/scenario/bus_forecast.h"
 #include "emulator/scenario/device_registry.h"
 #include "emulator/scenario/fault_plan.h"
 #include "emulator/scenario/physics_stage.h"
@@ -131,6 +132,10 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void StartFirmware();
   // Virtual clock: the firmware runs at the bus's instant until every thread of it is blocked.
   void SettleFirmware();
+  // --check-runahead, after the settle of a turn at `now_ns` that handed the firmware
+  // `handed` (the frames sent to it since the last turn).
+  void CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_sent, bool handed_over,
+                     const std::vector<bus::CanFrame>& handed);
   // --stop-at: stops the firmware's process group for a debugger and says how to attach.
   void StopFirmwareForDebugger();
   // Virtual clock: runs the firmware alone (its clock moving to its own deadlines) until it has
@@ -188,6 +193,18 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   bool firmware_stopped_ = false;     // StopFirmwareForDebugger
   std::uint64_t progress_calls_ = 0;  // Progress(false)
   std::vector<bus::CandumpRecord> bus_log_;  // can.log read back for logs: (WriteOtherLogs)
+  // --check-runahead: the forecast of the current window and how much of it was matched; the
+  // frames sent to the firmware since the last turn; the firmware's frames so far.
+  std::unique_ptr<BusForecast> forecast_;
+  const sim::SyncSource* sync_ = nullptr;  // the emulator's SYNCs (motion phase), if it makes them
+  std::size_t forecast_matched_ = 0;
+  std::vector<bus::CanFrame> to_firmware_;
+  std::uint64_t firmware_frames_seen_ = 0;
+  struct RunaheadCount {
+    std::uint64_t windows = 0, frames = 0, turns_saved = 0, turns_added = 0;
+    std::uint64_t ended_by_send = 0, ended_by_deadline = 0, ended_by_horizon = 0;
+    std::uint64_t no_forecast = 0;  // turns after which no forecast could be made
+  } runahead_;
 };
 
 void Run::CommandDrives() {
@@ -237,21 +254,14 @@ void Run::WaitLastStatus(int cycle, std::int64_t k) {
 
 void Run::StepDevices(std::int64_t t_ns, bool motion) {
   sim::WallTimer timer(wall_.devices_bus_s);
-  if (motion) faults_->StepNodeFaults(t_ns, physics_->step_ns(), devices_, run_);
-  DeviceWorld world;
-  world.body = &physics_->body();
-  world.wheels = &physics_->wheels();
-  for (std::size_t d = 0; d < devices_.size(); ++d) {
-    world.readings = physics_->readings(d);
-    devices_[d]->Poll(t_ns, world, hub_->port(d));
-  }
-  // Frames a frame fault delayed (or a duplicate's copy) that are due now; fault windows.
-  hub_->ReleaseDelayed();
-  for (auto& d : devices_) d->EndStep(t_ns);
+  StepDevicesAt(
+      t_ns, physics_->step_ns(), motion, physics_->body(), physics_->wheels(),
+      [this](std::size_t d) { return physics_->readings(d); }, devices_, *hub_, *faults_, run_);
   if (motion) truth_->RecordMotionStep(t_ns, physics_->wheels());
 }
 
 void Run::OnFirmwareFrame(const bus::CanFrame& f) {
+  ++firmware_frames_seen_;
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
   if (firmware_sync_ && f.id == bus::canopen::kSyncCobId && !f.rtr) {
@@ -282,9 +292,18 @@ void Run::SettleFirmware() {
       hub_->now_ns() >= o_.stop_firmware_at_ns) {
     StopFirmwareForDebugger();
   }
-  clock_->SetNow(hub_->now_ns());
+  const std::int64_t now = hub_->now_ns();
+  const bool deadline_turn = clock_->NextDeadlineNs() <= now;
+  const std::uint64_t sent_before = firmware_frames_seen_;
+  const std::uint64_t handovers_before = link_->handovers();
+  clock_->SetNow(now);
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+  if (o_.check_runahead) {
+    CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before,
+                  link_->handovers() != handovers_before, to_firmware_);
+    to_firmware_.clear();
+  }
   // What runs on the host's clock: the run goes on, but may not be deterministic.
   auto warn = [this](const char* event, const std::vector<std::string>& found) {
     for (const std::string& what : found) {
@@ -295,6 +314,80 @@ void Run::SettleFirmware() {
   };
   warn("firmware_host_clock_wait", clock_->TakeHostClockWaits());
   warn("firmware_off_the_clock", clock_->TakeProcessesOffTheClock());
+}
+
+void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_sent,
+                        bool handed_over, const std::vector<bus::CanFrame>& handed) {
+  auto frame_text = [](const bus::CanFrame& f) {
+    std::string line = bus::FormatCandumpLine(0, "", f);
+    return line.substr(line.find(' ') + 2);  // "ID#DATA" without the time and interface
+  };
+  auto mismatch = [&](const std::string& what) {
+    run_.Fail(fmt::format("runahead check at t = {:.6f} s (bus time): {}",
+                          static_cast<double>(now_ns) * 1e-9, what));
+    forecast_.reset();
+  };
+  if (forecast_) {
+    const auto& fc = forecast_->frames();
+    std::size_t& m = forecast_matched_;
+    if (m < fc.size() && fc[m].t_ns < now_ns) {
+      return mismatch(
+          fmt::format("the forecast had {} at t = {:.6f} s; the run did not hand it "
+                      "over then",
+                      frame_text(fc[m].frame), static_cast<double>(fc[m].t_ns) * 1e-9));
+    }
+    const char* end = nullptr;
+    if (deadline_turn && now_ns != run_.now_ns) {
+      // A deadline of the firmware's between two steps: the bus moves on to it (its frames
+      // then complete at other instants), so the library yields at it.
+      end = "deadline";
+    } else if (now_ns > forecast_->reached_ns()) {
+      end = "horizon";
+    } else {
+      for (const bus::CanFrame& f : handed) {
+        if (m >= fc.size() || fc[m].t_ns != now_ns || !(fc[m].frame == f)) {
+          return mismatch(fmt::format(
+              "the run handed the firmware {}; the forecast had {}", frame_text(f),
+              m >= fc.size() ? std::string("nothing more")
+                             : fmt::format("{} at t = {:.6f} s", frame_text(fc[m].frame),
+                                           static_cast<double>(fc[m].t_ns) * 1e-9)));
+        }
+        ++m;
+        ++runahead_.frames;
+      }
+      if (m < fc.size() && fc[m].t_ns == now_ns) {
+        return mismatch(fmt::format("the forecast had {} as well; the run did not hand it over",
+                                    frame_text(fc[m].frame)));
+      }
+      end = firmware_sent ? "send" : now_ns == forecast_->reached_ns() ? "horizon" : nullptr;
+      if (end == nullptr) {
+        // The firmware ran on through this turn's frames: no hand-over.
+        if (handed_over) ++runahead_.turns_saved;
+        return;
+      }
+    }
+    // The window ends with a hand-over; the run made one here unless the forecast ran out.
+    if (!handed_over) ++runahead_.turns_added;
+    const std::string_view e(end);
+    ++(e == "send"       ? runahead_.ended_by_send
+       : e == "deadline" ? runahead_.ended_by_deadline
+                         : runahead_.ended_by_horizon);
+    ++runahead_.windows;
+    forecast_.reset();
+  }
+  if (run_.failed() || !motion_started_ || !physics_->worker_used()) return;
+  // The next window: up to the emulator's next SYNC (its step comes first) and half a second.
+  // A deadline of the firmware's at a step's end takes its turn with the step's frames (the
+  // window runs on through it); one between two steps ends the window when it comes.
+  std::int64_t until = now_ns + 500'000'000;
+  if (sync_ != nullptr) until = std::min(until, sync_->NextEventNs());
+  forecast_ = std::make_unique<BusForecast>(*hub_, devices_, run_, physics_->step_ns());
+  forecast_matched_ = 0;
+  (void)forecast_->RunTo(until, *physics_, *faults_);
+  if (forecast_->reached_ns() == run_.now_ns) {
+    ++runahead_.no_forecast;
+    forecast_.reset();
+  }
 }
 
 void Run::StopFirmwareForDebugger() {
@@ -385,7 +478,10 @@ void Run::Build() {
     o_.on_private_bus(link_->interface(), link_->runtime_dir());
   }
   hub_->OpenLog(out_ + "/can.log", link_->interface());
-  hub_->SetFirmwareSend([this](const bus::CanFrame& f) { return link_->Send(f); });
+  hub_->SetFirmwareSend([this](const bus::CanFrame& f) {
+    if (o_.check_runahead) to_firmware_.push_back(f);
+    return link_->Send(f);
+  });
   handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
   hub_->SetObserver(handshake_.get());
   estimates_ = std::make_unique<scoring::EstimateDecoder>(
@@ -544,6 +640,7 @@ void Run::RunPhases() {
   if (firmware_sync_) {
     loop.Run({"motion", sources({&tick}), steps_done});
   } else {
+    sync_ = &sync;
     loop.Run({"motion", sources({&tick, &sync}),
               [&] { return steps_done() && sync.NextEventNs() == sim::kNever; }});
   }
@@ -628,6 +725,20 @@ json Run::Report(double wall_s) {
       {"physics_s", wall_.physics_s},
       {"devices_bus_s", wall_.devices_bus_s},
       {"other_s", std::max(0.0, wall_s - staged_s)}};
+  if (o_.check_runahead) {
+    // Hand-overs with runahead: every one of the run's but those of the turns a window ran
+    // through, plus one at each window's end that was no hand-over of the run's.
+    const std::uint64_t with_runahead = handovers - runahead_.turns_saved + runahead_.turns_added;
+    r["wall"]["runahead_check"] =
+        json{{"handovers", with_runahead},
+             {"handovers_per_sim_s", virtual_s > 0 ? with_runahead / virtual_s : 0.0},
+             {"windows", runahead_.windows},
+             {"frames_run_through", runahead_.frames},
+             {"ended_by_send", runahead_.ended_by_send},
+             {"ended_by_deadline", runahead_.ended_by_deadline},
+             {"ended_by_horizon", runahead_.ended_by_horizon},
+             {"turns_without_forecast", runahead_.no_forecast}};
+  }
   return r;
 }
 

@@ -50,6 +50,13 @@ struct RunOptions {
   /// then waits for it for as long as it is stopped or traced (docs/virtual-time.md,
   /// "Debugging"). `on_firmware_stopped` is called with its pid then.
   std::int64_t stop_firmware_at_ns = -1;
+  /// Virtual clock, motion phase with a physics worker: at every turn that ends a firmware's
+  /// run through the frames (it sent, a deadline of its came, or the forecast ran out), the
+  /// bus is forecast up to the firmware's next deadline (BusForecast), and each later turn
+  /// checks that the run hands the firmware exactly the forecast frames at their instants; a
+  /// difference fails the run. report.json's wall.runahead_check counts the turns a firmware
+  /// that ran ahead through the forecasts would have needed.
+  bool check_runahead = false;
   std::function<void(pid_t pid)> on_firmware_stopped;
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.

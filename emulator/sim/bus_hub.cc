@@ -37,6 +37,35 @@ BusHub::BusHub(const CanBusConfig& config, std::vector<std::unique_ptr<Device>>&
 
 BusHub::~BusHub() = default;
 
+BusHub::BusHub(const BusHub& other, std::vector<std::unique_ptr<Device>>& devices, RunContext& run)
+    : bus_(other.bus_),
+      devices_(devices),
+      run_(run),
+      emulator_node_(other.emulator_node_),
+      firmware_node_(other.firmware_node_),
+      first_device_node_(other.first_device_node_),
+      iface_(other.iface_),
+      enqueued_(other.enqueued_),
+      completed_(other.completed_),
+      silenced_(other.silenced_),
+      enqueue_failures_(other.enqueue_failures_),
+      firmware_frames_(other.firmware_frames_) {
+  for (std::size_t i = 0; i < devices_.size(); ++i) {
+    ports_.push_back(std::make_unique<Port>(*this, i));
+  }
+  if (other.faulty_bus_) faulty_bus_ = std::make_unique<FaultyCanBus>(*other.faulty_bus_, bus_);
+  for (const auto& [node, filter] : other.frame_filters_) {
+    frame_filters_[node] = std::make_unique<FrameFaultFilter>(*filter);
+  }
+}
+
+std::unique_ptr<BusHub> BusHub::CopyForForecast(std::vector<std::unique_ptr<Device>>& devices,
+                                                RunContext& run, FirmwareSend firmware_send) const {
+  std::unique_ptr<BusHub> copy(new BusHub(*this, devices, run));
+  copy->firmware_send_ = std::move(firmware_send);
+  return copy;
+}
+
 DevicePort& BusHub::port(std::size_t device) { return *ports_[device]; }
 
 int BusHub::DeviceOf(int node) const {
@@ -122,7 +151,7 @@ void BusHub::OnWire(const WireFrame& w) {
   if (!injected) ++completed_;
   if (background_log_) {
     background_log_->Write(w.complete_ns, w.frame);
-  } else {
+  } else if (log_) {
     (void)log_->Write(w.complete_ns, iface_, w.frame);
   }
   if (w.frame.error) return;  // an error burst: in can.log only (nothing to deliver)

@@ -49,6 +49,14 @@ class BusHub {
   BusHub(const CanBusConfig& config, std::vector<std::unique_ptr<Device>>& devices,
          RunContext& run);
   ~BusHub();
+  BusHub(const BusHub&) = delete;
+  BusHub& operator=(const BusHub&) = delete;
+
+  /// A copy of this bus as it is now (bus model, bus faults, frame faults, counters) around
+  /// `devices` (copies of the devices, Device::Clone) and `run`, for a forecast: it writes no
+  /// can.log, has no observer and hands the firmware's frames to `firmware_send`.
+  std::unique_ptr<BusHub> CopyForForecast(std::vector<std::unique_ptr<Device>>& devices,
+                                          RunContext& run, FirmwareSend firmware_send) const;
 
   /// can.log, written as frames complete (kBuffered).
   void OpenLog(const std::string& path, std::string interface);
@@ -89,6 +97,7 @@ class BusHub {
 
  private:
   class Port;
+  BusHub(const BusHub& other, std::vector<std::unique_ptr<Device>>& devices, RunContext& run);
   // The device that owns bus node `node`, -1 for the SYNC producer, -2 for anyone else (the
   // firmware, injected traffic).
   int DeviceOf(int node) const;

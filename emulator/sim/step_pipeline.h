@@ -116,6 +116,41 @@ class StepPipeline {
     return slots_[next_++ & mask_];
   }
 
+  /// The slot `ahead` steps after the one the last Next() returned (ahead >= 1; the first
+  /// step's for ahead 1 before any Next()), without consuming it: it stays valid until the
+  /// Next() that passes it. Waits for the worker (or computes it on the consumer's thread once
+  /// it fell back). nullptr when it lies beyond the last step, beyond half the ring, or the
+  /// step function failed (Next() reports that).
+  const Slot* Peek(std::int64_t ahead) {
+    if (ahead < 1 || static_cast<std::size_t>(ahead) >= slots_.size() / 2) return nullptr;
+    const std::uint64_t index = next_ + static_cast<std::uint64_t>(ahead) - 1;
+    if (index >= static_cast<std::uint64_t>(steps_)) return nullptr;
+    if (inline_from_ >= 0) {
+      try {
+        ProduceInline(index);
+      } catch (const std::exception&) {
+        return nullptr;
+      }
+      return &slots_[index & mask_];
+    }
+    for (int spin = 0; head_.load(std::memory_order_acquire) <= index; ++spin) {
+      if (done_.load(std::memory_order_acquire) && head_.load() <= index) return nullptr;
+      if (spin < kConsumerSpins) {
+        _mm_pause();
+        continue;
+      }
+      const std::uint32_t seq = data_seq_.load();
+      consumer_waiting_.store(true);
+      if (head_.load() > index || done_.load()) {
+        consumer_waiting_.store(false);
+        continue;
+      }
+      data_seq_.wait(seq);
+      consumer_waiting_.store(false);
+    }
+    return &slots_[index & mask_];
+  }
+
  private:
   static constexpr std::int64_t kJudgeSteps = 1024;
 
@@ -152,14 +187,20 @@ class StepPipeline {
     if (next_ >= static_cast<std::uint64_t>(steps_)) {
       throw std::runtime_error("physics: no step left to consume");
     }
-    Slot& out = slots_[next_ & mask_];
-    try {
-      fn_(static_cast<std::int64_t>(next_), out);
-    } catch (const std::exception& e) {
-      throw std::runtime_error(std::string("physics: ") + e.what());
-    }
-    head_.store(next_ + 1);
+    ProduceInline(next_);
     return slots_[next_++ & mask_];
+  }
+
+  // The consumer's thread computes every step up to `index` not yet made.
+  void ProduceInline(std::uint64_t index) {
+    for (std::uint64_t h = head_.load(); h <= index; ++h) {
+      try {
+        fn_(static_cast<std::int64_t>(h), slots_[h & mask_]);
+      } catch (const std::exception& e) {
+        throw std::runtime_error(std::string("physics: ") + e.what());
+      }
+      head_.store(h + 1);
+    }
   }
 
   // Spin rounds (pause instruction, ~10-50 ns each here) before a side blocks.

@@ -97,12 +97,17 @@ double LastEstimateX(const fs::path& dir, const std::string& stream) {
   return x;
 }
 
-// `s` run twice, into dir/a and dir/b: their can.log must be the same bytes. Returns the first
-// run's result and its can.log.
+// `s` run twice, into dir/a and dir/b: their can.log must be the same bytes. The second run
+// also forecasts the bus at each turn that ends the firmware's run through frames and checks
+// it is handed exactly those (check_runahead: a difference fails it). Returns the first run's
+// result and its can.log.
 std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs::path& dir) {
   RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir / "a"));
-  const RunResult b = RunScenario(s, testing::BuildTreeRunOptions(dir / "b"));
+  RunOptions checked = testing::BuildTreeRunOptions(dir / "b");
+  checked.check_runahead = true;
+  const RunResult b = RunScenario(s, checked);
   EXPECT_EQ(a.failure, b.failure);
+  EXPECT_TRUE(b.report["wall"].contains("runahead_check"));
   std::string log = Slurp(dir / "a" / "can.log");
   EXPECT_EQ(log, Slurp(dir / "b" / "can.log"));
   return {std::move(a), std::move(log)};
@@ -133,6 +138,38 @@ std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
     EXPECT_NEAR(I32(pose, 4) * 1e-4, 0.0, 0.005);
   }
   return log;
+}
+
+// The bus forecast a firmware could run ahead through (BusForecast): for a firmware that sends
+// twice per 0.25 s cycle, the run hands it exactly the forecast frames at their instants (a
+// difference fails the checked run), and it would need far fewer hand-overs. The forecast's
+// copies of the devices and fault injectors leave the run's record as it is: with faults of
+// every kind (sensor, frame, device, bus), can.log, events.jsonl and the report are those of a
+// run without it.
+TEST_F(VirtualTimeRun, TheRunHandsTheFirmwareExactlyTheBusForecast) {
+  for (const char* name : {"smoke/paper000_slip_short", "faults_demo", "bus_faults"}) {
+    SCOPED_TRACE(name);
+    const Scenario s =
+        LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
+    const fs::path dir = dir_ / fs::path(name).filename();
+    const RunResult plain = RunScenario(s, testing::BuildTreeRunOptions(dir / "plain"));
+    RunOptions o = testing::BuildTreeRunOptions(dir / "checked");
+    o.check_runahead = true;
+    const RunResult checked = RunScenario(s, o);
+    EXPECT_EQ(checked.failure, "");
+    EXPECT_EQ(plain.report["verdict"], "pass");
+    EXPECT_EQ(Slurp(dir / "plain" / "can.log"), Slurp(dir / "checked" / "can.log"));
+    EXPECT_EQ(Slurp(dir / "plain" / "events.jsonl"), Slurp(dir / "checked" / "events.jsonl"));
+    EXPECT_EQ(testing::ReportWithoutWall(dir / "plain"),
+              testing::ReportWithoutWall(dir / "checked"));
+    const auto& wall = checked.report["wall"];
+    const auto& ra = wall["runahead_check"];
+    EXPECT_GE(ra["frames_run_through"].get<int>(), 100) << ra.dump();
+    EXPECT_GE(ra["ended_by_send"].get<int>(), 2) << ra.dump();
+    // Two turns a cycle (its SYNC, its outputs) where the run needs ~116 a second.
+    EXPECT_LE(ra["handovers_per_sim_s"].get<double>(), 15.0) << ra.dump();
+    EXPECT_GE(wall["handovers_per_sim_s"].get<double>(), 100.0) << wall.dump();
+  }
 }
 
 TEST_F(VirtualTimeRun, CustomerCFirmwareIsTheMasterAndItsRunsAreByteIdentical) {

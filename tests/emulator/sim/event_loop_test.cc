@@ -108,6 +108,9 @@ class FakeDevice final : public Device {
  public:
   FakeDevice(std::string name, std::uint32_t id, std::int64_t period_ns)
       : name_(std::move(name)), id_(id), period_(period_ns), next_(period_ns) {}
+  std::unique_ptr<Device> Clone() const override {
+    return std::unique_ptr<Device>(new FakeDevice(*this));
+  }
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override { return next_; }
   void Poll(std::int64_t t_ns, const DeviceWorld&, DevicePort& port) override {
@@ -129,6 +132,8 @@ class FakeDevice final : public Device {
   std::vector<std::pair<std::uint32_t, std::int64_t>> heard;
 
  private:
+  FakeDevice(const FakeDevice&) = default;
+
   std::string name_;
   std::uint32_t id_;
   std::int64_t period_, next_;

@@ -1,0 +1,85 @@
+#pragma once
+/// BusForecast: the frames the bus will bring the firmware if the firmware sends none. It copies
+/// the run's bus (bus model, bus and frame faults) and devices as they are after the latest
+/// physics step, and runs the copies through the motion steps the physics worker already made,
+/// each step as the run makes it (StepDevicesAt, then the bus to the step's end). A frame for
+/// the firmware counts at the end of the step in which it completed: that is when the run hands
+/// it over. Until the firmware sends, the run itself then sends the same frames at the same
+/// instants (the run's `--check-runahead` compares them), which is what lets the firmware run
+/// ahead through them (docs/virtual-time.md, "Runahead").
+///
+/// The copies never touch the run's outputs: no can.log, no observer, their events go to a
+/// RunContext of their own, and what they record in the fault log is taken back at the end of
+/// each RunTo. Closed loop (the firmware drives the physics) has no worker, so no forecast.
+/// Thread-compatible: the run's thread.
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "bus/can_frame.h"
+#include "emulator/devices/device.h"
+#include "emulator/scenario/fault_plan.h"
+#include "emulator/scenario/physics_stage.h"
+#include "emulator/sim/bus_hub.h"
+#include "emulator/sim/run_context.h"
+
+namespace wheelhil::emulator::scenario {
+
+/// The devices' part of a step that ends at t_ns, the run's and a forecast's alike: the node
+/// faults' window edges (motion), every device polled with the vehicle after the step, the
+/// frames a frame fault delayed that are due, the device faults' windows.
+template <typename ReadingsOf>
+void StepDevicesAt(std::int64_t t_ns, std::int64_t step_ns, bool motion,
+                   const physics::BodyTruth& body, const std::vector<physics::WheelTruth>& wheels,
+                   ReadingsOf readings_of, std::vector<std::unique_ptr<Device>>& devices,
+                   sim::BusHub& hub, FaultPlan& faults, sim::RunContext& run) {
+  if (motion) faults.StepNodeFaults(t_ns, step_ns, devices, run);
+  DeviceWorld world;
+  world.body = &body;
+  world.wheels = &wheels;
+  for (std::size_t d = 0; d < devices.size(); ++d) {
+    world.readings = readings_of(d);
+    devices[d]->Poll(t_ns, world, hub.port(d));
+  }
+  hub.ReleaseDelayed();
+  for (auto& d : devices) d->EndStep(t_ns);
+}
+
+/// A frame for the firmware and the step end at which the run hands it over.
+struct ForecastFrame {
+  std::int64_t t_ns = 0;
+  bus::CanFrame frame;
+};
+
+class BusForecast {
+ public:
+  /// Copies `hub` and `devices` as they are now; the copies' next step is the one after
+  /// run.now_ns (the latest physics step). `run` (the run's) must outlive the forecast.
+  BusForecast(const sim::BusHub& hub, const std::vector<std::unique_ptr<Device>>& devices,
+              const sim::RunContext& run, std::int64_t step_ns);
+  ~BusForecast();
+  BusForecast(const BusForecast&) = delete;
+  BusForecast& operator=(const BusForecast&) = delete;
+
+  /// Runs the copies' motion steps up to the one ending at or before until_ns. False when it
+  /// stopped earlier: the physics worker has no such step (none running, past its last step,
+  /// beyond its ring) or a copy failed; the frames up to there stand.
+  bool RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults);
+
+  /// What the firmware gets, in order, from the first forecast step to reached_ns().
+  const std::vector<ForecastFrame>& frames() const { return frames_; }
+  /// The end of the latest step forecast (the start instant before any).
+  std::int64_t reached_ns() const { return run_.now_ns; }
+
+ private:
+  const sim::RunContext& real_run_;  // its now_ns: the physics' latest step
+  sim::RunContext run_;              // the copies' own: their events and failures go nowhere else
+  std::int64_t step_ns_;
+  std::vector<std::unique_ptr<Device>> devices_;
+  std::unique_ptr<sim::BusHub> hub_;
+  std::vector<bus::CanFrame> completed_;  // for the firmware, in the step being forecast
+  std::vector<ForecastFrame> frames_;
+};
+
+}  // namespace wheelhil::emulator::scenario
