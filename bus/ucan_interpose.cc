@@ -201,6 +201,19 @@ void NoteBusCall() {
 }
 
 /// Lock held. Drops fd's reference, if any.
+/// Every frame sent counts for the virtual clock's library (Page::bus_sends): while the firmware
+/// runs ahead on its own clock, a send gives the clock back to the emulator.
+void NoteFrameSent() {
+  using Fn = void (*)();
+  static std::atomic<Fn> fn{nullptr};
+  static std::atomic<bool> looked{false};
+  if (!looked.load(std::memory_order_acquire)) {
+    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent")));
+    looked.store(true, std::memory_order_release);
+  }
+  if (Fn f = fn.load(std::memory_order_relaxed)) f();
+}
+
 void DetachLocked(int fd) {
   if (fd < 0 || fd >= kMaxFds || g_sockets[fd] == nullptr) return;
   NoteBusCall();
@@ -754,6 +767,7 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   for (std::size_t i = 0; i < iovcnt; ++i) total += iov[i].iov_len;
   if (total != ucan::kCanMtu && total != ucan::kCanFdMtu) return Fail(EINVAL);
   if (total == ucan::kCanFdMtu && !v.fd_frames) return Fail(EINVAL);
+  NoteFrameSent();
   std::uint8_t buf[ucan::kCanFdMtu + sizeof(ucan::TxStamp) + sizeof(ucan::TxAddress)];
   std::size_t off = 0;
   for (std::size_t i = 0; i < iovcnt; ++i) {

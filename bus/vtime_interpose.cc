@@ -219,12 +219,19 @@ int ClaimThreadSlot(pid_t tid) {
   ::abort();
 }
 
+void RunAhead();
+thread_local bool t_holds_clock = false;  // HoldClock
+
 void FreeThreadSlot(int i) {
   vt::ThreadSlot& s = g_page->threads[i];
   s.tid.store(0);
   s.pid.store(0);
+  vt::MarkLocallyWoken(*g_page, i, false);
   s.state.store(vt::kFree);
   Transition(true);
+  // A thread that ends may leave every other one waiting: it moves the clock on, as the last
+  // to wait would.
+  if (g_page->runahead.load(std::memory_order_relaxed) != vt::kHostClock) RunAhead();
 }
 
 /// The calling thread's slot (claimed at its first call for a thread the library did not see
@@ -292,6 +299,10 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline, Wait
   s.calls.store(0, std::memory_order_relaxed);
   s.state.store(vt::kWaiting);
   Transition(true);
+  if (depth == 0 && !t_holds_clock &&
+      g_page->runahead.load(std::memory_order_relaxed) != vt::kHostClock) {
+    RunAhead();
+  }
 }
 
 void EndWait(vt::ThreadSlot& s) {
@@ -317,7 +328,169 @@ void EndWait(vt::ThreadSlot& s) {
   s.deadline_ns.store(vt::kNoDeadline);
   s.resumed.store(0);
   s.vouched.store(0);
+  if (t_slot >= 0) vt::MarkLocallyWoken(*g_page, t_slot, false);
   Transition();
+}
+
+// ---- runahead: the firmware moves its clock itself (Page::runahead) ----
+
+/// Gives the clock back to the host (this thread holds kLocalAdvance) and wakes it.
+void YieldClock() {
+  g_page->runahead.store(vt::kHostClock);
+  Transition(true);
+}
+
+/// What is due at `t` can be ended here without the host: a sleep (its futex word), an fd
+/// wait of this process with its wake eventfd, a timer of this process that writes its timerfd
+/// or tells nobody. Signals, condition variables, futex words and thread timers go through the
+/// agent or the kernel's signal rules: the host does those.
+bool LocallyEndable(std::int64_t t, pid_t me) {
+  const int timers = g_page->timers_used.load();
+  for (int i = 0; i < timers; ++i) {
+    const vt::TimerSlot& tm = g_page->timers[i];
+    if (tm.state.load() != vt::kTimerArmed || tm.next_ns.load() > t) continue;
+    const std::uint32_t how = tm.notify.load();
+    if (tm.pid.load() != me || (how != vt::kNotifyEventFd && how != vt::kNotifyNone)) return false;
+  }
+  const int threads = g_page->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    const vt::ThreadSlot& s = g_page->threads[i];
+    if (s.state.load() != vt::kWaiting || s.deadline_ns.load() > t) continue;
+    const std::uint32_t kind = s.kind.load();
+    if (kind == vt::kSleep) continue;
+    if (kind != vt::kFdWait || s.wake_fd < 0 || s.pid.load() != me) return false;
+  }
+  return true;
+}
+
+/// Runahead: takes the clock (kLocalAdvance) while it is granted, waiting out another thread
+/// that moves it; false when the clock is the host's.
+bool HoldClock() {
+  for (;;) {
+    std::uint32_t expect = vt::kGranted;
+    if (g_page->runahead.load(std::memory_order_relaxed) == vt::kHostClock) return false;
+    if (g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) {
+      t_holds_clock = true;
+      return true;
+    }
+    if (expect == vt::kHostClock) return false;
+    ::sched_yield();  // on the firmware's one CPU, the holder runs
+  }
+}
+
+/// Lets the clock go without moving it (a wait that found its fds ready).
+void ReleaseClock() {
+  t_holds_clock = false;
+  g_page->runahead.store(vt::kGranted);
+  if (g_page->runahead_missed.load() != 0) RunAhead();
+}
+
+/// With kLocalAdvance held: when every thread of the firmware is in a wait only the clock can
+/// end, moves the clock to the next instant something is due (if the grant allows) and ends
+/// what is due then, as the host's VirtualClock::WakeDue would, or gives the clock back (false).
+bool AdvanceOnce();
+
+/// With the clock held and this thread's wait published: moves it on, as RunAhead.
+void AdvanceHeldClock() {
+  t_holds_clock = false;
+  g_page->runahead_missed.store(0);
+  if (!AdvanceOnce()) return;
+  g_page->runahead.store(vt::kGranted);
+  if (g_page->runahead_missed.load() != 0) RunAhead();
+}
+
+/// Called by a thread right after it published a wait while the clock is granted.
+void RunAhead() {
+  for (;;) {
+    std::uint32_t expect = vt::kGranted;
+    if (!g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) {
+      if (expect != vt::kLocalAdvance) return;  // the host's clock
+      g_page->runahead_missed.store(1);
+      expect = vt::kGranted;
+      if (!g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) return;
+    }
+    g_page->runahead_missed.store(0);
+    if (!AdvanceOnce()) return;
+    g_page->runahead.store(vt::kGranted);
+    if (g_page->runahead_missed.load() == 0) return;
+  }
+}
+
+bool AdvanceOnce() {
+  const pid_t me = g_page->processes[g_proc].pid.load();
+  // One process only: another's fds and threads are not this one's to end.
+  for (int p = 0; p < vt::kMaxProcesses; ++p) {
+    const std::uint32_t st = g_page->processes[p].state.load();
+    if (st != vt::kProcFree && (p != g_proc || st != vt::kProcAlive)) {
+      YieldClock();
+      return false;
+    }
+  }
+  std::int64_t next = vt::kNoDeadline;
+  const int threads = g_page->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    const vt::ThreadSlot& s = g_page->threads[i];
+    const std::uint32_t st = s.state.load();
+    if (st == vt::kFree) continue;
+    // Still running (it calls this when it waits), or asleep where the library does not see
+    // it (the host finds that and takes the clock back).
+    if (st != vt::kWaiting) return true;
+    if (s.kind.load() == vt::kFdWait) {
+      // On anything but bus sockets and virtual timers, it may end at any time.
+      if (s.vouched.load() == 0) {
+        YieldClock();
+        return false;
+      }
+      // Written to since it began (a timer just fired): it is on its way out.
+      if (!vt::VouchHolds(*g_page, s)) return true;
+    }
+    next = std::min(next, s.deadline_ns.load());
+  }
+  const int timers = g_page->timers_used.load();
+  for (int i = 0; i < timers; ++i) {
+    const vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() == vt::kTimerArmed) next = std::min(next, t.next_ns.load());
+  }
+  const std::int64_t now = Now();
+  const std::int64_t step = g_page->runahead_step_ns.load();
+  const bool on_grid = step <= 0 || (next - g_page->runahead_phase_ns.load()) % step == 0;
+  if (next == vt::kNoDeadline || next <= now || next > g_page->runahead_until_ns.load() ||
+      !on_grid || g_page->bus_sends.load() != g_page->runahead_sends.load() ||
+      !LocallyEndable(next, me)) {
+    YieldClock();
+    return false;
+  }
+  g_page->now_ns.store(next, std::memory_order_release);
+  g_page->local_advances.fetch_add(1, std::memory_order_relaxed);
+  // As the host's WakeDue: timers first (a thread woken at this instant finds them fired).
+  std::uint32_t channels = 0;
+  for (int i = 0; i < timers; ++i) {
+    vt::TimerSlot& t = g_page->timers[i];
+    if (t.state.load() != vt::kTimerArmed || t.next_ns.load() > next) continue;
+    const std::uint64_t expirations = vt::ExpireTimer(t, next);
+    if (t.notify.load() == vt::kNotifyEventFd) {
+      eventfd_write(t.fd, expirations);
+      channels |= vt::TimerChannel(i);
+    }
+  }
+  if (channels != 0) vt::NoteWake(*g_page, channels);
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = g_page->threads[i];
+    if (s.state.load() != vt::kWaiting || s.deadline_ns.load() > next) continue;
+    std::uint32_t waiting = vt::kWaiting;
+    vt::MarkLocallyWoken(*g_page, i, true);
+    if (!s.state.compare_exchange_strong(waiting, vt::kRunning)) {
+      vt::MarkLocallyWoken(*g_page, i, false);
+      continue;
+    }
+    if (s.kind.load() == vt::kFdWait) {
+      eventfd_write(s.wake_fd, 1);
+    } else {
+      s.wake.fetch_add(1);
+      Futex(&s.wake, FUTEX_WAKE, 1);
+    }
+  }
+  return true;
 }
 
 // ---- the agent: ends eventfd and condition-variable waits, fires timers ----
@@ -596,14 +769,15 @@ std::uint32_t EpollVouchable(int epfd);
 /// wake channels into `*channels`.
 Vouch VouchForFd(int fd, std::uint32_t events, bool epoll_sets, std::uint32_t* channels) {
   if (events & (POLLOUT | POLLWRNORM | POLLWRBAND)) return Vouch::kNo;
-  const BusSocketFn bus = UcanBusSocketState();
-  if (bus == nullptr || g_proc < 0) return Vouch::kNo;
-  std::uint32_t client = 0;
-  const int state = bus(fd, &client);
-  if (state == 3) return Vouch::kNo;  // signal-driven bus input: SIGIO may end any wait
-  if (state != 0) {
-    *channels |= vt::BusSocketChannel(client);
-    return state == 2 ? Vouch::kReady : Vouch::kYes;
+  if (g_proc < 0) return Vouch::kNo;
+  if (const BusSocketFn bus = UcanBusSocketState(); bus != nullptr) {
+    std::uint32_t client = 0;
+    const int state = bus(fd, &client);
+    if (state == 3) return Vouch::kNo;  // signal-driven bus input: SIGIO may end any wait
+    if (state != 0) {
+      *channels |= vt::BusSocketChannel(client);
+      return state == 2 ? Vouch::kReady : Vouch::kYes;
+    }
   }
   const int timer = VirtualTimerFdSlot(fd);
   const std::uint32_t of = timer >= 0   ? vt::TimerChannel(timer)
@@ -702,7 +876,7 @@ void TrackEpollCtl(int epfd, int op, int fd, const epoll_event* ev) {
 /// The program's `fds` (see Vouch); `*channels`: their wake channels.
 Vouch VouchFor(const pollfd* fds, nfds_t n, std::uint32_t* channels) {
   *channels = 0;
-  if (UcanBusSocketState() == nullptr || g_proc < 0) return Vouch::kNo;
+  if (g_proc < 0) return Vouch::kNo;
   Vouch v = Vouch::kYes;
   for (nfds_t i = 0; i < n; ++i) {
     if (fds[i].fd < 0) continue;  // poll ignores it
@@ -727,6 +901,11 @@ int WaitOnFds(vt::ThreadSlot& s, pollfd* all, nfds_t n, int wake_fd, const sigse
               std::int64_t deadline, WaitTarget target) {
   static const timespec kZero{0, 0};
   const nfds_t n_all = n + (wake_fd >= 0 ? 1 : 0);
+  // Runahead: the look and the wait's publishing hold the clock, so no other thread moves it
+  // (firing timers, counting their writes) in between: a write counted after the look would
+  // leave the wait unvouched though it may have been for another fd, and a thread moving the
+  // clock would then take it for on its way out.
+  const bool held = HoldClock();
   const std::uint32_t wakes = g_page->fd_wakes.load();
   std::uint32_t channels = 0;
   Vouch v = VouchFor(all, n, &channels);
@@ -734,9 +913,15 @@ int WaitOnFds(vt::ThreadSlot& s, pollfd* all, nfds_t n, int wake_fd, const sigse
   if (v == Vouch::kLook || v == Vouch::kReady) {
     t_wake_may_be_left = false;
     const int rc = real_ppoll()(all, n_all, &kZero, mask);
-    if (rc != 0) return rc;
+    if (rc != 0) {
+      const int err = errno;
+      if (held) ReleaseClock();
+      errno = err;
+      return rc;
+    }
   }
   BeginWait(s, vt::kFdWait, deadline, target, v != Vouch::kNo, wakes, channels);
+  if (held) AdvanceHeldClock();
   const int rc = real_ppoll()(all, n_all, nullptr, mask);
   const int err = errno;
   // Ended by the host (its deadline) before its eventfd write was seen: that write may follow.
@@ -1908,6 +2093,12 @@ VTIME_EXPORT long syscall(long number, ...) {
 
 VTIME_EXPORT void wheelhil_vtime_note_bus_call() {
   if (g_page != nullptr) g_page->bus_calls.fetch_add(1);
+}
+
+/// The bus library sent a frame (Page::bus_sends): a clock granted to the firmware goes back
+/// to the host at its next turn, which takes the frame at the instant it was sent.
+VTIME_EXPORT void wheelhil_vtime_note_frame_sent() {
+  if (g_page != nullptr) g_page->bus_sends.fetch_add(1);
 }
 
 // ---- signals between the firmware's threads: they may end a wait the host takes for vouched ----

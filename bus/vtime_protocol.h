@@ -67,6 +67,13 @@ enum LastCall : std::uint32_t {
   kCallPastDeadline = 3,
 };
 
+/// Runahead (Page::runahead): who moves the clock.
+enum RunaheadState : std::uint32_t {
+  kHostClock = 0,     ///< The host (the default).
+  kGranted = 1,       ///< The firmware's library may move it, up to Page::runahead_until_ns.
+  kLocalAdvance = 2,  ///< A thread of the firmware is moving it (held by that thread).
+};
+
 enum ProcessState : std::uint32_t {
   kProcFree = 0,
   kProcStarting = 1,  ///< Forked or spawned; its library has not registered it yet.
@@ -186,6 +193,32 @@ struct Page {
   /// Set by the host before it sleeps on `transitions`; the first transition after takes it
   /// (exchange to 0) and wakes the host.
   std::atomic<std::uint32_t> host_waiting{0};
+  /// Runahead (docs/virtual-time.md): while `runahead` is kGranted, the last thread of the
+  /// firmware to enter a wait moves the clock itself to the next instant something of it is
+  /// due (a sleep's or an fd wait's deadline, a timer), ends those waits and fires those timers
+  /// as the host would (WakeDue), as long as that instant is at most `runahead_until_ns`, lies
+  /// on the step grid (`runahead_step_ns` > 0: phase + k * step), every thread is in a wait
+  /// only the clock can end, the firmware is one process and it sent no frame since the grant
+  /// (`bus_sends` still `runahead_sends`). Otherwise that thread gives the clock back
+  /// (kHostClock) and wakes the host. The host takes it back itself (compare-and-swap from
+  /// kGranted) when it finds every thread blocked while granted (a thread asleep outside the
+  /// library's waits never calls it). kLocalAdvance excludes the two.
+  alignas(64) std::atomic<std::uint32_t> runahead{kHostClock};
+  std::atomic<std::int64_t> runahead_until_ns{0};
+  std::atomic<std::int64_t> runahead_step_ns{0};
+  std::atomic<std::int64_t> runahead_phase_ns{0};
+  std::atomic<std::uint32_t> runahead_sends{0};
+  /// Set by a thread that entered a wait while another held kLocalAdvance: the holder looks
+  /// again before it lets go (that thread may have been the last to block).
+  std::atomic<std::uint32_t> runahead_missed{0};
+  /// Per thread slot, a bit: the slot's wait was ended by a thread of the firmware (runahead),
+  /// not by the host; cleared when that thread is out of its wait. The host takes such a thread
+  /// for running even while the kernel still has it asleep (it was not scheduled yet).
+  std::atomic<std::uint64_t> locally_woken[kMaxThreads / 64] = {};
+  /// Bumped by the firmware's bus library on every frame it sends.
+  std::atomic<std::uint32_t> bus_sends{0};
+  /// Instants the firmware's library moved the clock to itself (for the run's report).
+  std::atomic<std::uint64_t> local_advances{0};
   /// One past the highest thread / timer slot ever claimed (bounds the host's scans).
   std::atomic<std::int32_t> threads_used{0};
   std::atomic<std::int32_t> timers_used{0};
@@ -193,6 +226,18 @@ struct Page {
   ThreadSlot threads[kMaxThreads];
   TimerSlot timers[kMaxTimers];
 };
+
+inline void MarkLocallyWoken(Page& page, int slot, bool woken) {
+  const std::uint64_t bit = std::uint64_t{1} << (slot % 64);
+  if (woken) {
+    page.locally_woken[slot / 64].fetch_or(bit);
+  } else if (page.locally_woken[slot / 64].load(std::memory_order_relaxed) & bit) {
+    page.locally_woken[slot / 64].fetch_and(~bit);
+  }
+}
+inline bool LocallyWoken(const Page& page, int slot) {
+  return (page.locally_woken[slot / 64].load() >> (slot % 64) & 1u) != 0;
+}
 
 /// Counts a write that may end a vouched fd wait, on the channels of `channels`: after it, a
 /// wait that read fd_wakes before it and waits on one of them is no longer vouched for.

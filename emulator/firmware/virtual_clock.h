@@ -61,12 +61,25 @@ class VirtualClock {
   /// INT64_MAX when there is none.
   std::int64_t NextDeadlineNs() const;
   /// Ends every wait whose deadline is now or past and fires the timers due. Returns the
-  /// number of waits ended and timers fired.
+  /// number of waits ended and timers fired; none while the firmware holds the clock
+  /// (GrantRunahead).
   int WakeDue();
   /// After the host wrote to the firmware's sockets (a broker pass that wrote to a client): an
   /// fd wait on those `channels` (bus/vtime_protocol.h: BusSocketChannel of the clients
   /// written to, kAnyChannel for anything else) may have ended (ThreadSlot::vouched).
   void NoteFdWakes(std::uint32_t channels);
+  /// Runahead (bus/vtime_protocol.h, Page::runahead): the firmware's library may move the
+  /// clock itself, to the instants its own waits and timers are due, up to run time until_ns,
+  /// on the grid phase_ns + k * step_ns (step_ns 0: any instant), until it sends a frame or
+  /// meets what only the host can do; then it gives the clock back. Call with the firmware
+  /// blocked and everything due now woken (WakeDue). While it holds the clock Blocked() is
+  /// false; Blocked() takes the clock back when it finds every thread blocked (a thread asleep
+  /// outside the library's waits). now_ns() then says where the firmware got to.
+  void GrantRunahead(std::int64_t until_ns, std::int64_t step_ns, std::int64_t phase_ns);
+  /// The firmware may still move the clock (granted, or moving it now).
+  bool RunaheadGranted() const;
+  /// Instants the firmware moved its clock to itself so far.
+  std::uint64_t local_advances() const;
   /// The last Blocked() found a thread stopped or traced (a debugger has it): the firmware
   /// does not move until it is let go, however long that takes.
   bool FirmwareStopped() const { return stopped_seen_; }
@@ -121,6 +134,14 @@ class VirtualClock {
     std::uint64_t runs_seen = UINT64_MAX;  // schedstat timeslices when last seen asleep
     std::vector<long> calls_reported;      // host-clock waits already reported
   };
+  // Blocked() without the runahead grant's part; `*asked_kernel`: some thread was found blocked
+  // only by a look in the kernel (not in a wait the library vouches for).
+  bool AllThreadsBlocked(bool* asked_kernel);
+  // Runahead: since when (wall ns; -1: not) the looks found every thread in a wait only the
+  // clock ends with the clock still granted (the last thread to wait moves it or gives it
+  // back, normally at once).
+  std::int64_t granted_but_blocked_since_ns_ = -1;
+  static constexpr std::int64_t kGrantedButBlockedNs = 20'000'000;
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
   // timed wait the library did not see.

@@ -5,6 +5,7 @@
 // deadline, and 30 s of sleep must take far less than 30 s of wall time.
 #include <fcntl.h>
 #include <linux/capability.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
@@ -18,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -44,10 +46,20 @@ struct ProbeRun {
   pid_t pid = 0;  // a process UnregisteredProcess() named while it ran
   std::map<std::string, std::pair<std::int64_t, long>> waits;  // label -> (elapsed ns, result)
   std::string out;
+  std::uint64_t host_moves = 0;      // instants the host moved the clock to
+  std::uint64_t local_advances = 0;  // ... and the probe itself (runahead)
+};
+
+// Runahead for RunProbe: granted once the probe first blocked, up to run time until_ns on the
+// grid of step_ns.
+struct Grant {
+  std::int64_t until_ns = 0;
+  std::int64_t step_ns = 0;
 };
 
 // Runs the probe on a fresh clock: whenever it is blocked, the clock moves to its next deadline.
-ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
+ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
+                  std::optional<Grant> grant = std::nullopt) {
   const std::string dir = bus::CreateTempUcanRuntimeDir("wheelhil-vtime-test-");
   ProbeRun r;
   {
@@ -65,6 +77,16 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
       ::setenv("LD_PRELOAD", kLib.c_str(), 1);
       // Under ASan the probe is instrumented and the library is not (as the bus library).
       ::setenv("ASAN_OPTIONS", "verify_asan_link_order=0", 1);
+      if (grant) {
+        // As a run places the firmware: one CPU, at SCHED_BATCH (a thread the one moving the
+        // clock wakes does not preempt it before it has said so).
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        CPU_SET(sched_getcpu(), &one);
+        (void)::sched_setaffinity(0, sizeof(one), &one);
+        sched_param batch{};
+        (void)::sched_setscheduler(0, SCHED_BATCH, &batch);
+      }
       ::execl(kProbe.c_str(), kProbe.c_str(), what.c_str(), nullptr);
       ::_exit(127);
     }
@@ -98,8 +120,21 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20) {
         continue;
       }
       const std::int64_t next = clock.NextDeadlineNs();
-      if (next != INT64_MAX) clock.SetNow(next);
+      if (next != INT64_MAX && next > clock.now_ns()) {
+        clock.SetNow(next);
+        ++r.host_moves;
+        if (getenv("RA_DEBUG"))
+          fprintf(stderr, "host move %ld registered %d grant %d\n", (long)next, registered,
+                  grant.has_value());
+      }
+      if (grant && registered) {
+        // What is due now is the host's to end; from there the firmware moves the clock.
+        clock.WakeDue();
+        clock.GrantRunahead(grant->until_ns, grant->step_ns, 0);
+        grant.reset();
+      }
     }
+    r.local_advances = clock.local_advances();
     r.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
     r.virtual_ns = clock.now_ns();
     std::ifstream in(out_path);
@@ -209,6 +244,57 @@ TEST(VirtualClock, AlarmSetitimerAndPosixTimersSignalAtVirtualInstants) {
   EXPECT_EQ(r.waits.at("posix_timer"), std::make_pair(1015 * kMs, 1L));  // the third: 5, 10, 15
   EXPECT_EQ(r.waits.at("thread_timer"), std::make_pair(1023 * kMs, 1L));
   EXPECT_EQ(r.waits.at("setitimer"), std::make_pair(1026 * kMs, 1L));
+}
+
+// The probe's "ahead" waits, at their virtual instants: the main thread's sleeps at 3, 6, 9,
+// 12 ms, a timerfd thread's ticks at 2 .. 10 ms, then a sleep to 32 ms.
+void ExpectAheadWaits(const ProbeRun& r) {
+  ASSERT_TRUE(r.finished) << r.out;
+  EXPECT_EQ(r.exit_status, 0) << r.out;
+  for (int i = 1; i <= 4; ++i) {
+    EXPECT_EQ(r.waits.at("sleep" + std::to_string(i)).first, 3 * i * kMs) << r.out;
+  }
+  for (int i = 1; i <= 5; ++i) {
+    EXPECT_EQ(r.waits.at("tick" + std::to_string(i)), std::make_pair(2 * i * kMs, 1L)) << r.out;
+  }
+  EXPECT_EQ(r.waits.at("late"), std::make_pair(32 * kMs, 0L)) << r.out;
+}
+
+// Runahead: granted the clock, the firmware's library moves it itself through the firmware's
+// own sleeps and timer ticks, each ended at its own instant as the host would have, and gives
+// it back at the end of the grant, or at a deadline off the grid it was given.
+TEST(VirtualClock, RunaheadMovesTheClockThroughTheFirmwaresOwnWaitsInOrder) {
+  const ProbeRun host = RunProbe("ahead");
+  ExpectAheadWaits(host);
+  EXPECT_EQ(host.local_advances, 0u);
+  EXPECT_EQ(host.host_moves, 9u);  // 2, 3, 4, 6, 8, 9, 10, 12, 32 ms
+
+  // Granted after the host's first move (2 ms): the other eight are the probe's own.
+  const ProbeRun ahead = RunProbe("ahead", 20, Grant{1000 * kMs, kMs});
+  ExpectAheadWaits(ahead);
+  EXPECT_EQ(ahead.local_advances, 8u);
+  EXPECT_EQ(ahead.host_moves, 1u);
+
+  // Up to 5 ms: 3 and 4 ms, then the clock is the host's again.
+  const ProbeRun until5 = RunProbe("ahead", 20, Grant{5 * kMs, kMs});
+  ExpectAheadWaits(until5);
+  EXPECT_EQ(until5.local_advances, 2u);
+  EXPECT_EQ(until5.host_moves, 7u);
+
+  // On a 2 ms grid: 3 ms is off it, so the host takes that instant and everything after.
+  const ProbeRun grid = RunProbe("ahead", 20, Grant{1000 * kMs, 2 * kMs});
+  ExpectAheadWaits(grid);
+  EXPECT_EQ(grid.local_advances, 0u);
+}
+
+// A thread asleep in the kernel where the library does not see it (a read on a pipe) may be
+// woken by anything: the firmware never moves the clock, the host finds every thread blocked,
+// takes the clock back and moves it as ever.
+TEST(VirtualClock, RunaheadWithAThreadAsleepOutsideTheLibraryStaysWithTheHost) {
+  const ProbeRun r = RunProbe("ahead_outside", 20, Grant{1000 * kMs, kMs});
+  ExpectAheadWaits(r);
+  EXPECT_EQ(r.local_advances, 0u);
+  EXPECT_EQ(r.host_moves, 9u);
 }
 
 TEST(VirtualClock, AThreadThatNeverBlocksIsNamedWithItsLastCall) {

@@ -208,11 +208,73 @@ static void* first_wait_without_fds(void* arg) {
   return NULL;
 }
 
+/* Runahead: lines kept in memory and written at the end, so that no thread sleeps in the
+ * kernel on a file (outside the library's waits) in between. */
+static char g_lines[4096];
+static size_t g_used;
+static pthread_mutex_t g_lines_lock = PTHREAD_MUTEX_INITIALIZER;
+static void report_later(const char* label, long result) {
+  const long long t = (long long)(mono() - g_start);
+  pthread_mutex_lock(&g_lines_lock);
+  const int n =
+      snprintf(g_lines + g_used, sizeof(g_lines) - g_used, "%s %lld %ld\n", label, t, result);
+  if (n > 0 && (size_t)n < sizeof(g_lines) - g_used) g_used += (size_t)n;
+  pthread_mutex_unlock(&g_lines_lock);
+}
+
+/* Runahead: a timerfd every 2 ms on a thread of its own, 5 times (a poll, then the read). */
+static void* ahead_ticks(void* arg) {
+  (void)arg;
+  const int t = timerfd_create(CLOCK_MONOTONIC, 0);
+  struct itimerspec its = {.it_interval = {0, 2000000}, .it_value = {0, 2000000}};
+  timerfd_settime(t, 0, &its, NULL);
+  char label[16];
+  for (int i = 1; i <= 5; ++i) {
+    struct pollfd p = {t, POLLIN, 0};
+    uint64_t n = 0;
+    if (poll(&p, 1, -1) != 1 || read(t, &n, sizeof(n)) != sizeof(n)) return NULL;
+    snprintf(label, sizeof(label), "tick%d", i);
+    report_later(label, (long)n);
+  }
+  close(t);
+  return NULL;
+}
+
+/* Runahead: a thread asleep in the kernel where the library does not see it. */
+static int g_never[2];
+static void* ahead_outside(void* arg) {
+  (void)arg;
+  char c;
+  (void)read(g_never[0], &c, 1);
+  return NULL;
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   g_start = mono();
   const char* what = argv[1];
-  if (strcmp(what, "sleeps") == 0) {
+  if (strcmp(what, "ahead") == 0 || strcmp(what, "ahead_outside") == 0) {
+    /* Sleeps of the main thread (3, 6, 9, 12 ms) and a timerfd's ticks (2 .. 10 ms) in one
+     * order; with a thread blocked in the kernel outside the library's waits. */
+    pthread_t outside;
+    if (strcmp(what, "ahead_outside") == 0) {
+      if (pipe(g_never) != 0) return 1;
+      pthread_create(&outside, NULL, ahead_outside, NULL);
+    }
+    pthread_t ticks;
+    pthread_create(&ticks, NULL, ahead_ticks, NULL);
+    char label[16];
+    for (int i = 1; i <= 4; ++i) {
+      usleep(3000);
+      snprintf(label, sizeof(label), "sleep%d", i);
+      report_later(label, 0);
+    }
+    pthread_join(ticks, NULL);
+    struct timespec req = {0, 20000000};
+    report_later("late", nanosleep(&req, NULL)); /* 32 ms: beyond a short grant */
+    fputs(g_lines, stdout);
+    return 0;
+  } else if (strcmp(what, "sleeps") == 0) {
     report("start", 0);
     sleep(30);
     report("sleep30", 0);
