@@ -210,6 +210,7 @@ struct Client {
   MsgRing queue;
   std::uint32_t drops = 0;
   std::unique_ptr<Rings> rings;  // kOpenRings: frames go through shared memory
+  bool own_bell = false;         // kOpenOwnBell: the client holds a copy of fd
 
   /// net/can/raw.c raw_rcv(): filter match counting incl. CAN_RAW_JOIN_FILTERS.
   bool Accepts(std::uint32_t can_id) const {
@@ -508,6 +509,12 @@ struct UcanBroker::Impl {
     ++client_progress;
     woken.other = true;
     if (c->rings) c->rings->header->closed.store(1);
+    if (c->own_bell && !c->local) {
+      // The client holds a copy of this end (kOpenOwnBell): closing it is no end of the
+      // connection there. A doorbell makes the socket readable; its reader finds `closed`.
+      const std::uint64_t bell = 1;
+      (void)::send(c->fd.get(), &bell, sizeof(bell), MSG_DONTWAIT | MSG_NOSIGNAL);
+    }
     if (!c->local) ::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
   }
 
@@ -702,11 +709,49 @@ struct UcanBroker::Impl {
     return true;
   }
 
+  static bool IsSeqpacketSocket(int fd) {
+    int type = 0;
+    socklen_t len = sizeof(type);
+    return ::getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &len) == 0 && type == SOCK_SEQPACKET;
+  }
+
+  /// The client's data connection goes on through `fd` (kOpenOwnBell); the connection its
+  /// request came on closes.
+  void SwapDataConnection(Client* c, Fd fd) {
+    (void)::epoll_ctl(epoll_fd.get(), EPOLL_CTL_DEL, c->fd.get(), nullptr);
+    const int sndbuf = 1 << 20;
+    ::setsockopt(fd.get(), SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof(sndbuf));
+    epoll_event ev{};
+    ev.events = EPOLLIN;
+    ev.data.u64 = c->id;
+    c->fd = std::move(fd);
+    if (::epoll_ctl(epoll_fd.get(), EPOLL_CTL_ADD, c->fd.get(), &ev) != 0) Kill(c);
+  }
+
   /// First message of a connection.
   void HandleRequest(Client* c) {
     std::vector<std::uint8_t> buf(kMaxRequest + 1);
-    const ssize_t n = ::recv(c->fd.get(), buf.data(), buf.size(), MSG_DONTWAIT);
+    iovec iov{buf.data(), buf.size()};
+    msghdr msg{};
+    msg.msg_iov = &iov;
+    msg.msg_iovlen = 1;
+    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
+    msg.msg_control = control;
+    msg.msg_controllen = sizeof(control);
+    const ssize_t n = ::recvmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC);
     if (n < 0 && (errno == EAGAIN || errno == EINTR)) return;
+    // kOpenOwnBell: the client's end of its own socket pair (closed unless taken below).
+    Fd passed;
+    if (n >= 0) {
+      for (cmsghdr* cm = CMSG_FIRSTHDR(&msg); cm != nullptr; cm = CMSG_NXTHDR(&msg, cm)) {
+        if (cm->cmsg_level == SOL_SOCKET && cm->cmsg_type == SCM_RIGHTS &&
+            cm->cmsg_len >= CMSG_LEN(sizeof(int))) {
+          int got = -1;
+          std::memcpy(&got, CMSG_DATA(cm), sizeof(got));
+          passed = Fd(got);
+        }
+      }
+    }
     Request req;
     if (n < static_cast<ssize_t>(sizeof(Request))) {
       ++orphan_bad_messages;
@@ -763,8 +808,16 @@ struct UcanBroker::Impl {
             ring_clients.push_back(c);
           }
         }
+        // The client's own end of a socket pair: from now on the data connection.
+        const bool own_bell = (req.flags & ucan::kOpenOwnBell) != 0 && c->rings != nullptr &&
+                              passed.get() >= 0 && IsSeqpacketSocket(passed.get());
+        if (own_bell) reply.flags |= ucan::kOpenOwnBell;
         SendReply(c, reply, nullptr, 0, ring_fd);
         if (ring_fd >= 0) ::close(ring_fd);
+        if (own_bell) {
+          SwapDataConnection(c, std::move(passed));
+          c->own_bell = true;
+        }
         return;  // stays connected
       }
       case Op::kSetOptions: {

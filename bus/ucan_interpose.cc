@@ -110,6 +110,9 @@ struct MappedRings {
   int refs = 1;
   ucan::RingHeader* header = nullptr;
   std::size_t bytes = 0;
+  /// kOpenOwnBell: a copy of the broker's end of the socket's connection (writing to it makes
+  /// the socket readable), -1 without.
+  int bell_fd = -1;
 };
 
 /// With or without the lock. The last reference unmaps: by then no socket in the table points
@@ -117,6 +120,7 @@ struct MappedRings {
 void ReleaseRings(MappedRings* m) {
   if (m != nullptr && __atomic_sub_fetch(&m->refs, 1, __ATOMIC_ACQ_REL) == 0) {
     ::munmap(m->header, m->bytes);
+    if (m->bell_fd >= 0) real_close()(m->bell_fd);
     delete m;
   }
 }
@@ -214,6 +218,13 @@ void NoteFrameSent() {
   if (Fn f = fn.load(std::memory_order_relaxed)) f();
 }
 
+/// The virtual clock's library is loaded (its firmware may move the clock itself and deliver
+/// the frames the broker put ahead in its rings: kOpenOwnBell).
+bool VtimeLoaded() {
+  static const bool loaded = dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent") != nullptr;
+  return loaded;
+}
+
 void DetachLocked(int fd) {
   if (fd < 0 || fd >= kMaxFds || g_sockets[fd] == nullptr) return;
   NoteBusCall();
@@ -308,7 +319,8 @@ int ConnectBroker() {
 /// Sends `req` (+ filters) and waits for the reply. Returns the connected socket (caller
 /// closes) or -1 with errno. A broker-side refusal is reported in reply->error.
 int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* reply,
-             void* extra = nullptr, std::size_t extra_cap = 0, int* passed_fd = nullptr) {
+             void* extra = nullptr, std::size_t extra_cap = 0, int* passed_fd = nullptr,
+             int send_fd = -1) {
   if (passed_fd != nullptr) *passed_fd = -1;
   const int s = ConnectBroker();
   if (s < 0) return -1;
@@ -318,6 +330,16 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msghdr msg{};
   msg.msg_iov = iov;
   msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
+  alignas(cmsghdr) char send_control[CMSG_SPACE(sizeof(int))] = {};
+  if (send_fd >= 0) {
+    msg.msg_control = send_control;
+    msg.msg_controllen = sizeof(send_control);
+    cmsghdr* cm = CMSG_FIRSTHDR(&msg);
+    cm->cmsg_level = SOL_SOCKET;
+    cm->cmsg_type = SCM_RIGHTS;
+    cm->cmsg_len = CMSG_LEN(sizeof(int));
+    std::memcpy(CMSG_DATA(cm), &send_fd, sizeof(int));
+  }
   if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0 && errno != EPIPE && errno != ECONNRESET) {
     const int err = errno;
     real_close()(s);
@@ -558,17 +580,37 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   std::memcpy(req.name, name, sizeof(name));
   req.options = opts;
   if (RingsWanted()) req.flags |= ucan::kOpenRings;
+  // Rings: a socket pair whose one end the broker takes as its end of the connection, so that
+  // this library can ring the socket's own doorbell (kOpenOwnBell).
+  int pair[2] = {-1, -1};
+  if ((req.flags & ucan::kOpenRings) && VtimeLoaded() &&
+      ::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, pair) == 0) {
+    req.flags |= ucan::kOpenOwnBell;
+  }
   ucan::Reply reply;
   int ring_fd = -1;
-  int conn = Transact(req, filters, &reply, nullptr, 0, &ring_fd);
+  int conn = Transact(req, filters, &reply, nullptr, 0, &ring_fd, pair[1]);
   MappedRings* rings = ring_fd >= 0 ? MapRings(ring_fd) : nullptr;
   if (ring_fd >= 0) real_close()(ring_fd);
+  int data = conn;  // the connection the program's fd becomes
+  if (conn >= 0 && reply.error == 0 && (reply.flags & ucan::kOpenOwnBell) && rings != nullptr) {
+    data = pair[0];
+    pair[0] = -1;
+    rings->bell_fd = pair[1];
+    pair[1] = -1;
+  }
+  for (int& end : pair) {
+    if (end >= 0) real_close()(end);
+    end = -1;
+  }
   if (conn >= 0 && reply.error == 0 && (req.flags & ucan::kOpenRings) && rings == nullptr) {
     // Rings granted but not usable here (no fd passed: out of fds; mapping refused): the
     // broker would fill a ring nobody reads. Open again without them.
     real_close()(conn);
-    req.flags &= ~ucan::kOpenRings;
+    if (data != conn && data >= 0) real_close()(data);
+    req.flags &= ~(ucan::kOpenRings | ucan::kOpenOwnBell);
     conn = Transact(req, filters, &reply);
+    data = conn;
   }
   free(filters);
   if (conn < 0) {
@@ -577,6 +619,7 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   }
   if (reply.error != 0) {
     real_close()(conn);
+    if (data != conn && data >= 0) real_close()(data);
     if (rings != nullptr) {
       LockTable();
       ReleaseRings(rings);
@@ -585,10 +628,10 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
     return reply.error == ENODEV ? SwitchToKernel(fd, addr, len) : reply.error;
   }
   const int fl = real_fcntl()(fd, F_GETFL);
-  if (fl >= 0 && (fl & O_NONBLOCK)) real_fcntl()(conn, F_SETFL, O_NONBLOCK);
+  if (fl >= 0 && (fl & O_NONBLOCK)) real_fcntl()(data, F_SETFL, O_NONBLOCK);
   const int fdfl = real_fcntl()(fd, F_GETFD);
   LockTable();
-  int rc = real_dup3()(conn, fd, (fdfl >= 0 && (fdfl & FD_CLOEXEC)) ? O_CLOEXEC : 0);
+  int rc = real_dup3()(data, fd, (fdfl >= 0 && (fdfl & FD_CLOEXEC)) ? O_CLOEXEC : 0);
   const int err = errno;
   if (rc >= 0) {
     if (UcanSocket* s = g_sockets[fd]) {
@@ -606,6 +649,7 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   ReleaseRings(rings);
   UnlockTable();
   real_close()(conn);
+  if (data != conn) real_close()(data);
   return rc < 0 ? err : 0;
 }
 

@@ -81,12 +81,19 @@ struct Request {
   std::int32_t ifindex = 0;
   std::uint32_t client_id = 0;
   RawOptions options;
-  std::uint32_t flags = 0;  ///< kOpen: kOpenRings.
+  std::uint32_t flags = 0;  ///< kOpen: kOpenRings, kOpenOwnBell.
   std::uint32_t reserved = 0;
   std::uint64_t token = 0;  ///< kSetOptions: the token of `client_id`'s kOpen Reply.
 };
 
 inline constexpr std::uint32_t kOpenRings = 1;
+/// With kOpenRings: the Request carries (SCM_RIGHTS) one end of a socket pair the client made,
+/// which the broker takes as its end of the data connection (the Reply still comes on the
+/// connection the request came on, which the broker then closes; Reply::flags says it took
+/// it). The client keeps a copy of that end, so it can ring its own socket's doorbell: a
+/// firmware that moves its clock itself delivers the frames the broker put in its ring ahead
+/// of their instants (runahead, docs/virtual-time.md).
+inline constexpr std::uint32_t kOpenOwnBell = 2;
 
 struct Reply {
   std::uint32_t magic = kMagic;
@@ -95,7 +102,7 @@ struct Reply {
   std::uint32_t client_id = 0;
   char name[kNameSize] = {};
   std::uint32_t count = 0;  ///< kList: BusInfo records that follow.
-  std::uint32_t reserved = 0;
+  std::uint32_t flags = 0;  ///< kOpen: kOpenOwnBell when the broker took the client's end.
   std::uint64_t token = 0;  ///< kOpen: a random secret; requests about this client quote it.
 };
 
