@@ -151,6 +151,7 @@ struct Rings {
   std::size_t bytes = 0;
   std::uint32_t slots = 0;
   std::uint64_t rx_tail = 0;  // next rx slot the broker writes
+  std::uint64_t prepared_tail = 0;  // runahead: rx slots written ahead up to here (>= rx_tail)
   std::uint64_t tx_head = 0;  // next tx slot the broker reads
   bool corrupt = false;       // impossible client indexes seen: never read again
   Rings() = default;
@@ -1118,11 +1119,83 @@ struct UcanBroker::Impl {
     for (Client* r : any_clients) deliver(r);
   }
 
+  /// Runahead: the recipients of a frame from `sender` (Route's rules), into `out`; false when
+  /// one cannot take it ahead.
+  bool PreparedRecipients(Client* sender, std::uint32_t can_id, bool is_fd,
+                          std::vector<std::pair<Client*, std::uint32_t>>& out) {
+    out.clear();
+    bool ok = true;
+    auto consider = [&](Client* r) {
+      if (r->dead) return;
+      std::uint32_t flags = 0;
+      if (r->id == sender->id) {
+        if (!sender->options.recv_own || !sender->options.loopback) return;
+        flags = ucan::kRxOwn;
+      } else if (!sender->options.loopback && r->pid == sender->pid) {
+        return;
+      }
+      if (is_fd && !r->options.fd_frames) return;
+      if (!r->Accepts(can_id)) return;
+      if (!r->rings || !r->own_bell || r->rings->corrupt ||
+          r->rings->prepared_tail - r->rings->header->rx.head.load() >= r->rings->slots) {
+        ok = false;
+        return;
+      }
+      out.emplace_back(r, flags);
+    };
+    for (Client* r : sender->bus->members) consider(r);
+    for (Client* r : any_clients) consider(r);
+    return ok;
+  }
+
+  bool PrepareFrame(Client* sender, const std::uint8_t* frame, std::size_t frame_len,
+                    std::uint32_t can_id, std::int64_t instant_ns) {
+    std::vector<std::pair<Client*, std::uint32_t>> to;
+    if (!PreparedRecipients(sender, can_id, frame_len == ucan::kCanFdMtu, to)) return false;
+    for (const auto& [r, flags] : to) {
+      Rings& rings = *r->rings;
+      const std::uint64_t at = rings.prepared_tail;
+      ucan::RingSlot& slot = ucan::RxSlots(rings.header)[at & (rings.slots - 1)];
+      std::memcpy(slot.bytes, frame, frame_len);
+      RxTrailer t;
+      t.ifindex = sender->bus->ifindex;
+      t.flags = flags;
+      t.timestamp_ns = 0;  // the client stamps it with its own clock when it publishes it
+      t.drops = r->drops;
+      std::memcpy(slot.bytes + frame_len, &t, sizeof(t));
+      slot.len = static_cast<std::uint32_t>(frame_len + sizeof(t));
+      ucan::RxInstants(rings.header, rings.slots)[at & (rings.slots - 1)] = instant_ns;
+      rings.prepared_tail = at + 1;
+      rings.header->rx_prepared_tail.store(at + 1, std::memory_order_release);
+    }
+    return true;
+  }
+
+  /// Runahead over for `r`: the slots its library published are delivered; the rest go.
+  std::uint64_t SettlePreparedOf(Client* r) {
+    Rings& rings = *r->rings;
+    if (rings.prepared_tail == rings.rx_tail) return 0;
+    const std::uint64_t published = rings.header->rx.tail.load(std::memory_order_acquire);
+    std::uint64_t delivered = 0;
+    if (published < rings.rx_tail || published > rings.prepared_tail) {
+      rings.header->rx.tail.store(rings.rx_tail);
+      CorruptRing(r);
+    } else {
+      delivered = published - rings.rx_tail;
+      rings.rx_tail = published;
+    }
+    rings.prepared_tail = rings.rx_tail;
+    rings.header->rx_prepared_tail.store(rings.rx_tail, std::memory_order_release);
+    if (r->bus != nullptr) r->bus->frames += delivered;
+    return delivered;
+  }
+
   /// Route() to a ring client: a full ring is a drop (counted as a full queue is).
   void PushRx(Client* r, Bus* bus, const std::uint8_t* frame, std::size_t frame_len,
               std::uint32_t flags, std::int64_t ts) {
     Rings& rings = *r->rings;
     if (rings.corrupt) return;
+    if (rings.prepared_tail != rings.rx_tail) (void)SettlePreparedOf(r);
     ucan::RingIndex& ring = rings.header->rx;
     const std::uint64_t tail = rings.rx_tail;
     const std::uint64_t used = tail - ring.head.load(std::memory_order_acquire);
@@ -1145,6 +1218,8 @@ struct UcanBroker::Impl {
     std::memcpy(slot.bytes + frame_len, &t, sizeof(t));
     slot.len = static_cast<std::uint32_t>(frame_len + sizeof(t));
     rings.rx_tail = tail + 1;
+    rings.prepared_tail = tail + 1;  // nothing ahead (settled above)
+    rings.header->rx_prepared_tail.store(tail + 1, std::memory_order_relaxed);
     ring.tail.store(tail + 1, std::memory_order_release);
     if (!r->dirty) {
       r->dirty = true;
@@ -1430,6 +1505,27 @@ bool UcanBroker::SendLocal(int port, const CanFrame& frame) {
   f.frame_len = static_cast<std::uint8_t>(frame_len);
   std::memcpy(f.frame.data(), &buf, frame_len);
   return true;
+}
+
+bool UcanBroker::PrepareLocal(int port, const CanFrame& frame, std::int64_t instant_ns) {
+  canfd_frame buf;
+  const std::size_t frame_len = internal::EncodeFrame(frame, buf);
+  if (frame_len == 0) return false;
+  std::lock_guard lk(impl_->mu);
+  Client* c = impl_->Find(static_cast<std::uint32_t>(port));
+  if (c == nullptr || !c->local || c->bus == nullptr) return false;
+  if (frame_len == ucan::kCanFdMtu && !c->options.fd_frames) return false;
+  return impl_->PrepareFrame(c, reinterpret_cast<const std::uint8_t*>(&buf), frame_len, buf.can_id,
+                             instant_ns);
+}
+
+std::uint64_t UcanBroker::SettlePrepared() {
+  std::lock_guard lk(impl_->mu);
+  std::uint64_t delivered = 0;
+  for (auto& [id, c] : impl_->clients) {
+    if (c->rings && !c->dead) delivered += impl_->SettlePreparedOf(c.get());
+  }
+  return delivered;
 }
 
 bool UcanBroker::ReceiveLocal(int port, CanFrame* frame) {

@@ -138,6 +138,16 @@ class UcanBroker {
   bool SendLocal(int port, const CanFrame& frame);
   /// Takes the next frame routed to the port; false when none is there.
   bool ReceiveLocal(int port, CanFrame* frame);
+  /// Runahead (docs/virtual-time.md): a frame from the port that its recipients get at the
+  /// virtual CLOCK_MONOTONIC instant `instant_ns` (not before the frames prepared before it),
+  /// routed as SendLocal's would be once everything sent before is routed, and put in each
+  /// recipient's ring past what it sees (ucan::RingHeader::rx_prepared_tail). False, with
+  /// nothing put, when a recipient cannot take it ahead (no rings of its own doorbell, its ring
+  /// full): the caller prepares nothing after it. Call with no frame of the port pending.
+  bool PrepareLocal(int port, const CanFrame& frame, std::int64_t instant_ns);
+  /// After the firmware gave the clock back: the frames it published are delivered (counted as
+  /// routed frames), the rest are dropped, unseen. Returns the number delivered.
+  std::uint64_t SettlePrepared();
 
   /// Grows with everything that can wake a program blocked on a broker socket: writes to a
   /// client (frames, doorbells, replies), a connection accepted (its request answered in the

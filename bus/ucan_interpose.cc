@@ -47,6 +47,7 @@
 #include "bus/internal/interpose_real.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
+#include "bus/vtime_protocol.h"
 
 #define UCAN_EXPORT extern "C" __attribute__((visibility("default")))
 
@@ -113,14 +114,25 @@ struct MappedRings {
   /// kOpenOwnBell: a copy of the broker's end of the socket's connection (writing to it makes
   /// the socket readable), -1 without.
   int bell_fd = -1;
+  std::uint32_t client_id = 0;
 };
+
+/// Rings with their own doorbell (runahead: frames put ahead), under g_lock.
+constexpr int kMaxBellRings = 64;
+MappedRings* g_bell_rings[kMaxBellRings];
+int g_bell_rings_used = 0;
 
 /// With or without the lock. The last reference unmaps: by then no socket in the table points
 /// to the rings, so no one can take a new reference.
 void ReleaseRings(MappedRings* m) {
   if (m != nullptr && __atomic_sub_fetch(&m->refs, 1, __ATOMIC_ACQ_REL) == 0) {
+    if (m->bell_fd >= 0) {
+      for (int i = 0; i < g_bell_rings_used; ++i) {
+        if (g_bell_rings[i] == m) g_bell_rings[i] = g_bell_rings[--g_bell_rings_used];
+      }
+      real_close()(m->bell_fd);
+    }
     ::munmap(m->header, m->bytes);
-    if (m->bell_fd >= 0) real_close()(m->bell_fd);
     delete m;
   }
 }
@@ -593,11 +605,18 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   MappedRings* rings = ring_fd >= 0 ? MapRings(ring_fd) : nullptr;
   if (ring_fd >= 0) real_close()(ring_fd);
   int data = conn;  // the connection the program's fd becomes
-  if (conn >= 0 && reply.error == 0 && (reply.flags & ucan::kOpenOwnBell) && rings != nullptr) {
+  if (conn >= 0 && reply.error == 0 && (reply.flags & ucan::kOpenOwnBell)) {
+    // The broker's end of the connection is now the pair's: the program's fd is the other.
     data = pair[0];
     pair[0] = -1;
-    rings->bell_fd = pair[1];
-    pair[1] = -1;
+    LockTable();
+    if (rings != nullptr && g_bell_rings_used < kMaxBellRings) {
+      rings->bell_fd = pair[1];
+      pair[1] = -1;
+      rings->client_id = reply.client_id;
+      g_bell_rings[g_bell_rings_used++] = rings;
+    }
+    UnlockTable();
   }
   for (int& end : pair) {
     if (end >= 0) real_close()(end);
@@ -986,6 +1005,59 @@ int DupFcntl(int fd, int cmd, int rc, void* arg) {
 /// `*client_id`: its id on the broker (the wake channel the host counts its writes on). 3, for
 /// any fd: some bus socket of the process signals its input (O_ASYNC), so a frame may end any
 /// thread's wait.
+/// Runahead (bus/vtime_interpose.cc): the earliest instant (virtual CLOCK_MONOTONIC ns) of a
+/// frame the broker put ahead in this process's rings and not published yet; INT64_MAX none.
+UCAN_EXPORT std::int64_t wheelhil_ucan_next_prepared_ns() {
+  std::int64_t next = INT64_MAX;
+  LockTable();
+  for (int i = 0; i < g_bell_rings_used; ++i) {
+    ucan::RingHeader* h = g_bell_rings[i]->header;
+    const std::uint64_t tail = h->rx.tail.load(std::memory_order_relaxed);
+    const std::uint64_t prepared = h->rx_prepared_tail.load(std::memory_order_acquire);
+    if (prepared - tail - 1 >= h->slots) continue;  // none ahead (or nonsense)
+    next = std::min(next, ucan::RxInstants(h, h->slots)[tail & (h->slots - 1)]);
+  }
+  UnlockTable();
+  return next;
+}
+
+/// Runahead: the frames put ahead whose instant is at or before `until_ns` become visible,
+/// received at `realtime_ns` (their RxTrailer's time), and their sockets' doorbells ring, as
+/// the broker's delivery at that instant would. Returns the wake channels of those sockets
+/// (vtime::BusSocketChannel), for the count of writes that may end a vouched wait.
+UCAN_EXPORT std::uint32_t wheelhil_ucan_publish_prepared(std::int64_t until_ns,
+                                                         std::int64_t realtime_ns) {
+  std::uint32_t channels = 0;
+  LockTable();
+  for (int i = 0; i < g_bell_rings_used; ++i) {
+    MappedRings* m = g_bell_rings[i];
+    ucan::RingHeader* h = m->header;
+    const std::uint32_t slots = h->slots;
+    const std::uint64_t prepared = h->rx_prepared_tail.load(std::memory_order_acquire);
+    std::uint64_t tail = h->rx.tail.load(std::memory_order_relaxed);
+    const std::uint64_t from = tail;
+    if (prepared - tail > slots) continue;  // nonsense: the broker's to find
+    while (tail != prepared && ucan::RxInstants(h, slots)[tail & (slots - 1)] <= until_ns) {
+      ucan::RingSlot& slot = ucan::RxSlots(h)[tail & (slots - 1)];
+      if (slot.len >= sizeof(ucan::RxTrailer) && slot.len <= ucan::kSlotBytes) {
+        std::memcpy(slot.bytes + slot.len - sizeof(ucan::RxTrailer) +
+                        offsetof(ucan::RxTrailer, timestamp_ns),
+                    &realtime_ns, sizeof(realtime_ns));
+      }
+      ++tail;
+    }
+    if (tail == from) continue;
+    h->rx.tail.store(tail, std::memory_order_release);
+    if (ucan::RingTakeDoorbell(h->rx, ucan::kDoorbellTries) != 0) {
+      const std::uint64_t bell = 1;
+      (void)real_send()(m->bell_fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT);
+    }
+    channels |= wheelhil::bus::vtime::BusSocketChannel(m->client_id);
+  }
+  UnlockTable();
+  return channels;
+}
+
 UCAN_EXPORT int wheelhil_ucan_bus_socket_state(int fd, std::uint32_t* client_id) {
   if (g_signals_on_input.load(std::memory_order_relaxed)) return 3;
   View v;

@@ -173,10 +173,18 @@ struct RingHeader {
   std::atomic<std::uint32_t> tx_drained_every_pass{0};
   RingIndex rx;  ///< broker -> client
   RingIndex tx;  ///< client -> broker
+  /// Runahead (kOpenOwnBell): frames the broker put in the rx ring ahead of their instants,
+  /// from rx.tail (what the client sees) to here, each with its instant (RxInstants: the
+  /// virtual CLOCK_MONOTONIC ns at which the firmware gets it). The client's library publishes
+  /// them (moves rx.tail, rings its own doorbell) as it moves its clock to their instants; the
+  /// broker takes the published ones for delivered and drops the rest when it has the clock
+  /// again.
+  alignas(64) std::atomic<std::uint64_t> rx_prepared_tail{0};
 };
 
 inline std::size_t RingBytes(std::uint32_t slots) {
-  return (sizeof(RingHeader) + 63) / 64 * 64 + 2 * std::size_t{slots} * sizeof(RingSlot);
+  return (sizeof(RingHeader) + 63) / 64 * 64 + 2 * std::size_t{slots} * sizeof(RingSlot) +
+         std::size_t{slots} * sizeof(std::int64_t);
 }
 inline RingSlot* RxSlots(RingHeader* h) {
   return reinterpret_cast<RingSlot*>(reinterpret_cast<std::uint8_t*>(h) +
@@ -184,6 +192,10 @@ inline RingSlot* RxSlots(RingHeader* h) {
 }
 /// `slots`: the geometry as the caller knows it (the broker never takes it from the header).
 inline RingSlot* TxSlots(RingHeader* h, std::uint32_t slots) { return RxSlots(h) + slots; }
+/// The instants of the rx slots put ahead (RingHeader::rx_prepared_tail), by slot.
+inline std::int64_t* RxInstants(RingHeader* h, std::uint32_t slots) {
+  return reinterpret_cast<std::int64_t*>(TxSlots(h, slots) + slots);
+}
 
 /// A producer's doorbell takes one compare-exchange unless the consumer clears `pending` at
 /// the same moment; this many failures mean the other side keeps rewriting the word.

@@ -416,6 +416,21 @@ void RunAhead() {
   }
 }
 
+/// libwheelhil_ucan.so's frames put ahead (runahead): the next one's instant, and publishing
+/// those due (bus/ucan_interpose.cc). nullptr without that library.
+using NextPreparedFn = std::int64_t (*)();
+using PublishPreparedFn = std::uint32_t (*)(std::int64_t, std::int64_t);
+template <typename Fn>
+Fn UcanFunction(const char* name) {
+  static std::atomic<Fn> fn{nullptr};
+  static std::atomic<bool> looked{false};
+  if (!looked.load(std::memory_order_acquire)) {
+    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, name)));
+    looked.store(true, std::memory_order_release);
+  }
+  return fn.load(std::memory_order_relaxed);
+}
+
 bool AdvanceOnce() {
   const pid_t me = g_page->processes[g_proc].pid.load();
   // One process only: another's fds and threads are not this one's to end.
@@ -451,6 +466,9 @@ bool AdvanceOnce() {
     const vt::TimerSlot& t = g_page->timers[i];
     if (t.state.load() == vt::kTimerArmed) next = std::min(next, t.next_ns.load());
   }
+  const auto next_frame = UcanFunction<NextPreparedFn>("wheelhil_ucan_next_prepared_ns");
+  const auto publish = UcanFunction<PublishPreparedFn>("wheelhil_ucan_publish_prepared");
+  if (next_frame != nullptr && publish != nullptr) next = std::min(next, next_frame());
   const std::int64_t now = Now();
   const std::int64_t step = g_page->runahead_step_ns.load();
   const bool on_grid = step <= 0 || (next - g_page->runahead_phase_ns.load()) % step == 0;
@@ -473,6 +491,8 @@ bool AdvanceOnce() {
       channels |= vt::TimerChannel(i);
     }
   }
+  // The frames of this instant, as the broker's pass after the host's WakeDue delivers them.
+  if (publish != nullptr) channels |= publish(next, next + RealtimeOffset());
   if (channels != 0) vt::NoteWake(*g_page, channels);
   for (int i = 0; i < threads; ++i) {
     vt::ThreadSlot& s = g_page->threads[i];

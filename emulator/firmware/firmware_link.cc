@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -233,7 +234,14 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   const bool ended_waits = clock.WakeDue() > 0;
   if (!ended_waits && firmware_blocked_) return true;
   firmware_blocked_ = false;
-  ++handovers_;
+  // After runahead: a pass takes what the firmware sent at its own instant; that is a turn of
+  // its only if something wakes it.
+  bool counted = !std::exchange(after_runahead_, false);
+  if (counted) ++handovers_;
+  auto turn = [&] {
+    if (!counted) ++handovers_;
+    counted = true;
+  };
   double unaccounted = 0;
   sim::WallTimer timer(handover_s_ != nullptr ? *handover_s_ : unaccounted);
   // The limit is on running without blocking: a firmware that blocks and is woken again by
@@ -282,6 +290,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       // routing them wakes nobody, the firmware stays blocked.
       if (pass()) {
         woke = true;
+        turn();
         t0 = Clock::now();
         const double cap_s = std::max(kMinSecondsAtOneInstant, kTimeoutsAtOneInstant * timeout_s);
         if (WallSeconds(settle_start) > cap_s) {
@@ -306,6 +315,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       firmware_blocked_ = true;
       return true;
     }
+    turn();
     if (clock.FirmwareStopped()) {
       // A debugger has it (or it was stopped for one): no limit, and no hurry to look again.
       t0 = Clock::now();
@@ -343,6 +353,48 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     clock.WaitForChange(200);
     woke = false;
   }
+}
+
+bool FirmwareLink::Prepare(const bus::CanFrame& frame, std::int64_t instant_ns) {
+  return broker_ != nullptr &&
+         broker_->PrepareLocal(local_port_, frame, VirtualClock::kMonotonicAtStartNs + instant_ns);
+}
+
+bool FirmwareLink::RunAhead(VirtualClock& clock, double timeout_s, FirmwareProcess& process) {
+  ++handovers_;
+  double unaccounted = 0;
+  sim::WallTimer timer(handover_s_ != nullptr ? *handover_s_ : unaccounted);
+  const auto t0 = Clock::now();
+  bool ok = true;
+  // No broker pass meanwhile: what the firmware sends is taken at the instant it sent it,
+  // once the run's bus is there.
+  while (!clock.Blocked()) {
+    if (run_.failed()) {
+      ok = false;
+      break;
+    }
+    if (WallSeconds(t0) > std::min(1.0, timeout_s / 2) && process.running() && process.Exited()) {
+      FailExited(process);
+      ok = false;
+      break;
+    }
+    if (WallSeconds(t0) > timeout_s) {
+      std::string who;
+      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+      run_.Fail(
+          fmt::format("the firmware did not block within {} s of wall time while it ran "
+                      "ahead on its own clock: {}",
+                      timeout_s, who.empty() ? "no thread seen running" : who));
+      ok = false;
+      break;
+    }
+    clock.WaitForChange(200);
+  }
+  (void)broker_->SettlePrepared();
+  // What it sent is in its ring: the next settle, at its instant, takes it.
+  firmware_blocked_ = false;
+  after_runahead_ = true;
+  return ok;
 }
 
 bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,

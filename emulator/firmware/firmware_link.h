@@ -66,6 +66,16 @@ class FirmwareLink {
   /// or did not block within timeout_s of wall time (its running threads are named).
   bool Settle(VirtualClock& clock, double timeout_s, FirmwareProcess& process,
               const FrameFn& on_frame);
+  /// Runahead (docs/virtual-time.md): a frame for the firmware at run time instant_ns, put in
+  /// its sockets' rings ahead (bus::UcanBroker::PrepareLocal); false when it could not be.
+  bool Prepare(const bus::CanFrame& frame, std::int64_t instant_ns);
+  /// Runahead: with the clock granted to the firmware, waits (wall clock) until it gave the
+  /// clock back and every thread of it is blocked, then delivers the frames it published and
+  /// drops the rest (bus::UcanBroker::SettlePrepared). A turn of the firmware's. False (the
+  /// reason in the RunContext) as Settle.
+  bool RunAhead(VirtualClock& clock, double timeout_s, FirmwareProcess& process);
+  /// Runahead not begun after all: the frames put ahead go.
+  std::uint64_t RunAheadDropPrepared() { return broker_ ? broker_->SettlePrepared() : 0; }
   /// Virtual time, after the run: ends the waits due, routes the bus (the firmware's frames are
   /// dropped) and waits up to 1 ms for the firmware to change.
   void KeepAlive(VirtualClock& clock);
@@ -112,6 +122,7 @@ class FirmwareLink {
   int unpumped_frames_ = 0;
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
+  bool after_runahead_ = false;    // RunAhead: the next Settle picks up what it sent
   // Virtual time, Settle: VirtualClock::socket_activity and the clock's time at the last pass
   // that looked at the broker's sockets.
   static constexpr std::int64_t kSocketLookEveryNs = 10'000'000;

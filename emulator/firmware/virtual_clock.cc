@@ -384,6 +384,25 @@ void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
   // the last thread to block look (its wait ends, it waits again).
 }
 
+bool VirtualClock::KickRunahead() {
+  for (int p = 0; p < vt::kMaxProcesses; ++p) {
+    vt::ProcessSlot& proc = page_->processes[p];
+    if (proc.state.load() != vt::kProcAlive) continue;
+    const int slot = proc.agent.load();
+    if (slot < 0 || page_->threads[slot].tid.load() == 0) return false;
+    vt::ThreadSlot& s = page_->threads[slot];
+    // Running already, it waits again soon, and moves the clock on then.
+    std::uint32_t expect = vt::kWaiting;
+    if (!s.state.compare_exchange_strong(expect, vt::kRunning)) return expect == vt::kRunning;
+    s.wake.fetch_add(1);
+    FutexWake(&s.wake);
+    return true;
+  }
+  return false;
+}
+
+void VirtualClock::RevokeRunahead() { page_->runahead.store(vt::kHostClock); }
+
 bool VirtualClock::RunaheadGranted() const { return page_->runahead.load() != vt::kHostClock; }
 
 std::uint64_t VirtualClock::local_advances() const { return page_->local_advances.load(); }

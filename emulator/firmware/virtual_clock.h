@@ -76,6 +76,12 @@ class VirtualClock {
   /// false; Blocked() takes the clock back when it finds every thread blocked (a thread asleep
   /// outside the library's waits). now_ns() then says where the firmware got to.
   void GrantRunahead(std::int64_t until_ns, std::int64_t step_ns, std::int64_t phase_ns);
+  /// Runahead, right after GrantRunahead: wakes the first process's agent thread, which finds
+  /// nothing of its own to do and, waiting again, moves the clock on. False when it has none
+  /// (nothing would take the grant up: take it back).
+  bool KickRunahead();
+  /// Takes the clock back from a firmware that did not take it up (KickRunahead false).
+  void RevokeRunahead();
   /// The firmware may still move the clock (granted, or moving it now).
   bool RunaheadGranted() const;
   /// Instants the firmware moved its clock to itself so far.

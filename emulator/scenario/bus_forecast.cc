@@ -21,11 +21,12 @@ BusForecast::BusForecast(const sim::BusHub& hub,
 
 BusForecast::~BusForecast() = default;
 
-bool BusForecast::RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults) {
+bool BusForecast::RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults,
+                        std::size_t max_frames) {
   FaultEventLog& log = faults.log();
   const std::size_t logged = log.size();
   bool whole = true;
-  while (run_.now_ns + step_ns_ <= until_ns) {
+  while (run_.now_ns + step_ns_ <= until_ns && frames_.size() < max_frames) {
     const std::int64_t t = run_.now_ns + step_ns_;
     const auto step = t > real_run_.now_ns
                           ? physics.PeekMotionStep((t - real_run_.now_ns) / step_ns_)

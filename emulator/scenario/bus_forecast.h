@@ -62,10 +62,12 @@ class BusForecast {
   BusForecast(const BusForecast&) = delete;
   BusForecast& operator=(const BusForecast&) = delete;
 
-  /// Runs the copies' motion steps up to the one ending at or before until_ns. False when it
-  /// stopped earlier: the physics worker has no such step (none running, past its last step,
-  /// beyond its ring) or a copy failed; the frames up to there stand.
-  bool RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults);
+  /// Runs the copies' motion steps up to the one ending at or before until_ns, or the first
+  /// whose frames make `max_frames` or more. False when it stopped earlier: the physics worker
+  /// has no such step (none running, past its last step, beyond its ring) or a copy failed;
+  /// the frames up to there stand.
+  bool RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults,
+             std::size_t max_frames = SIZE_MAX);
 
   /// What the firmware gets, in order, from the first forecast step to reached_ns().
   const std::vector<ForecastFrame>& frames() const { return frames_; }

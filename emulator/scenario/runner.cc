@@ -136,6 +136,12 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // `handed` (the frames sent to it since the last turn).
   void CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_sent, bool handed_over,
                      const std::vector<bus::CanFrame>& handed);
+  // The forecast's frames before now_ns were all handed over, and `handed` (when given) are
+  // its frames at now_ns; else the run fails (the reason names both).
+  bool MatchForecast(std::int64_t now_ns, const std::vector<bus::CanFrame>* handed);
+  // --runahead, after the turn at now_ns: the forecast, its frames in the firmware's rings,
+  // the clock granted until the firmware gives it back (firmware_ahead_ns_).
+  void RunAhead(std::int64_t now_ns);
   // --stop-at: stops the firmware's process group for a debugger and says how to attach.
   void StopFirmwareForDebugger();
   // Virtual clock: runs the firmware alone (its clock moving to its own deadlines) until it has
@@ -196,6 +202,11 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // --check-runahead: the forecast of the current window and how much of it was matched; the
   // frames sent to the firmware since the last turn; the firmware's frames so far.
   std::unique_ptr<BusForecast> forecast_;
+  // --runahead: where the firmware moved its clock in the current window (-1: no window); turns
+  // left without one, and that count's next value.
+  std::int64_t firmware_ahead_ns_ = -1;
+  static constexpr std::size_t kRunaheadMaxFrames = 512;
+  std::uint32_t runahead_skip_ = 0, runahead_backoff_ = 0;
   const sim::SyncSource* sync_ = nullptr;  // the emulator's SYNCs (motion phase), if it makes them
   std::size_t forecast_matched_ = 0;
   std::vector<bus::CanFrame> to_firmware_;
@@ -293,6 +304,16 @@ void Run::SettleFirmware() {
     StopFirmwareForDebugger();
   }
   const std::int64_t now = hub_->now_ns();
+  if (firmware_ahead_ns_ >= 0) {
+    // In a window: the firmware was handed these frames from its rings, at this instant.
+    const bool ok = MatchForecast(now, &to_firmware_);
+    to_firmware_.clear();
+    if (!ok) return;
+    if (now < firmware_ahead_ns_) return;  // it is past this turn
+    // Its own turn: what it sent at its instant is taken here, as the turn goes on.
+    firmware_ahead_ns_ = -1;
+    forecast_.reset();
+  }
   const bool deadline_turn = clock_->NextDeadlineNs() <= now;
   const std::uint64_t sent_before = firmware_frames_seen_;
   const std::uint64_t handovers_before = link_->handovers();
@@ -302,8 +323,10 @@ void Run::SettleFirmware() {
   if (o_.check_runahead) {
     CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before,
                   link_->handovers() != handovers_before, to_firmware_);
-    to_firmware_.clear();
+  } else if (o_.runahead) {
+    RunAhead(now);
   }
+  to_firmware_.clear();
   // What runs on the host's clock: the run goes on, but may not be deterministic.
   auto warn = [this](const char* event, const std::vector<std::string>& found) {
     for (const std::string& what : found) {
@@ -316,8 +339,7 @@ void Run::SettleFirmware() {
   warn("firmware_off_the_clock", clock_->TakeProcessesOffTheClock());
 }
 
-void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_sent,
-                        bool handed_over, const std::vector<bus::CanFrame>& handed) {
+bool Run::MatchForecast(std::int64_t now_ns, const std::vector<bus::CanFrame>* handed) {
   auto frame_text = [](const bus::CanFrame& f) {
     std::string line = bus::FormatCandumpLine(0, "", f);
     return line.substr(line.find(' ') + 2);  // "ID#DATA" without the time and interface
@@ -326,16 +348,39 @@ void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_s
     run_.Fail(fmt::format("runahead check at t = {:.6f} s (bus time): {}",
                           static_cast<double>(now_ns) * 1e-9, what));
     forecast_.reset();
+    return false;
   };
-  if (forecast_) {
-    const auto& fc = forecast_->frames();
-    std::size_t& m = forecast_matched_;
-    if (m < fc.size() && fc[m].t_ns < now_ns) {
+  const auto& fc = forecast_->frames();
+  std::size_t& m = forecast_matched_;
+  if (m < fc.size() && fc[m].t_ns < now_ns) {
+    return mismatch(
+        fmt::format("the forecast had {} at t = {:.6f} s; the run did not hand it "
+                    "over then",
+                    frame_text(fc[m].frame), static_cast<double>(fc[m].t_ns) * 1e-9));
+  }
+  if (handed == nullptr) return true;
+  for (const bus::CanFrame& f : *handed) {
+    if (m >= fc.size() || fc[m].t_ns != now_ns || !(fc[m].frame == f)) {
       return mismatch(
-          fmt::format("the forecast had {} at t = {:.6f} s; the run did not hand it "
-                      "over then",
-                      frame_text(fc[m].frame), static_cast<double>(fc[m].t_ns) * 1e-9));
+          fmt::format("the run handed the firmware {}; the forecast had {}", frame_text(f),
+                      m >= fc.size() ? std::string("nothing more")
+                                     : fmt::format("{} at t = {:.6f} s", frame_text(fc[m].frame),
+                                                   static_cast<double>(fc[m].t_ns) * 1e-9)));
     }
+    ++m;
+    ++runahead_.frames;
+  }
+  if (m < fc.size() && fc[m].t_ns == now_ns) {
+    return mismatch(fmt::format("the forecast had {} as well; the run did not hand it over",
+                                frame_text(fc[m].frame)));
+  }
+  return true;
+}
+
+void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_sent,
+                        bool handed_over, const std::vector<bus::CanFrame>& handed) {
+  if (forecast_) {
+    if (!MatchForecast(now_ns, nullptr)) return;
     const char* end = nullptr;
     if (deadline_turn && now_ns != run_.now_ns) {
       // A deadline of the firmware's between two steps: the bus moves on to it (its frames
@@ -344,21 +389,7 @@ void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_s
     } else if (now_ns > forecast_->reached_ns()) {
       end = "horizon";
     } else {
-      for (const bus::CanFrame& f : handed) {
-        if (m >= fc.size() || fc[m].t_ns != now_ns || !(fc[m].frame == f)) {
-          return mismatch(fmt::format(
-              "the run handed the firmware {}; the forecast had {}", frame_text(f),
-              m >= fc.size() ? std::string("nothing more")
-                             : fmt::format("{} at t = {:.6f} s", frame_text(fc[m].frame),
-                                           static_cast<double>(fc[m].t_ns) * 1e-9)));
-        }
-        ++m;
-        ++runahead_.frames;
-      }
-      if (m < fc.size() && fc[m].t_ns == now_ns) {
-        return mismatch(fmt::format("the forecast had {} as well; the run did not hand it over",
-                                    frame_text(fc[m].frame)));
-      }
+      if (!MatchForecast(now_ns, &handed)) return;
       end = firmware_sent ? "send" : now_ns == forecast_->reached_ns() ? "horizon" : nullptr;
       if (end == nullptr) {
         // The firmware ran on through this turn's frames: no hand-over.
@@ -386,6 +417,68 @@ void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_s
   (void)forecast_->RunTo(until, *physics_, *faults_);
   if (forecast_->reached_ns() == run_.now_ns) {
     ++runahead_.no_forecast;
+    forecast_.reset();
+  }
+}
+
+void Run::RunAhead(std::int64_t now_ns) {
+  if (run_.failed() || !motion_started_ || !physics_->worker_used() || sync_ != nullptr ||
+      !firmware_.running() || firmware_stopped_) {
+    return;
+  }
+  // A firmware that did not run through the last window (it sends at every frame, or waits
+  // where the library cannot move the clock) is left alone for twice as many turns each time.
+  if (runahead_skip_ > 0) {
+    --runahead_skip_;
+    return;
+  }
+  forecast_ = std::make_unique<BusForecast>(*hub_, devices_, run_, physics_->step_ns());
+  forecast_matched_ = 0;
+  // Half a second, or 512 frames (the rings hold 1024): the work beyond where the firmware
+  // sends is lost, which the backoff above bounds.
+  (void)forecast_->RunTo(now_ns + 500'000'000, *physics_, *faults_, kRunaheadMaxFrames);
+  // Its frames into the firmware's rings, up to the first that cannot go there (then none of
+  // its instant: the firmware stops before it).
+  std::int64_t until = forecast_->reached_ns();
+  for (const ForecastFrame& f : forecast_->frames()) {
+    if (!link_->Prepare(f.frame, f.t_ns)) {
+      until = f.t_ns - 1;
+      break;
+    }
+  }
+  if (until <= now_ns) {
+    (void)link_->RunAheadDropPrepared();
+    forecast_.reset();
+    return;
+  }
+  clock_->GrantRunahead(until, physics_->step_ns(), run_.now_ns);
+  if (!clock_->KickRunahead()) {
+    clock_->RevokeRunahead();
+    (void)link_->RunAheadDropPrepared();
+    forecast_.reset();
+    return;
+  }
+  if (!link_->RunAhead(*clock_, s_.timing.timeout_s, firmware_)) return;
+  ++runahead_.windows;
+  firmware_ahead_ns_ = clock_->now_ns();
+  // The turns it saved: the instants of frames it ran through before the one it stopped at
+  // (there the run takes its turn as ever).
+  std::size_t turns_saved = 0;
+  std::int64_t last_instant = now_ns;
+  for (const ForecastFrame& f : forecast_->frames()) {
+    if (f.t_ns > firmware_ahead_ns_) break;
+    if (f.t_ns < firmware_ahead_ns_ && f.t_ns != last_instant) ++turns_saved;
+    last_instant = f.t_ns;
+  }
+  if (turns_saved == 0) {
+    runahead_backoff_ =
+        std::min<std::uint32_t>(std::max<std::uint32_t>(1, runahead_backoff_ * 2), 1024);
+    runahead_skip_ = runahead_backoff_;
+  } else {
+    runahead_backoff_ = 0;
+  }
+  if (firmware_ahead_ns_ <= now_ns) {
+    firmware_ahead_ns_ = -1;
     forecast_.reset();
   }
 }
@@ -479,7 +572,9 @@ void Run::Build() {
   }
   hub_->OpenLog(out_ + "/can.log", link_->interface());
   hub_->SetFirmwareSend([this](const bus::CanFrame& f) {
-    if (o_.check_runahead) to_firmware_.push_back(f);
+    if (o_.check_runahead || o_.runahead) to_firmware_.push_back(f);
+    // The firmware got the frames of its window up to its own clock from its rings.
+    if (firmware_ahead_ns_ >= 0 && run_.now_ns <= firmware_ahead_ns_) return true;
     return link_->Send(f);
   });
   handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
@@ -725,6 +820,11 @@ json Run::Report(double wall_s) {
       {"physics_s", wall_.physics_s},
       {"devices_bus_s", wall_.devices_bus_s},
       {"other_s", std::max(0.0, wall_s - staged_s)}};
+  if (o_.runahead && clock_) {
+    r["wall"]["runahead"] = json{{"windows", runahead_.windows},
+                                 {"frames_run_through", runahead_.frames},
+                                 {"local_advances", clock_->local_advances()}};
+  }
   if (o_.check_runahead) {
     // Hand-overs with runahead: every one of the run's but those of the turns a window ran
     // through, plus one at each window's end that was no hand-over of the run's.

@@ -57,6 +57,12 @@ struct RunOptions {
   /// difference fails the run. report.json's wall.runahead_check counts the turns a firmware
   /// that ran ahead through the forecasts would have needed.
   bool check_runahead = false;
+  /// Virtual clock, motion phase with a physics worker, the firmware the SYNC producer:
+  /// runahead (docs/virtual-time.md). At every turn that ends the firmware's run through frames
+  /// the bus is forecast, the forecast frames put in the firmware's rings ahead, and the
+  /// firmware moves its clock itself through them and its own deadlines until it sends; the
+  /// run then moves its bus up to there, checking it hands the firmware exactly those frames.
+  bool runahead = false;
   std::function<void(pid_t pid)> on_firmware_stopped;
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.

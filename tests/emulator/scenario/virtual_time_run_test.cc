@@ -97,10 +97,11 @@ double LastEstimateX(const fs::path& dir, const std::string& stream) {
   return x;
 }
 
-// `s` run twice, into dir/a and dir/b: their can.log must be the same bytes. The second run
-// also forecasts the bus at each turn that ends the firmware's run through frames and checks
-// it is handed exactly those (check_runahead: a difference fails it). Returns the first run's
-// result and its can.log.
+// `s` run three times, into dir/a, dir/b and dir/c: their can.log must be the same bytes. The
+// second run also forecasts the bus at each turn that ends the firmware's run through frames
+// and checks it is handed exactly those (check_runahead: a difference fails it); in the third
+// the firmware runs ahead through the forecasts on its own clock (runahead). Returns the first
+// run's result and its can.log.
 std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs::path& dir) {
   RunResult a = RunScenario(s, testing::BuildTreeRunOptions(dir / "a"));
   RunOptions checked = testing::BuildTreeRunOptions(dir / "b");
@@ -108,6 +109,11 @@ std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs:
   const RunResult b = RunScenario(s, checked);
   EXPECT_EQ(a.failure, b.failure);
   EXPECT_TRUE(b.report["wall"].contains("runahead_check"));
+  RunOptions ahead = testing::BuildTreeRunOptions(dir / "c");
+  ahead.runahead = true;
+  const RunResult c = RunScenario(s, ahead);
+  EXPECT_EQ(a.failure, c.failure);
+  EXPECT_EQ(Slurp(dir / "a" / "can.log"), Slurp(dir / "c" / "can.log"));
   std::string log = Slurp(dir / "a" / "can.log");
   EXPECT_EQ(log, Slurp(dir / "b" / "can.log"));
   return {std::move(a), std::move(log)};
@@ -169,6 +175,34 @@ TEST_F(VirtualTimeRun, TheRunHandsTheFirmwareExactlyTheBusForecast) {
     // Two turns a cycle (its SYNC, its outputs) where the run needs ~116 a second.
     EXPECT_LE(ra["handovers_per_sim_s"].get<double>(), 15.0) << ra.dump();
     EXPECT_GE(wall["handovers_per_sim_s"].get<double>(), 100.0) << wall.dump();
+  }
+}
+
+// Runahead: the forecast frames go into the firmware's rings ahead of their instants and the
+// firmware moves its clock itself through them and its own deadlines until it sends. What it
+// sees, and so every artefact, is what it would have seen one frame at a time (can.log,
+// events.jsonl, the report: the same bytes), with a turn at each send only: ~9 hand-overs a
+// simulated second where the run needs ~116.
+TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughTheForecastAndNothingChanges) {
+  for (const char* name : {"smoke/paper000_slip_short", "faults_demo", "bus_faults"}) {
+    SCOPED_TRACE(name);
+    const Scenario s =
+        LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
+    const fs::path dir = dir_ / fs::path(name).filename();
+    const RunResult plain = RunScenario(s, testing::BuildTreeRunOptions(dir / "plain"));
+    RunOptions o = testing::BuildTreeRunOptions(dir / "ahead");
+    o.runahead = true;
+    const RunResult ahead = RunScenario(s, o);
+    EXPECT_EQ(ahead.failure, "");
+    EXPECT_EQ(plain.report["verdict"], "pass");
+    EXPECT_EQ(Slurp(dir / "plain" / "can.log"), Slurp(dir / "ahead" / "can.log"));
+    EXPECT_EQ(Slurp(dir / "plain" / "events.jsonl"), Slurp(dir / "ahead" / "events.jsonl"));
+    EXPECT_EQ(testing::ReportWithoutWall(dir / "plain"), testing::ReportWithoutWall(dir / "ahead"));
+    const auto& wall = ahead.report["wall"];
+    EXPECT_GE(wall["runahead"]["frames_run_through"].get<int>(), 100) << wall.dump();
+    EXPECT_GE(wall["runahead"]["local_advances"].get<int>(), 100) << wall.dump();
+    EXPECT_LE(wall["handovers_per_sim_s"].get<double>(), 15.0) << wall.dump();
+    EXPECT_GE(plain.report["wall"]["handovers_per_sim_s"].get<double>(), 100.0);
   }
 }
 
