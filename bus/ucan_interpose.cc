@@ -230,11 +230,13 @@ void NoteFrameSent() {
   if (Fn f = fn.load(std::memory_order_relaxed)) f();
 }
 
-/// The virtual clock's library is loaded (its firmware may move the clock itself and deliver
-/// the frames the broker put ahead in its rings: kOpenOwnBell).
-bool VtimeLoaded() {
-  static const bool loaded = dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent") != nullptr;
-  return loaded;
+/// The run asked for runahead (ucan::kOwnBellEnv) and the virtual clock's library is loaded:
+/// the firmware may move the clock itself and deliver the frames the broker put ahead in its
+/// rings (kOpenOwnBell).
+bool OwnBellWanted() {
+  static const bool wanted = getenv(ucan::kOwnBellEnv) != nullptr &&
+                             dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent") != nullptr;
+  return wanted;
 }
 
 void DetachLocked(int fd) {
@@ -595,7 +597,7 @@ int BindUcan(int fd, const sockaddr* addr, socklen_t len) {
   // Rings: a socket pair whose one end the broker takes as its end of the connection, so that
   // this library can ring the socket's own doorbell (kOpenOwnBell).
   int pair[2] = {-1, -1};
-  if ((req.flags & ucan::kOpenRings) && VtimeLoaded() &&
+  if ((req.flags & ucan::kOpenRings) && OwnBellWanted() &&
       ::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, pair) == 0) {
     req.flags |= ucan::kOpenOwnBell;
   }

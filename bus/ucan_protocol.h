@@ -94,6 +94,9 @@ inline constexpr std::uint32_t kOpenRings = 1;
 /// firmware that moves its clock itself delivers the frames the broker put in its ring ahead
 /// of their instants (runahead, docs/virtual-time.md).
 inline constexpr std::uint32_t kOpenOwnBell = 2;
+/// Set (to anything) in a client's environment: its sockets ask for kOpenOwnBell (the run puts
+/// it in the firmware's environment when the firmware may run ahead).
+inline constexpr char kOwnBellEnv[] = "WHEELHIL_UCAN_OWN_BELL";
 
 struct Reply {
   std::uint32_t magic = kMagic;

@@ -254,11 +254,6 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     FailExited(process);
     return false;
   };
-  auto running_threads = [&] {
-    std::string who;
-    for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
-    return who;
-  };
   // One broker pass; true when it wrote to a client (which may wake a firmware thread).
   // A pass looks at the broker's sockets only when the firmware did something there since the
   // last look (its frames travel in the rings), when a process of it is not on the clock, and
@@ -323,36 +318,49 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
       woke = false;  // the next round looks again
       continue;
     }
-    const double wall = WallSeconds(t0);
-    if (wall > std::min(1.0, timeout_s / 2) && !checked_exit) {
-      checked_exit = true;
-      if (process.running() && process.Exited()) return exited();
-      // Long before the limit: say who keeps virtual time from moving.
-      run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
-                                           {"event", "firmware_busy"},
-                                           {"wall_s", std::min(1.0, timeout_s / 2)},
-                                           {"threads", running_threads()}});
-    }
-    if (wall > timeout_s) {
-      std::string who = running_threads();
-      if (const pid_t p = clock.UnregisteredProcess(); p != 0) {
-        who += fmt::format("{}process {} is not on the virtual clock: it never loaded "
-                           "libwheelhil_vtime.so, or exec'd a program without it (a static "
-                           "binary, or LD_PRELOAD cleared: see docs/virtual-time.md)",
-                           who.empty() ? "" : "; ", p);
-      }
-      run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
-                                           {"event", "firmware_not_blocking"},
-                                           {"threads", who}});
-      run_.Fail(fmt::format("the firmware did not block within {} s of wall time, so virtual "
-                            "time could not go on: {} (a firmware that polls in a loop can run "
-                            "with timing.spin_cost_s: docs/virtual-time.md)",
-                            timeout_s, who.empty() ? "no thread seen running" : who));
-      return false;
-    }
+    if (!StillWaiting(clock, WallSeconds(t0), timeout_s, process, checked_exit)) return false;
     clock.WaitForChange(200);
     woke = false;
   }
+}
+
+bool FirmwareLink::StillWaiting(VirtualClock& clock, double wall_s, double timeout_s,
+                                FirmwareProcess& process, bool& checked_exit) {
+  auto running_threads = [&] {
+    std::string who;
+    for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
+    return who;
+  };
+  if (wall_s > std::min(1.0, timeout_s / 2) && !checked_exit) {
+    checked_exit = true;
+    if (process.running() && process.Exited()) {
+      FailExited(process);
+      return false;
+    }
+    // Long before the limit: say who keeps virtual time from moving.
+    run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                                         {"event", "firmware_busy"},
+                                         {"wall_s", std::min(1.0, timeout_s / 2)},
+                                         {"threads", running_threads()}});
+  }
+  if (wall_s <= timeout_s) return true;
+  std::string who = running_threads();
+  if (const pid_t p = clock.UnregisteredProcess(); p != 0) {
+    who += fmt::format(
+        "{}process {} is not on the virtual clock: it never loaded "
+        "libwheelhil_vtime.so, or exec'd a program without it (a static "
+        "binary, or LD_PRELOAD cleared: see docs/virtual-time.md)",
+        who.empty() ? "" : "; ", p);
+  }
+  run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
+                                       {"event", "firmware_not_blocking"},
+                                       {"threads", who}});
+  run_.Fail(
+      fmt::format("the firmware did not block within {} s of wall time, so virtual "
+                  "time could not go on: {} (a firmware that polls in a loop can run "
+                  "with timing.spin_cost_s: docs/virtual-time.md)",
+                  timeout_s, who.empty() ? "no thread seen running" : who));
+  return false;
 }
 
 bool FirmwareLink::Prepare(const bus::CanFrame& frame, std::int64_t instant_ns) {
@@ -366,25 +374,21 @@ bool FirmwareLink::RunAhead(VirtualClock& clock, double timeout_s, FirmwareProce
   sim::WallTimer timer(handover_s_ != nullptr ? *handover_s_ : unaccounted);
   const auto t0 = Clock::now();
   bool ok = true;
+  bool checked_exit = false;
   // No broker pass meanwhile: what the firmware sends is taken at the instant it sent it,
-  // once the run's bus is there.
-  while (!clock.Blocked()) {
+  // once the run's bus is there. While the firmware holds the clock, a look at its threads
+  // (in the kernel) is made only every millisecond: it gives the clock back when it blocks.
+  auto last_look = t0;
+  for (;;) {
     if (run_.failed()) {
       ok = false;
       break;
     }
-    if (WallSeconds(t0) > std::min(1.0, timeout_s / 2) && process.running() && process.Exited()) {
-      FailExited(process);
-      ok = false;
-      break;
+    if (!clock.RunaheadGranted() || WallSeconds(last_look) > 1e-3) {
+      last_look = Clock::now();
+      if (clock.Blocked()) break;
     }
-    if (WallSeconds(t0) > timeout_s) {
-      std::string who;
-      for (const auto& t : clock.RunningThreads()) who += (who.empty() ? "" : "; ") + t;
-      run_.Fail(
-          fmt::format("the firmware did not block within {} s of wall time while it ran "
-                      "ahead on its own clock: {}",
-                      timeout_s, who.empty() ? "no thread seen running" : who));
+    if (!StillWaiting(clock, WallSeconds(t0), timeout_s, process, checked_exit)) {
       ok = false;
       break;
     }

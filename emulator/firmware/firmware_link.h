@@ -101,6 +101,11 @@ class FirmwareLink {
   bool PumpBroker(int timeout_ms, bool quiet = false);
   // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
   void CheckBrokerLimits();
+  // Waiting wall_s for the firmware to block: after min(1 s, timeout/2) its exit is looked for
+  // and who runs is told (event firmware_busy); after timeout_s the run fails naming its
+  // running threads. False when the run failed.
+  bool StillWaiting(VirtualClock& clock, double wall_s, double timeout_s, FirmwareProcess& process,
+                    bool& checked_exit);
   // "the firmware was killed by signal 11 (SIGSEGV) during the run (see firmware.log)".
   void FailExited(const FirmwareProcess& process);
 

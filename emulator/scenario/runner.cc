@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <stdexcept>
 
@@ -15,6 +16,7 @@
 
 #include "bus/canopen.h"
 #include "bus/dbc.h"
+#include "bus/ucan_protocol.h"
 #include "bus/vector_logs.h"
 #include "emulator/devices/device.h"
 #include "emulator/firmware/firmware_link.h"
@@ -202,11 +204,20 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // --check-runahead: the forecast of the current window and how much of it was matched; the
   // frames sent to the firmware since the last turn; the firmware's frames so far.
   std::unique_ptr<BusForecast> forecast_;
-  // --runahead: where the firmware moved its clock in the current window (-1: no window); turns
-  // left without one, and that count's next value.
+  // --runahead: where the firmware moved its clock in the current window (-1: no window); what
+  // windows after the firmware's last frame of a turn (by its id) did last time.
   std::int64_t firmware_ahead_ns_ = -1;
   static constexpr std::size_t kRunaheadMaxFrames = 512;
-  std::uint32_t runahead_skip_ = 0, runahead_backoff_ = 0;
+  static constexpr std::int64_t kRunaheadMaxNs = 500'000'000;
+  static constexpr std::uint32_t kNoFrameSent = 0xFFFFFFFFu;
+  struct RunaheadHistory {
+    bool saved_nothing = false;
+    std::uint32_t skipped = 0;
+    std::int64_t ran_ns = -1;  // how far the firmware ran last time (-1: unknown)
+  };
+  std::map<std::uint32_t, RunaheadHistory> runahead_history_;
+  std::uint32_t last_sent_id_ = kNoFrameSent;  // the firmware's latest frame, and its instant
+  std::int64_t last_sent_at_ns_ = -1;
   const sim::SyncSource* sync_ = nullptr;  // the emulator's SYNCs (motion phase), if it makes them
   std::size_t forecast_matched_ = 0;
   std::vector<bus::CanFrame> to_firmware_;
@@ -273,6 +284,8 @@ void Run::StepDevices(std::int64_t t_ns, bool motion) {
 
 void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   ++firmware_frames_seen_;
+  last_sent_id_ = f.id;
+  last_sent_at_ns_ = hub_->now_ns();
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
   if (firmware_sync_ && f.id == bus::canopen::kSyncCobId && !f.rtr) {
@@ -426,24 +439,35 @@ void Run::RunAhead(std::int64_t now_ns) {
       !firmware_.running() || firmware_stopped_) {
     return;
   }
-  // A firmware that did not run through the last window (it sends at every frame, or waits
-  // where the library cannot move the clock) is left alone for twice as many turns each time.
-  if (runahead_skip_ > 0) {
-    --runahead_skip_;
-    return;
-  }
-  forecast_ = std::make_unique<BusForecast>(*hub_, devices_, run_, physics_->step_ns());
-  forecast_matched_ = 0;
-  // Half a second, or 512 frames (the rings hold 1024): the work beyond where the firmware
-  // sends is lost, which the backoff above bounds.
-  (void)forecast_->RunTo(now_ns + 500'000'000, *physics_, *faults_, kRunaheadMaxFrames);
-  // Its frames into the firmware's rings, up to the first that cannot go there (then none of
-  // its instant: the firmware stops before it).
-  std::int64_t until = forecast_->reached_ns();
-  for (const ForecastFrame& f : forecast_->frames()) {
-    if (!link_->Prepare(f.frame, f.t_ns)) {
-      until = f.t_ns - 1;
-      break;
+  // What the firmware sent in this turn says how long its next run through frames will be: a
+  // window after the same frame of its (its SYNC, which the devices answer at once) that saved
+  // no turn last time is not made again, but one in 16 such turns, to follow a firmware that
+  // changes. After a turn without a frame of its, the last such window says it.
+  const std::uint32_t key = last_sent_at_ns_ == now_ns ? last_sent_id_ : kNoFrameSent;
+  if (key == kNoFrameSent) runahead_history_[key] = RunaheadHistory{};
+  RunaheadHistory& history = runahead_history_[key];
+  if (history.saved_nothing && ++history.skipped % 16 != 0) return;
+  std::int64_t until = 0;
+  {
+    sim::WallTimer timer(wall_.forecast_s);
+    forecast_ = std::make_unique<BusForecast>(*hub_, devices_, run_, physics_->step_ns());
+    forecast_matched_ = 0;
+    // A quarter further than the firmware ran after the same frame last time (the work beyond
+    // where it sends is lost), half a second or 512 frames (the rings hold 1024) at most.
+    const std::int64_t step = physics_->step_ns();
+    const std::int64_t span =
+        history.ran_ns < 0
+            ? kRunaheadMaxNs
+            : std::min(kRunaheadMaxNs, history.ran_ns + history.ran_ns / 4 + 8 * step);
+    (void)forecast_->RunTo(now_ns + span, *physics_, *faults_, kRunaheadMaxFrames);
+    // Its frames into the firmware's rings, up to the first that cannot go there (then none
+    // of its instant: the firmware stops before it).
+    until = forecast_->reached_ns();
+    for (const ForecastFrame& f : forecast_->frames()) {
+      if (!link_->Prepare(f.frame, f.t_ns)) {
+        until = f.t_ns - 1;
+        break;
+      }
     }
   }
   if (until <= now_ns) {
@@ -470,13 +494,8 @@ void Run::RunAhead(std::int64_t now_ns) {
     if (f.t_ns < firmware_ahead_ns_ && f.t_ns != last_instant) ++turns_saved;
     last_instant = f.t_ns;
   }
-  if (turns_saved == 0) {
-    runahead_backoff_ =
-        std::min<std::uint32_t>(std::max<std::uint32_t>(1, runahead_backoff_ * 2), 1024);
-    runahead_skip_ = runahead_backoff_;
-  } else {
-    runahead_backoff_ = 0;
-  }
+  runahead_history_[key].saved_nothing = turns_saved == 0;
+  runahead_history_[key].ran_ns = firmware_ahead_ns_ - now_ns;
   if (firmware_ahead_ns_ <= now_ns) {
     firmware_ahead_ns_ = -1;
     forecast_.reset();
@@ -616,6 +635,8 @@ void Run::StartFirmware() {
   std::vector<std::pair<std::string, std::string>> env;
   if (link_->private_bus() && o_.ucan_child_env) env = o_.ucan_child_env(link_->runtime_dir());
   env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
+  // Runahead: the firmware's sockets get their own doorbell (bus/ucan_protocol.h).
+  if (virtual_time_ && o_.runahead) env.emplace_back(bus::ucan::kOwnBellEnv, "1");
   if (virtual_time_) {
     // The clock's library goes first: the bus library's own waits are then virtual too.
     const std::string lib = VtimeLibrary(env);
@@ -802,7 +823,8 @@ json Run::Report(double wall_s) {
   // Where the wall time went (docs/performance.md, "Reading a run's wall block").
   const double virtual_s = static_cast<double>(run_.now_ns) * 1e-9;
   const std::uint64_t handovers = link_ ? link_->handovers() : 0;
-  const double staged_s = wall_.physics_s + wall_.devices_bus_s + wall_.handover_s;
+  const double staged_s =
+      wall_.physics_s + wall_.devices_bus_s + wall_.handover_s + wall_.forecast_s;
   r["wall"] = json{
       {"wall_time_s", wall_s},
       {"real_time_factor", wall_s > 0 ? sim / wall_s : 0.0},
@@ -819,6 +841,7 @@ json Run::Report(double wall_s) {
       {"kernel_looks", clock_ ? json(clock_->kernel_looks()) : json()},
       {"physics_s", wall_.physics_s},
       {"devices_bus_s", wall_.devices_bus_s},
+      {"forecast_s", wall_.forecast_s},
       {"other_s", std::max(0.0, wall_s - staged_s)}};
   if (o_.runahead && clock_) {
     r["wall"]["runahead"] = json{{"windows", runahead_.windows},

@@ -13,6 +13,7 @@ struct WallAccount {
   double physics_s = 0;      ///< Physics steps, waiting for the physics worker included.
   double devices_bus_s = 0;  ///< Devices' readings and frames, the bus model, can.log.
   double handover_s = 0;     ///< The firmware's turns: from handing it the CPU to its return.
+  double forecast_s = 0;     ///< Runahead: the bus forecasts and putting their frames ahead.
 };
 
 /// Adds the wall time of its scope to `into` (two steady_clock reads: ~50 ns).
