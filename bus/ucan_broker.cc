@@ -673,6 +673,17 @@ struct UcanBroker::Impl {
     return it == clients.end() || it->second->dead ? nullptr : it->second.get();
   }
 
+  /// The local port `port` that may send `frame` (encoded into `buf`, its length into `len`),
+  /// lock held; nullptr for an invalid frame or a closed port.
+  Client* LocalSender(int port, const CanFrame& frame, canfd_frame& buf, std::size_t& len) {
+    len = internal::EncodeFrame(frame, buf);
+    if (len == 0) return nullptr;
+    Client* c = Find(static_cast<std::uint32_t>(port));
+    if (c == nullptr || !c->local || c->bus == nullptr) return nullptr;
+    if (len == ucan::kCanFdMtu && !c->options.fd_frames) return nullptr;
+    return c;
+  }
+
   void SendReply(Client* c, const Reply& reply, const void* extra = nullptr,
                  std::size_t extra_len = 0, int pass_fd = -1) {
     iovec iov[2] = {{const_cast<Reply*>(&reply), sizeof(reply)},
@@ -1488,12 +1499,10 @@ int UcanBroker::OpenLocalPort(const std::string& bus_name) {
 
 bool UcanBroker::SendLocal(int port, const CanFrame& frame) {
   canfd_frame buf;
-  const std::size_t frame_len = internal::EncodeFrame(frame, buf);
-  if (frame_len == 0) return false;
+  std::size_t frame_len = 0;
   std::lock_guard lk(impl_->mu);
-  Client* c = impl_->Find(static_cast<std::uint32_t>(port));
-  if (c == nullptr || !c->local || c->bus == nullptr) return false;
-  if (frame_len == ucan::kCanFdMtu && !c->options.fd_frames) return false;
+  Client* c = impl_->LocalSender(port, frame, buf, frame_len);
+  if (c == nullptr) return false;
   Pending& f = impl_->pending.emplace_back();
   f.stamp_ns = MonotonicNs();  // as a socket's TxStamp: its place in the bus order
   f.bus = c->bus;
@@ -1509,12 +1518,10 @@ bool UcanBroker::SendLocal(int port, const CanFrame& frame) {
 
 bool UcanBroker::PrepareLocal(int port, const CanFrame& frame, std::int64_t instant_ns) {
   canfd_frame buf;
-  const std::size_t frame_len = internal::EncodeFrame(frame, buf);
-  if (frame_len == 0) return false;
+  std::size_t frame_len = 0;
   std::lock_guard lk(impl_->mu);
-  Client* c = impl_->Find(static_cast<std::uint32_t>(port));
-  if (c == nullptr || !c->local || c->bus == nullptr) return false;
-  if (frame_len == ucan::kCanFdMtu && !c->options.fd_frames) return false;
+  Client* c = impl_->LocalSender(port, frame, buf, frame_len);
+  if (c == nullptr) return false;
   return impl_->PrepareFrame(c, reinterpret_cast<const std::uint8_t*>(&buf), frame_len, buf.can_id,
                              instant_ns);
 }

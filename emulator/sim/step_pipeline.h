@@ -90,23 +90,9 @@ class StepPipeline {
     if (inline_from_ >= 0 && head_.load() <= next_) return ComputeInline();
     if (head_.load(std::memory_order_acquire) > next_) return slots_[next_++ & mask_];
     const auto wait_start = std::chrono::steady_clock::now();
-    for (int spin = 0; head_.load(std::memory_order_acquire) <= next_; ++spin) {
-      if (done_.load(std::memory_order_acquire) && head_.load() <= next_) {
-        throw std::runtime_error(error_.empty() ? "physics: no step left to consume"
-                                                : "physics worker: " + error_);
-      }
-      if (spin < kConsumerSpins) {
-        _mm_pause();
-        continue;
-      }
-      const std::uint32_t seq = data_seq_.load();
-      consumer_waiting_.store(true);
-      if (head_.load() > next_ || done_.load()) {
-        consumer_waiting_.store(false);
-        continue;
-      }
-      data_seq_.wait(seq);
-      consumer_waiting_.store(false);
+    if (!WaitForSlot(next_)) {
+      throw std::runtime_error(error_.empty() ? "physics: no step left to consume"
+                                              : "physics worker: " + error_);
     }
     const std::int64_t waited = std::chrono::duration_cast<std::chrono::nanoseconds>(
                                     std::chrono::steady_clock::now() - wait_start)
@@ -133,8 +119,17 @@ class StepPipeline {
       }
       return &slots_[index & mask_];
     }
+    return WaitForSlot(index) ? &slots_[index & mask_] : nullptr;
+  }
+
+ private:
+  static constexpr std::int64_t kJudgeSteps = 1024;
+
+  // The consumer waits (spins, then sleeps) until the worker filled slot `index`; false when
+  // the worker is done without it.
+  bool WaitForSlot(std::uint64_t index) {
     for (int spin = 0; head_.load(std::memory_order_acquire) <= index; ++spin) {
-      if (done_.load(std::memory_order_acquire) && head_.load() <= index) return nullptr;
+      if (done_.load(std::memory_order_acquire) && head_.load() <= index) return false;
       if (spin < kConsumerSpins) {
         _mm_pause();
         continue;
@@ -148,11 +143,8 @@ class StepPipeline {
       data_seq_.wait(seq);
       consumer_waiting_.store(false);
     }
-    return &slots_[index & mask_];
+    return true;
   }
-
- private:
-  static constexpr std::int64_t kJudgeSteps = 1024;
 
   static std::int64_t ThreadCpuNs() {
     timespec ts{};

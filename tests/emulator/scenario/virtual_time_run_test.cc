@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -149,28 +150,41 @@ std::string ExpectCustomerRun(const fs::path& dir, const std::string& scenario,
   return log;
 }
 
+// The shipped scenarios the runahead tests run (firmware SYNC every 0.25 s; faults of every
+// kind: sensor, frame, device, bus).
+constexpr const char* kRunaheadScenarios[] = {"smoke/paper000_slip_short", "faults_demo",
+                                              "bus_faults"};
+
+// Shipped scenario `name` run one frame at a time into dir/plain and with `with` set into
+// dir/other: the second must not fail, and can.log, events.jsonl and the report (without its
+// wall block) must be those of the first. Returns both results.
+std::pair<RunResult, RunResult> RunPlainAndWith(const fs::path& dir, const char* name,
+                                                const std::function<void(RunOptions&)>& with) {
+  const Scenario s =
+      LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
+  RunOptions one_by_one = testing::BuildTreeRunOptions(dir / "plain");
+  one_by_one.runahead = false;
+  RunResult plain = RunScenario(s, one_by_one);
+  RunOptions o = testing::BuildTreeRunOptions(dir / "other");
+  with(o);
+  RunResult other = RunScenario(s, o);
+  EXPECT_EQ(other.failure, "");
+  EXPECT_EQ(plain.report["verdict"], "pass");
+  EXPECT_EQ(Slurp(dir / "plain" / "can.log"), Slurp(dir / "other" / "can.log"));
+  EXPECT_EQ(Slurp(dir / "plain" / "events.jsonl"), Slurp(dir / "other" / "events.jsonl"));
+  EXPECT_EQ(testing::ReportWithoutWall(dir / "plain"), testing::ReportWithoutWall(dir / "other"));
+  return {std::move(plain), std::move(other)};
+}
+
 // The bus forecast a firmware could run ahead through (BusForecast): for a firmware that sends
 // twice per 0.25 s cycle, the run hands it exactly the forecast frames at their instants (a
 // difference fails the checked run), and it would need far fewer hand-overs. The forecast's
-// copies of the devices and fault injectors leave the run's record as it is: with faults of
-// every kind (sensor, frame, device, bus), can.log, events.jsonl and the report are those of a
-// run without it.
+// copies of the devices and fault injectors leave the run's record as it is.
 TEST_F(VirtualTimeRun, TheRunHandsTheFirmwareExactlyTheBusForecast) {
-  for (const char* name : {"smoke/paper000_slip_short", "faults_demo", "bus_faults"}) {
+  for (const char* name : kRunaheadScenarios) {
     SCOPED_TRACE(name);
-    const Scenario s =
-        LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
-    const fs::path dir = dir_ / fs::path(name).filename();
-    const RunResult plain = RunScenario(s, testing::BuildTreeRunOptions(dir / "plain"));
-    RunOptions o = testing::BuildTreeRunOptions(dir / "checked");
-    o.check_runahead = true;
-    const RunResult checked = RunScenario(s, o);
-    EXPECT_EQ(checked.failure, "");
-    EXPECT_EQ(plain.report["verdict"], "pass");
-    EXPECT_EQ(Slurp(dir / "plain" / "can.log"), Slurp(dir / "checked" / "can.log"));
-    EXPECT_EQ(Slurp(dir / "plain" / "events.jsonl"), Slurp(dir / "checked" / "events.jsonl"));
-    EXPECT_EQ(testing::ReportWithoutWall(dir / "plain"),
-              testing::ReportWithoutWall(dir / "checked"));
+    const auto [plain, checked] = RunPlainAndWith(dir_ / fs::path(name).filename(), name,
+                                                  [](RunOptions& o) { o.check_runahead = true; });
     const auto& wall = checked.report["wall"];
     const auto& ra = wall["runahead_check"];
     EXPECT_GE(ra["frames_run_through"].get<int>(), 100) << ra.dump();
@@ -184,32 +198,19 @@ TEST_F(VirtualTimeRun, TheRunHandsTheFirmwareExactlyTheBusForecast) {
 // Runahead: the forecast frames go into the firmware's rings ahead of their instants and the
 // firmware moves its clock itself through them and its own deadlines until it sends. What it
 // sees, and so every artefact, is what it would have seen one frame at a time (can.log,
-// events.jsonl, the report: the same bytes), with a turn at each send only: ~12 hand-overs a
-// simulated second where the run needs ~116 (paper000_slip over 42 s: 8.8).
+// events.jsonl, the report: the same bytes). How many turns it saves depends on the load (the
+// host takes the clock back when it finds a thread asleep outside the library's waits): on an
+// idle machine ~12 hand-overs a simulated second where the run needs ~116 (paper000_slip over
+// 42 s: 8.8; docs/performance.md), so only that it ran ahead at all is checked here.
 TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughTheForecastAndNothingChanges) {
-  for (const char* name : {"smoke/paper000_slip_short", "faults_demo", "bus_faults"}) {
+  for (const char* name : kRunaheadScenarios) {
     SCOPED_TRACE(name);
-    const Scenario s =
-        LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
-    const fs::path dir = dir_ / fs::path(name).filename();
-    RunOptions one_by_one = testing::BuildTreeRunOptions(dir / "plain");
-    one_by_one.runahead = false;
-    const RunResult plain = RunScenario(s, one_by_one);
-    RunOptions o = testing::BuildTreeRunOptions(dir / "ahead");
-    o.runahead = true;
-    const RunResult ahead = RunScenario(s, o);
-    EXPECT_EQ(ahead.failure, "");
-    EXPECT_EQ(plain.report["verdict"], "pass");
-    EXPECT_EQ(Slurp(dir / "plain" / "can.log"), Slurp(dir / "ahead" / "can.log"));
-    EXPECT_EQ(Slurp(dir / "plain" / "events.jsonl"), Slurp(dir / "ahead" / "events.jsonl"));
-    EXPECT_EQ(testing::ReportWithoutWall(dir / "plain"), testing::ReportWithoutWall(dir / "ahead"));
+    const auto [plain, ahead] = RunPlainAndWith(dir_ / fs::path(name).filename(), name,
+                                                [](RunOptions& o) { o.runahead = true; });
     const auto& wall = ahead.report["wall"];
     EXPECT_GE(wall["runahead"]["frames_run_through"].get<int>(), 100) << wall.dump();
     EXPECT_GE(wall["runahead"]["local_advances"].get<int>(), 100) << wall.dump();
-    // A tenth or so of the turns (start-up and settling, not run ahead, included).
-    const double one_by_one_turns = plain.report["wall"]["handovers_per_sim_s"].get<double>();
-    EXPECT_GE(one_by_one_turns, 100.0);
-    EXPECT_LE(wall["handovers_per_sim_s"].get<double>(), 0.15 * one_by_one_turns) << wall.dump();
+    EXPECT_FALSE(plain.report["wall"].contains("runahead"));
   }
 }
 
