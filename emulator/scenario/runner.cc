@@ -201,8 +201,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   bool firmware_stopped_ = false;     // StopFirmwareForDebugger
   std::uint64_t progress_calls_ = 0;  // Progress(false)
   std::vector<bus::CandumpRecord> bus_log_;  // can.log read back for logs: (WriteOtherLogs)
-  // --check-runahead: the forecast of the current window and how much of it was matched; the
-  // frames sent to the firmware since the last turn; the firmware's frames so far.
+  // Runahead (--check-runahead, --runahead): the forecast of the current window and how much
+  // of it was matched; the frames sent to the firmware since the last turn; the firmware's
+  // frames so far.
   std::unique_ptr<BusForecast> forecast_;
   // --runahead: where the firmware moved its clock in the current window (-1: no window); what
   // windows after the firmware's last frame of a turn (by its id) did last time.
@@ -463,6 +464,8 @@ void Run::RunAhead(std::int64_t now_ns) {
     // Its frames into the firmware's rings, up to the first that cannot go there (then none
     // of its instant: the firmware stops before it).
     until = forecast_->reached_ns();
+    // --stop-at: the firmware stops for its debugger at that instant, not past it.
+    if (o_.stop_firmware_at_ns >= 0) until = std::min(until, o_.stop_firmware_at_ns - 1);
     for (const ForecastFrame& f : forecast_->frames()) {
       if (!link_->Prepare(f.frame, f.t_ns)) {
         until = f.t_ns - 1;
