@@ -375,6 +375,24 @@ void VirtualClock::FreeDeadThread(int slot) {
 
 void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
                                  std::int64_t phase_ns) {
+  // A vouched fd wait that a write of the host's came after (the host counts its writes after
+  // making them, when the thread may have begun its next wait already) is no longer vouched
+  // for, and the firmware's library would take its thread for on its way out of it and never
+  // move the clock. Asleep in the kernel now, after all of the host's writes, none of its fds
+  // is ready: it is vouched for again, from here.
+  const int threads = page_->threads_used.load();
+  for (int i = 0; i < threads; ++i) {
+    vt::ThreadSlot& s = page_->threads[i];
+    if (s.state.load() != vt::kWaiting || s.kind.load() != vt::kFdWait || s.vouched.load() == 0 ||
+        vt::VouchHolds(*page_, s)) {
+      continue;
+    }
+    const std::uint32_t wakes = page_->fd_wakes.load();
+    if (KernelState(i, s.pid.load(), s.tid.load(), nullptr) == Kernel::kAsleep &&
+        s.state.load() == vt::kWaiting) {
+      s.entry_wakes.store(wakes);
+    }
+  }
   page_->runahead_until_ns.store(kMonotonicAtStartNs + until_ns);
   page_->runahead_step_ns.store(step_ns);
   page_->runahead_phase_ns.store(kMonotonicAtStartNs + phase_ns);

@@ -443,9 +443,8 @@ void Run::RunAhead(std::int64_t now_ns) {
   // What the firmware sent in this turn says how long its next run through frames will be: a
   // window after the same frame of its (its SYNC, which the devices answer at once) that saved
   // no turn last time is not made again, but one in 16 such turns, to follow a firmware that
-  // changes. After a turn without a frame of its, the last such window says it.
+  // changes. Turns without a frame of its share one history.
   const std::uint32_t key = last_sent_at_ns_ == now_ns ? last_sent_id_ : kNoFrameSent;
-  if (key == kNoFrameSent) runahead_history_[key] = RunaheadHistory{};
   RunaheadHistory& history = runahead_history_[key];
   if (history.saved_nothing && ++history.skipped % 16 != 0) return;
   std::int64_t until = 0;
