@@ -35,6 +35,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "bus/internal/passed_fd.h"
 #include "bus/internal/socketcan_convert.h"
 #include "bus/internal/unique_fd.h"
 #include "bus/ucan_protocol.h"
@@ -691,16 +692,8 @@ struct UcanBroker::Impl {
     msghdr msg{};
     msg.msg_iov = iov;
     msg.msg_iovlen = extra_len ? 2 : 1;
-    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
-    if (pass_fd >= 0) {
-      msg.msg_control = control;
-      msg.msg_controllen = sizeof(control);
-      cmsghdr* cm = CMSG_FIRSTHDR(&msg);
-      cm->cmsg_level = SOL_SOCKET;
-      cm->cmsg_type = SCM_RIGHTS;
-      cm->cmsg_len = CMSG_LEN(sizeof(int));
-      std::memcpy(CMSG_DATA(cm), &pass_fd, sizeof(int));
-    }
+    internal::PassedFdControl control;
+    if (pass_fd >= 0) internal::AttachFd(msg, control, pass_fd);
     [[maybe_unused]] ssize_t n = ::sendmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
     ++client_progress;
     woken.other = true;
@@ -747,23 +740,12 @@ struct UcanBroker::Impl {
     msghdr msg{};
     msg.msg_iov = &iov;
     msg.msg_iovlen = 1;
-    alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
-    msg.msg_control = control;
-    msg.msg_controllen = sizeof(control);
+    internal::PassedFdControl control;
+    internal::ExpectFd(msg, control);
     const ssize_t n = ::recvmsg(c->fd.get(), &msg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC);
     if (n < 0 && (errno == EAGAIN || errno == EINTR)) return;
     // kOpenOwnBell: the client's end of its own socket pair (closed unless taken below).
-    Fd passed;
-    if (n >= 0) {
-      for (cmsghdr* cm = CMSG_FIRSTHDR(&msg); cm != nullptr; cm = CMSG_NXTHDR(&msg, cm)) {
-        if (cm->cmsg_level == SOL_SOCKET && cm->cmsg_type == SCM_RIGHTS &&
-            cm->cmsg_len >= CMSG_LEN(sizeof(int))) {
-          int got = -1;
-          std::memcpy(&got, CMSG_DATA(cm), sizeof(got));
-          passed = Fd(got);
-        }
-      }
-    }
+    Fd passed(n >= 0 ? internal::ReceivedFd(msg) : -1);
     Request req;
     if (n < static_cast<ssize_t>(sizeof(Request))) {
       ++orphan_bad_messages;

@@ -45,6 +45,8 @@
 #include <new>
 
 #include "bus/internal/interpose_real.h"
+#include "bus/internal/passed_fd.h"
+#include "bus/internal/peer_symbol.h"
 #include "bus/ucan_protocol.h"
 #include "bus/ucan_runtime_dir.h"
 #include "bus/vtime_protocol.h"
@@ -54,6 +56,7 @@
 namespace {
 
 namespace ucan = wheelhil::bus::ucan;
+namespace internal = wheelhil::bus::internal;
 
 constexpr int kMaxFds = 1 << 16;
 constexpr int kSoTimestampOld = 29;
@@ -205,39 +208,28 @@ void Release(UcanSocket* s) {
 /// sent or received as a message, a doorbell for it, a close): the virtual clock's library
 /// (bus/vtime_interpose.cc) counts them, so the emulator knows when a look at the sockets can
 /// find nothing new from the firmware. Nothing without that library.
+internal::PeerSymbol<void (*)()> g_vtime_note_bus_call("wheelhil_vtime_note_bus_call");
 void NoteBusCall() {
-  using Fn = void (*)();
-  static std::atomic<Fn> fn{nullptr};
-  static std::atomic<bool> looked{false};
-  if (!looked.load(std::memory_order_acquire)) {
-    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_bus_call")));
-    looked.store(true, std::memory_order_release);
-  }
-  if (Fn f = fn.load(std::memory_order_relaxed)) f();
+  if (auto f = g_vtime_note_bus_call.get()) f();
 }
 
-/// Lock held. Drops fd's reference, if any.
 /// Every frame sent counts for the virtual clock's library (Page::bus_sends): while the firmware
 /// runs ahead on its own clock, a send gives the clock back to the emulator.
+internal::PeerSymbol<void (*)()> g_vtime_note_frame_sent("wheelhil_vtime_note_frame_sent");
 void NoteFrameSent() {
-  using Fn = void (*)();
-  static std::atomic<Fn> fn{nullptr};
-  static std::atomic<bool> looked{false};
-  if (!looked.load(std::memory_order_acquire)) {
-    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent")));
-    looked.store(true, std::memory_order_release);
-  }
-  if (Fn f = fn.load(std::memory_order_relaxed)) f();
+  if (auto f = g_vtime_note_frame_sent.get()) f();
 }
 
 /// The run asked for runahead (ucan::kOwnBellEnv) and the virtual clock's library is loaded:
 /// the firmware may move the clock itself and deliver the frames the broker put ahead in its
 /// rings (kOpenOwnBell).
 bool OwnBellWanted() {
-  static const bool wanted = getenv(ucan::kOwnBellEnv) != nullptr &&
-                             dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent") != nullptr;
+  static const bool wanted =
+      getenv(ucan::kOwnBellEnv) != nullptr && g_vtime_note_frame_sent.get() != nullptr;
   return wanted;
 }
+
+/// Lock held. Drops fd's reference, if any.
 
 void DetachLocked(int fd) {
   if (fd < 0 || fd >= kMaxFds || g_sockets[fd] == nullptr) return;
@@ -344,16 +336,8 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msghdr msg{};
   msg.msg_iov = iov;
   msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
-  alignas(cmsghdr) char send_control[CMSG_SPACE(sizeof(int))] = {};
-  if (send_fd >= 0) {
-    msg.msg_control = send_control;
-    msg.msg_controllen = sizeof(send_control);
-    cmsghdr* cm = CMSG_FIRSTHDR(&msg);
-    cm->cmsg_level = SOL_SOCKET;
-    cm->cmsg_type = SCM_RIGHTS;
-    cm->cmsg_len = CMSG_LEN(sizeof(int));
-    std::memcpy(CMSG_DATA(cm), &send_fd, sizeof(int));
-  }
+  internal::PassedFdControl send_control;
+  if (send_fd >= 0) internal::AttachFd(msg, send_control, send_fd);
   if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0 && errno != EPIPE && errno != ECONNRESET) {
     const int err = errno;
     real_close()(s);
@@ -371,24 +355,16 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msghdr rmsg{};
   rmsg.msg_iov = riov;
   rmsg.msg_iovlen = extra != nullptr ? 2 : 1;
-  alignas(cmsghdr) char control[CMSG_SPACE(sizeof(int))] = {};
-  rmsg.msg_control = control;
-  rmsg.msg_controllen = sizeof(control);
+  internal::PassedFdControl control;
+  internal::ExpectFd(rmsg, control);
   ssize_t n = rc == 1 ? real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC) : -1;
   // A socket closed with our request unread reports ECONNRESET once, before the reply.
   if (n < 0 && errno == ECONNRESET) n = real_recvmsg()(s, &rmsg, MSG_DONTWAIT | MSG_CMSG_CLOEXEC);
-  if (n >= 0) {
-    for (cmsghdr* c = CMSG_FIRSTHDR(&rmsg); c != nullptr; c = CMSG_NXTHDR(&rmsg, c)) {
-      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_RIGHTS &&
-          c->cmsg_len >= CMSG_LEN(sizeof(int))) {
-        int got = -1;
-        std::memcpy(&got, CMSG_DATA(c), sizeof(got));
-        if (passed_fd != nullptr) {
-          *passed_fd = got;
-        } else {
-          real_close()(got);
-        }
-      }
+  if (const int got = n >= 0 ? internal::ReceivedFd(rmsg) : -1; got >= 0) {
+    if (passed_fd != nullptr) {
+      *passed_fd = got;
+    } else {
+      real_close()(got);
     }
   }
   if (n < static_cast<ssize_t>(sizeof(*reply)) || reply->magic != ucan::kMagic) {

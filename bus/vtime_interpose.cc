@@ -42,6 +42,7 @@
 #include <cstring>
 
 #include "bus/internal/interpose_real.h"
+#include "bus/internal/peer_symbol.h"
 #include "bus/vtime_protocol.h"
 
 #define VTIME_EXPORT extern "C" __attribute__((visibility("default")))
@@ -49,6 +50,7 @@
 namespace {
 
 namespace vt = wheelhil::bus::vtime;
+namespace internal = wheelhil::bus::internal;
 
 // ---- the real functions (bus/internal/interpose_real.h) ----
 
@@ -418,18 +420,9 @@ void RunAhead() {
 
 /// libwheelhil_ucan.so's frames put ahead (runahead): the next one's instant, and publishing
 /// those due (bus/ucan_interpose.cc). nullptr without that library.
-using NextPreparedFn = std::int64_t (*)();
-using PublishPreparedFn = std::uint32_t (*)(std::int64_t, std::int64_t);
-template <typename Fn>
-Fn UcanFunction(const char* name) {
-  static std::atomic<Fn> fn{nullptr};
-  static std::atomic<bool> looked{false};
-  if (!looked.load(std::memory_order_acquire)) {
-    fn.store(reinterpret_cast<Fn>(dlsym(RTLD_DEFAULT, name)));
-    looked.store(true, std::memory_order_release);
-  }
-  return fn.load(std::memory_order_relaxed);
-}
+internal::PeerSymbol<std::int64_t (*)()> g_ucan_next_prepared("wheelhil_ucan_next_prepared_ns");
+internal::PeerSymbol<std::uint32_t (*)(std::int64_t, std::int64_t)> g_ucan_publish_prepared(
+    "wheelhil_ucan_publish_prepared");
 
 bool AdvanceOnce() {
   const pid_t me = g_page->processes[g_proc].pid.load();
@@ -466,8 +459,8 @@ bool AdvanceOnce() {
     const vt::TimerSlot& t = g_page->timers[i];
     if (t.state.load() == vt::kTimerArmed) next = std::min(next, t.next_ns.load());
   }
-  const auto next_frame = UcanFunction<NextPreparedFn>("wheelhil_ucan_next_prepared_ns");
-  const auto publish = UcanFunction<PublishPreparedFn>("wheelhil_ucan_publish_prepared");
+  const auto next_frame = g_ucan_next_prepared.get();
+  const auto publish = g_ucan_publish_prepared.get();
   if (next_frame != nullptr && publish != nullptr) next = std::min(next, next_frame());
   const std::int64_t now = Now();
   const std::int64_t step = g_page->runahead_step_ns.load();
@@ -754,15 +747,8 @@ int PollUntilSignalled(pollfd* fds, nfds_t n, std::int64_t deadline, const sigse
 /// loaded): 0 not a bus socket of the broker, 1 one with nothing to read, 2 one that may have;
 /// its client id on the broker.
 using BusSocketFn = int (*)(int, std::uint32_t*);
-BusSocketFn UcanBusSocketState() {
-  static std::atomic<BusSocketFn> fn{nullptr};
-  static std::atomic<bool> looked{false};
-  if (!looked.load(std::memory_order_acquire)) {
-    fn.store(reinterpret_cast<BusSocketFn>(dlsym(RTLD_DEFAULT, "wheelhil_ucan_bus_socket_state")));
-    looked.store(true, std::memory_order_release);
-  }
-  return fn.load(std::memory_order_relaxed);
-}
+internal::PeerSymbol<BusSocketFn> g_ucan_bus_socket_state("wheelhil_ucan_bus_socket_state");
+BusSocketFn UcanBusSocketState() { return g_ucan_bus_socket_state.get(); }
 
 /// The timer slot of fd when it is a virtual timerfd of this process, else -1 (no system call:
 /// the pid is the process slot's).
