@@ -328,7 +328,8 @@ void Run::SettleFirmware() {
     firmware_ahead_ns_ = -1;
     forecast_.reset();
   }
-  const bool deadline_turn = clock_->NextDeadlineNs() <= now;
+  // --check-runahead only: a scan of the firmware's waits and timers at every turn.
+  const bool deadline_turn = o_.check_runahead && clock_->NextDeadlineNs() <= now;
   const std::uint64_t sent_before = firmware_frames_seen_;
   const std::uint64_t handovers_before = link_->handovers();
   clock_->SetNow(now);
