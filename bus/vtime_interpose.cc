@@ -123,6 +123,9 @@ thread_local int t_slot = -1;
 // Each thread's wake eventfd, by thread slot, as fd + 1 (0: none): the library's own
 // descriptors, which the program's close/close_range/closefrom/dup2 must not take.
 std::atomic<int> g_wake_fd_plus1[vt::kMaxThreads];
+// The wake eventfd number a thread polls (fd + 1), set from before its ppoll until after it:
+// a dup2 onto that number signals the thread until it is out of that ppoll (MoveLibraryFd).
+std::atomic<int> g_polling_wake_plus1[vt::kMaxThreads];
 // Waits interrupted by a signal handler's own wait (a sleep in a SIGALRM handler during a
 // condition wait): saved while the handler's wait has the slot, handed back after it, as the
 // kernel's waits nest. Deeper nesting than kMaxNestedWaits is not saved.
@@ -221,19 +224,21 @@ int ClaimThreadSlot(pid_t tid) {
   ::abort();
 }
 
-void RunAhead();
 thread_local bool t_holds_clock = false;  // HoldClock
+bool HoldClock();
+void AdvanceHeldClock();
 
 void FreeThreadSlot(int i) {
+  // A thread that ends may leave every other one waiting: it moves the clock on, as the last
+  // to wait would (holding it from before it is gone, as BeginWait does).
+  const bool held = HoldClock();
   vt::ThreadSlot& s = g_page->threads[i];
   s.tid.store(0);
   s.pid.store(0);
   vt::MarkLocallyWoken(*g_page, i, false);
   s.state.store(vt::kFree);
   Transition(true);
-  // A thread that ends may leave every other one waiting: it moves the clock on, as the last
-  // to wait would.
-  if (g_page->runahead.load(std::memory_order_relaxed) != vt::kHostClock) RunAhead();
+  if (held) AdvanceHeldClock();
 }
 
 /// The calling thread's slot (claimed at its first call for a thread the library did not see
@@ -280,6 +285,11 @@ struct WaitTarget {
 void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline, WaitTarget target = {},
                bool vouched = false, std::uint32_t entry_wakes = 0, std::uint32_t channels = 0) {
   const int depth = t_wait_depth;
+  // Runahead: the clock is held from before the wait is published until this thread has moved
+  // it on (or found it cannot), so the host never sees every thread waiting with the clock
+  // granted and nobody about to move it. A wait in a signal handler leaves the clock to the
+  // one it interrupts.
+  const bool held = depth == 0 && HoldClock();
   // Counted before the slot is written: a handler that runs from here on saves and restores
   // what it finds, and this wait then finishes writing its own.
   t_wait_depth = depth + 1;
@@ -301,10 +311,7 @@ void BeginWait(vt::ThreadSlot& s, vt::WaitKind kind, std::int64_t deadline, Wait
   s.calls.store(0, std::memory_order_relaxed);
   s.state.store(vt::kWaiting);
   Transition(true);
-  if (depth == 0 && !t_holds_clock &&
-      g_page->runahead.load(std::memory_order_relaxed) != vt::kHostClock) {
-    RunAhead();
-  }
+  if (held) AdvanceHeldClock();
 }
 
 void EndWait(vt::ThreadSlot& s) {
@@ -338,7 +345,7 @@ void EndWait(vt::ThreadSlot& s) {
 
 /// Gives the clock back to the host (this thread holds kLocalAdvance) and wakes it.
 void YieldClock() {
-  g_page->runahead.store(vt::kHostClock);
+  g_page->runahead.store(vt::NextRunaheadWord(g_page->runahead.load(), vt::kHostClock));
   Transition(true);
 }
 
@@ -366,16 +373,18 @@ bool LocallyEndable(std::int64_t t, pid_t me) {
 }
 
 /// Runahead: takes the clock (kLocalAdvance) while it is granted, waiting out another thread
-/// that moves it; false when the clock is the host's.
+/// that moves it; false when the clock is the host's or this thread holds it already.
 bool HoldClock() {
+  if (t_holds_clock) return false;
   for (;;) {
-    std::uint32_t expect = vt::kGranted;
-    if (g_page->runahead.load(std::memory_order_relaxed) == vt::kHostClock) return false;
-    if (g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) {
+    std::uint32_t word = g_page->runahead.load();
+    const std::uint32_t state = vt::RunaheadStateOf(word);
+    if (state == vt::kHostClock) return false;
+    if (state == vt::kGranted && g_page->runahead.compare_exchange_strong(
+                                     word, vt::NextRunaheadWord(word, vt::kLocalAdvance))) {
       t_holds_clock = true;
       return true;
     }
-    if (expect == vt::kHostClock) return false;
     ::sched_yield();  // on the firmware's one CPU, the holder runs
   }
 }
@@ -383,8 +392,7 @@ bool HoldClock() {
 /// Lets the clock go without moving it (a wait that found its fds ready).
 void ReleaseClock() {
   t_holds_clock = false;
-  g_page->runahead.store(vt::kGranted);
-  if (g_page->runahead_missed.load() != 0) RunAhead();
+  g_page->runahead.store(vt::NextRunaheadWord(g_page->runahead.load(), vt::kGranted));
 }
 
 /// With kLocalAdvance held: when every thread of the firmware is in a wait only the clock can
@@ -392,29 +400,13 @@ void ReleaseClock() {
 /// what is due then, as the host's VirtualClock::WakeDue would, or gives the clock back (false).
 bool AdvanceOnce();
 
-/// With the clock held and this thread's wait published: moves it on, as RunAhead.
+/// With the clock held and this thread's wait published (or its slot freed): moves the clock
+/// on and lets it go, or gives it back to the host.
 void AdvanceHeldClock() {
-  t_holds_clock = false;
-  g_page->runahead_missed.store(0);
-  if (!AdvanceOnce()) return;
-  g_page->runahead.store(vt::kGranted);
-  if (g_page->runahead_missed.load() != 0) RunAhead();
-}
-
-/// Called by a thread right after it published a wait while the clock is granted.
-void RunAhead() {
-  for (;;) {
-    std::uint32_t expect = vt::kGranted;
-    if (!g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) {
-      if (expect != vt::kLocalAdvance) return;  // the host's clock
-      g_page->runahead_missed.store(1);
-      expect = vt::kGranted;
-      if (!g_page->runahead.compare_exchange_strong(expect, vt::kLocalAdvance)) return;
-    }
-    g_page->runahead_missed.store(0);
-    if (!AdvanceOnce()) return;
-    g_page->runahead.store(vt::kGranted);
-    if (g_page->runahead_missed.load() == 0) return;
+  if (AdvanceOnce()) {
+    ReleaseClock();
+  } else {
+    t_holds_clock = false;
   }
 }
 
@@ -928,8 +920,16 @@ int WaitOnFds(vt::ThreadSlot& s, pollfd* all, nfds_t n, int wake_fd, const sigse
   }
   BeginWait(s, vt::kFdWait, deadline, target, v != Vouch::kNo, wakes, channels);
   if (held) AdvanceHeldClock();
-  const int rc = real_ppoll()(all, n_all, nullptr, mask);
-  const int err = errno;
+  int rc = -1;
+  int err = EINTR;
+  // Marked before the number is looked at again: a dup2 onto it either finds the mark (and
+  // signals this thread out of the ppoll) or is seen here (its wait goes round again).
+  if (wake_fd >= 0 && t_slot >= 0) g_polling_wake_plus1[t_slot].store(wake_fd + 1);
+  if (wake_fd < 0 || t_slot < 0 || g_wake_fd_plus1[t_slot].load() == wake_fd + 1) {
+    rc = real_ppoll()(all, n_all, nullptr, mask);
+    err = errno;
+  }
+  if (wake_fd >= 0 && t_slot >= 0) g_polling_wake_plus1[t_slot].store(0);
   // Ended by the host (its deadline) before its eventfd write was seen: that write may follow.
   if (wake_fd >= 0 && s.state.load() == vt::kRunning && all[n].revents == 0) {
     t_wake_may_be_left = true;
@@ -1675,9 +1675,15 @@ int MoveLibraryFd(int fd) {
     g_wake_fd_plus1[i].store(moved + 1);
     // A thread polling the old number would look at the program's new file there from its
     // next wake-up on (poll resolves numbers each time): the wake signal sends it round again.
-    if (i != t_slot && s.state.load() == vt::kWaiting && s.kind.load() == vt::kFdWait) {
+    // Signalled on its way into that ppoll, it would enter it after the handler ran: it is
+    // signalled until it is out (a bounded number of times; the firmware's threads share a
+    // CPU, so each yield lets it run).
+    if (i != t_slot) {
       EnsureWakeSignal();
-      real_syscall()(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
+      for (int tries = 0; tries < 10000 && g_polling_wake_plus1[i].load() == fd + 1; ++tries) {
+        real_syscall()(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
+        ::sched_yield();
+      }
     }
     return 0;
   }

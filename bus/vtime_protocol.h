@@ -74,6 +74,15 @@ enum RunaheadState : std::uint32_t {
   kLocalAdvance = 2,  ///< A thread of the firmware is moving it (held by that thread).
 };
 
+/// Page::runahead is a RunaheadState in its low two bits and, above them, a count of its
+/// changes: the host takes the clock back only from the very word it read before it looked
+/// at the threads, so a thread that held the clock and let it go meanwhile (a move the look
+/// may have half seen) makes the take-back fail.
+inline constexpr std::uint32_t RunaheadStateOf(std::uint32_t word) { return word & 3u; }
+inline constexpr std::uint32_t NextRunaheadWord(std::uint32_t word, RunaheadState next) {
+  return (((word >> 2) + 1) << 2) | next;
+}
+
 enum ProcessState : std::uint32_t {
   kProcFree = 0,
   kProcStarting = 1,  ///< Forked or spawned; its library has not registered it yet.
@@ -202,15 +211,14 @@ struct Page {
   /// (`bus_sends` still `runahead_sends`). Otherwise that thread gives the clock back
   /// (kHostClock) and wakes the host. The host takes it back itself (compare-and-swap from
   /// kGranted) when it finds every thread blocked while granted (a thread asleep outside the
-  /// library's waits never calls it). kLocalAdvance excludes the two.
+  /// library's waits never calls it; RunaheadStateOf). kLocalAdvance excludes the two; a thread
+  /// holds it from before it publishes its wait until it moved the clock or gave it back, so every
+  /// thread waiting while the clock is kGranted means nobody will move it.
   alignas(64) std::atomic<std::uint32_t> runahead{kHostClock};
   std::atomic<std::int64_t> runahead_until_ns{0};
   std::atomic<std::int64_t> runahead_step_ns{0};
   std::atomic<std::int64_t> runahead_phase_ns{0};
   std::atomic<std::uint32_t> runahead_sends{0};
-  /// Set by a thread that entered a wait while another held kLocalAdvance: the holder looks
-  /// again before it lets go (that thread may have been the last to block).
-  std::atomic<std::uint32_t> runahead_missed{0};
   /// Per thread slot, a bit: the slot's wait was ended by a thread of the firmware (runahead),
   /// not by the host; cleared when that thread is out of its wait. The host takes such a thread
   /// for running even while the kernel still has it asleep (it was not scheduled yet).

@@ -30,13 +30,6 @@ namespace vt = bus::vtime;
 
 namespace {
 
-// The host's monotonic clock, ns (the runahead safety net's wall time).
-std::int64_t WallNowNs() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_MONOTONIC, &ts);
-  return std::int64_t{ts.tv_sec} * 1000000000 + ts.tv_nsec;
-}
-
 void FutexWake(std::atomic<std::uint32_t>* word) {
   ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(word), FUTEX_WAKE, 1, nullptr, nullptr,
             0);
@@ -191,7 +184,7 @@ void VirtualClock::SendTimerSignal(const vt::TimerSlot& t, pid_t pid) {
 
 int VirtualClock::WakeDue() {
   // While the firmware holds the clock (runahead), it ends its own waits.
-  if (page_->runahead.load() != vt::kHostClock) return 0;
+  if (vt::RunaheadStateOf(page_->runahead.load()) != vt::kHostClock) return 0;
   const std::int64_t now = page_->now_ns.load();
   signalled_.clear();
   int ended = 0;
@@ -397,7 +390,7 @@ void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
   page_->runahead_step_ns.store(step_ns);
   page_->runahead_phase_ns.store(kMonotonicAtStartNs + phase_ns);
   page_->runahead_sends.store(page_->bus_sends.load());
-  page_->runahead.store(vt::kGranted);
+  page_->runahead.store(vt::NextRunaheadWord(page_->runahead.load(), vt::kGranted));
   // A thread that published its wait before the grant does not look again: a wake-up makes
   // the last thread to block look (its wait ends, it waits again).
 }
@@ -419,38 +412,29 @@ bool VirtualClock::KickRunahead() {
   return false;
 }
 
-void VirtualClock::RevokeRunahead() { page_->runahead.store(vt::kHostClock); }
+void VirtualClock::RevokeRunahead() {
+  page_->runahead.store(vt::NextRunaheadWord(page_->runahead.load(), vt::kHostClock));
+}
 
-bool VirtualClock::RunaheadGranted() const { return page_->runahead.load() != vt::kHostClock; }
+bool VirtualClock::RunaheadGranted() const {
+  return vt::RunaheadStateOf(page_->runahead.load()) != vt::kHostClock;
+}
 
 std::uint64_t VirtualClock::local_advances() const { return page_->local_advances.load(); }
 
 bool VirtualClock::Blocked() {
   bool asked_kernel = false;
-  if (page_->runahead.load() == vt::kHostClock) return AllThreadsBlocked(&asked_kernel);
-  const std::uint64_t advances = page_->local_advances.load();
-  if (!AllThreadsBlocked(&asked_kernel)) {
-    granted_but_blocked_since_ns_ = -1;
+  std::uint32_t word = page_->runahead.load();
+  if (vt::RunaheadStateOf(word) == vt::kHostClock) return AllThreadsBlocked(&asked_kernel);
+  if (!AllThreadsBlocked(&asked_kernel) || vt::RunaheadStateOf(word) != vt::kGranted) {
     return false;
   }
-  // Every thread blocked with the clock still granted. In the library's own waits only, the
-  // last to wait moves the clock or gives it back, now or in a moment (it published its wait
-  // first; this thread may have taken its CPU): the clock is taken back only when that did
-  // not happen for kGrantedButBlockedNs of wall time (a safety net). A thread asleep outside
-  // them never will: the clock is taken back at once. The swap fails while a thread moves the
-  // clock; the count changes when one moved it during the look (a thread it woke runs).
-  if (!asked_kernel) {
-    const std::int64_t wall = WallNowNs();
-    if (granted_but_blocked_since_ns_ < 0) granted_but_blocked_since_ns_ = wall;
-    if (wall - granted_but_blocked_since_ns_ < kGrantedButBlockedNs) return false;
-  }
-  granted_but_blocked_since_ns_ = -1;
-  std::uint32_t granted = vt::kGranted;
-  if (!page_->runahead.compare_exchange_strong(granted, vt::kHostClock) &&
-      granted != vt::kHostClock) {
-    return false;
-  }
-  return page_->local_advances.load() == advances;
+  // Every thread blocked with the clock granted and nobody holding it since before the look:
+  // a thread holds it (kLocalAdvance) from before it publishes its wait until it has moved the
+  // clock or given it back, so nobody will (a thread asleep outside the library's waits, or
+  // waits published before the grant that no kick woke). The swap fails if a thread held the
+  // clock since `word` was read.
+  return page_->runahead.compare_exchange_strong(word, vt::NextRunaheadWord(word, vt::kHostClock));
 }
 
 bool VirtualClock::AllThreadsBlocked(bool* asked_kernel) {

@@ -143,11 +143,6 @@ class VirtualClock {
   // Blocked() without the runahead grant's part; `*asked_kernel`: some thread was found blocked
   // only by a look in the kernel (not in a wait the library vouches for).
   bool AllThreadsBlocked(bool* asked_kernel);
-  // Runahead: since when (wall ns; -1: not) the looks found every thread in a wait only the
-  // clock ends with the clock still granted (the last thread to wait moves it or gives it
-  // back, normally at once).
-  std::int64_t granted_but_blocked_since_ns_ = -1;
-  static constexpr std::int64_t kGrantedButBlockedNs = 20'000'000;
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
   // timed wait the library did not see.
