@@ -13,6 +13,7 @@
 
 #include "bus/yaml_fields.h"
 #include "emulator/physics/roller_geometry.h"
+#include "emulator/platforms/robot_description.h"
 
 namespace wheelhil::emulator::platforms {
 
@@ -460,6 +461,7 @@ Platform LoadPlatformYaml(const std::string& text, const std::string& file,
     YAML::Node root = rd.Parse(text);
     if (!root.IsMap()) rd.Fail(root, "(document)", "must be a mapping");
     if (overrides.IsDefined() && !overrides.IsNull()) MergeOverrides(root, overrides, "", rd);
+    ImportRobotDescription(root, rd);
     return ReadPlatform(rd, root);
   });
 }
