@@ -156,6 +156,7 @@ struct WheelInUrdf {
   std::string joint;
   Isometry3d joint_in_base = Isometry3d::Identity();  // the joint frame in the base link frame
   Vector3d axis_base = Vector3d::UnitY();             // the spin axis in the base link frame
+  Vector3d axis_joint = Vector3d::UnitY();            // and in the joint's (the child link's)
   std::set<std::string> links;                        // the child link and all under it
 };
 
@@ -208,9 +209,15 @@ class Importer {
   // that are not fixed.
   bool LinkInBase(const urdf::LinkConstSharedPtr& link, Isometry3d* pose,
                   std::vector<std::string>* moving) const {
+    return LinkIn(base_->name, link, pose, moving);
+  }
+
+  // The same in the frame of link `top` above it.
+  bool LinkIn(const std::string& top, const urdf::LinkConstSharedPtr& link, Isometry3d* pose,
+              std::vector<std::string>* moving) const {
     Isometry3d t = Isometry3d::Identity();
     urdf::LinkConstSharedPtr at = link;
-    while (at->name != base_->name) {
+    while (at->name != top) {
       const urdf::JointConstSharedPtr j = at->parent_joint;
       if (!j) return false;
       if (j->type != urdf::Joint::FIXED && moving != nullptr) moving->push_back(j->name);
@@ -268,7 +275,8 @@ class Importer {
     if (axis.norm() < 1e-12) {
       rd_.Fail(joint_node, f, fmt::format("{} has a zero axis", urdf_.Joint(name)));
     }
-    w.axis_base = w.joint_in_base.linear() * axis.normalized();
+    w.axis_joint = axis.normalized();
+    w.axis_base = w.joint_in_base.linear() * w.axis_joint;
     if (std::abs(w.axis_base.z()) > 1e-6) {
       rd_.Fail(joint_node, f,
                fmt::format("{}: its axis in the base link's frame ({:.6g}, {:.6g}, {:.6g}) is "
@@ -514,14 +522,12 @@ class Importer {
     // Mass and inertia about the spin axis: the child link and everything under it.
     Lumped wheel;
     double about_axis = 0;
-    const Isometry3d base_to_joint = w.joint_in_base.inverse();
-    const Vector3d axis_j = w.joint_in_base.linear().transpose() * w.axis_base;
+    const Vector3d& axis_j = w.axis_joint;
     for (const std::string& name : w.links) {
       const urdf::LinkConstSharedPtr link = model_.getLink(name);
       if (!link->inertial) continue;
-      Isometry3d pose;
-      if (!LinkInBase(link, &pose, nullptr)) continue;
-      const Isometry3d in_joint = base_to_joint * pose;
+      Isometry3d in_joint;  // the child link's frame is the joint's
+      if (!LinkIn(child->name, link, &in_joint, nullptr)) continue;
       const urdf::Inertial& in = *link->inertial;
       const Vector3d c = in_joint * ToVector(in.origin.position);
       const Matrix3d i_c =

@@ -1,0 +1,255 @@
+// Platforms from URDF (emulator/platforms/robot_description.h): the shipped URDF robots equal
+// their hand-written YAML twins field by field; a URDF's chassis is lumped from its links;
+// bad files and disagreements are errors that name the file, line and link or joint.
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "emulator/platforms/platform.h"
+#include "tests/emulator/physics/physics_test_util.h"
+
+namespace wheelhil::emulator::platforms {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using wheelhil::emulator::testing::LoadShipped;
+
+// Every number of the physics the two platforms make, compared exactly.
+void ExpectSamePlatform(const Platform& a, const Platform& b) {
+  const physics::VehicleSpec& va = a.vehicle;
+  const physics::VehicleSpec& vb = b.vehicle;
+  EXPECT_EQ(va.mass_kg, vb.mass_kg);
+  EXPECT_EQ(va.inertia_kg_m2, vb.inertia_kg_m2);
+  EXPECT_EQ(va.half_extents_m, vb.half_extents_m);
+  ASSERT_EQ(va.wheels.size(), vb.wheels.size());
+  for (std::size_t i = 0; i < va.wheels.size(); ++i) {
+    const physics::WheelSpec& x = va.wheels[i];
+    const physics::WheelSpec& y = vb.wheels[i];
+    SCOPED_TRACE(x.name);
+    EXPECT_EQ(x.name, y.name);
+    EXPECT_EQ(x.kind, y.kind);
+    EXPECT_EQ(x.mount_B, y.mount_B);
+    EXPECT_EQ(x.heading_rad, y.heading_rad);
+    EXPECT_EQ(x.radius_m, y.radius_m);
+    EXPECT_EQ(x.inertia_kg_m2, y.inertia_kg_m2);
+    EXPECT_EQ(x.roller_angle_rad, y.roller_angle_rad);
+    EXPECT_EQ(x.rolling_resistance, y.rolling_resistance);
+    EXPECT_EQ(x.bearing_friction_nm, y.bearing_friction_nm);
+    EXPECT_EQ(x.suspension.free_length_m, y.suspension.free_length_m);
+    EXPECT_EQ(x.suspension.max_length_m, y.suspension.max_length_m);
+    EXPECT_EQ(x.suspension.min_length_m, y.suspension.min_length_m);
+    EXPECT_EQ(x.suspension.stiffness_n_m, y.suspension.stiffness_n_m);
+    EXPECT_EQ(x.suspension.damping_n_s_m, y.suspension.damping_n_s_m);
+    EXPECT_EQ(x.suspension.bump_stiffness_n_m, y.suspension.bump_stiffness_n_m);
+    EXPECT_EQ(x.suspension.hub_mass_kg, y.suspension.hub_mass_kg);
+    EXPECT_EQ(x.driven, y.driven);
+    EXPECT_EQ(x.motor.gear_ratio, y.motor.gear_ratio);
+    EXPECT_EQ(x.rollers.count, y.rollers.count);
+    EXPECT_EQ(x.rollers.rows, y.rollers.rows);
+  }
+  EXPECT_EQ(a.drive_wheels, b.drive_wheels);
+  EXPECT_EQ(a.encoder_wheels, b.encoder_wheels);
+  EXPECT_EQ(a.parameters, b.parameters);
+  EXPECT_EQ(a.tolerances.mount_m, b.tolerances.mount_m);
+  ASSERT_EQ(a.sensors.size(), b.sensors.size());
+}
+
+TEST(UrdfPlatform, TheShippedUrdfRobotsAreTheirYamlTwins) {
+  ExpectSamePlatform(LoadShipped("diff2_urdf"), LoadShipped("diff2"));
+  ExpectSamePlatform(LoadShipped("mecanum4_omni3_urdf"), LoadShipped("mecanum4_omni3"));
+  const Platform d = LoadShipped("diff2_urdf");
+  EXPECT_TRUE(fs::is_regular_file(d.chassis_mesh)) << d.chassis_mesh;
+}
+
+// A scratch directory with a URDF and a platform file that reads it.
+class UrdfFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("wheelhil-urdf-" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+            "-" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string Write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    fs::create_directories(p.parent_path());
+    std::ofstream(p) << text;
+    return p.string();
+  }
+
+  // The overlay every case shares: two driven wheels and what URDF cannot say.
+  static std::string Overlay(const std::string& extra_wheel_keys = "",
+                             const std::string& top = "") {
+    return "urdf: robot.urdf\n" + top +
+           "wheel_defaults:\n"
+           "  kind: conventional\n"
+           "  suspension: {free_length_m: 0.05, min_length_m: 0.01, max_length_m: 0.06,\n"
+           "               stiffness_n_m: 20000, damping_n_s_m: 300}\n"
+           "  motor: {gear_ratio: 10, torque_constant_nm_a: 0.05, max_current_a: 5}\n"
+           "wheels:\n"
+           "  - {joint: left_joint, motor: {}" +
+           extra_wheel_keys +
+           "}\n"
+           "  - {joint: right_joint, motor: {}}\n"
+           "kinematics: {type: diff_drive, track_m: 0.4, wheel_radius_m: 0.1}\n";
+  }
+
+  // A robot whose base link is offset from its centre of mass and carries a fixed battery,
+  // with wheels whose joints are rotated the ROS way (axis z, rolled -90 deg about x).
+  static std::string Robot(const std::string& left_joint_type = "continuous",
+                           const std::string& left_radius = "0.1") {
+    return R"(<?xml version="1.0"?>
+<robot name="scratch">
+  <link name="base_link">
+    <inertial>
+      <origin xyz="0.1 0 0.05"/>
+      <mass value="8"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.25"/>
+    </inertial>
+    <collision><geometry><box size="0.5 0.4 0.1"/></geometry></collision>
+  </link>
+  <link name="battery">
+    <inertial>
+      <mass value="2"/>
+      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>
+    </inertial>
+  </link>
+  <joint name="battery_mount" type="fixed">
+    <parent link="base_link"/><child link="battery"/>
+    <origin xyz="-0.15 0 0.05"/>
+  </joint>
+  <link name="left">
+    <inertial><mass value="0.5"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.0025"/></inertial>
+    <collision><geometry><cylinder radius=")" +
+           left_radius + R"(" length="0.04"/></geometry></collision>
+  </link>
+  <joint name="left_joint" type=")" +
+           left_joint_type + R"(">
+    <parent link="base_link"/><child link="left"/>
+    <origin xyz="0.05 0.2 -0.06" rpy="-1.5707963267948966 0 0"/>
+    <axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+  <link name="right">
+    <inertial><mass value="0.5"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.0025"/></inertial>
+    <collision><geometry><sphere radius="0.1"/></geometry></collision>
+  </link>
+  <joint name="right_joint" type="continuous">
+    <parent link="base_link"/><child link="right"/>
+    <origin xyz="0.05 -0.2 -0.06" rpy="-1.5707963267948966 0 0"/>
+    <axis xyz="0 0 1"/>
+  </joint>
+</robot>
+)";
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(UrdfFiles, TheChassisIsEveryLinkButTheWheelsLumpedAtItsCentreOfMass) {
+  Write("robot.urdf", Robot());
+  const Platform p = LoadPlatformFile(Write("p.yaml", Overlay()));
+  EXPECT_EQ(p.name, "scratch");
+  const physics::VehicleSpec& v = p.vehicle;
+  EXPECT_DOUBLE_EQ(v.mass_kg, 10.0);
+  // COM: (8 * (0.1, 0, 0.05) + 2 * (-0.15, 0, 0.05)) / 10 = (0.05, 0, 0.05).
+  // About it, by the parallel-axis theorem: both bodies sit at the COM's height.
+  const double d_base = 0.05, d_bat = 0.2;  // x distances of the two bodies from the COM
+  EXPECT_NEAR(v.inertia_kg_m2.x(), 0.1 + 0.01, 1e-12);
+  EXPECT_NEAR(v.inertia_kg_m2.y(), 0.2 + 0.01 + 8 * d_base * d_base + 2 * d_bat * d_bat, 1e-12);
+  EXPECT_NEAR(v.inertia_kg_m2.z(), 0.25 + 0.01 + 8 * d_base * d_base + 2 * d_bat * d_bat, 1e-12);
+  EXPECT_EQ(v.half_extents_m, Eigen::Vector3d(0.25, 0.2, 0.05));
+  ASSERT_EQ(v.wheels.size(), 2u);
+  const physics::WheelSpec& left = v.wheels[0];
+  EXPECT_EQ(left.name, "left_joint");
+  // Wheel centre (0.05, 0.2, -0.06) in the base frame, COM (0.05, 0, 0.05): (0, 0.2, -0.11),
+  // the mount 0.06 (max_length_m) above it.
+  EXPECT_EQ(left.mount_B, Eigen::Vector3d(0, 0.2, -0.05));
+  EXPECT_NEAR(left.heading_rad, 0.0, 1e-15);  // axis z rolled -90 deg about x: +y
+  EXPECT_EQ(left.radius_m, 0.1);
+  EXPECT_EQ(left.inertia_kg_m2, 0.0025);  // izz of the link: its joint axis
+  EXPECT_EQ(left.suspension.hub_mass_kg, 0.5);
+  EXPECT_EQ(v.wheels[1].radius_m, 0.1);  // from the sphere
+}
+
+TEST_F(UrdfFiles, AValueBothGiveMustAgreeAndTheErrorNamesBoth) {
+  Write("robot.urdf", Robot());
+  // The same radius in both: fine.
+  EXPECT_NO_THROW(LoadPlatformFile(Write("same.yaml", Overlay(", radius_m: 0.1"))));
+  try {
+    LoadPlatformFile(Write("p.yaml", Overlay(", radius_m: 0.12")));
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("p.yaml:8:"));
+    EXPECT_THAT(e.what(), HasSubstr("wheels[0].radius_m: 0.12 here, but robot.urdf:"));
+    EXPECT_THAT(e.what(), HasSubstr("link 'left' collision cylinder says 0.1"));
+  }
+}
+
+TEST_F(UrdfFiles, ErrorsNameTheFileTheLineAndTheLinkOrJoint) {
+  struct Case {
+    std::string urdf, overlay, expect;
+  };
+  const std::vector<Case> cases = {
+      {Robot("revolute"), Overlay(),
+       "wheels[0].joint: robot.urdf:26: joint 'left_joint' is not a continuous joint"},
+      {Robot(), Overlay().replace(Overlay().find("left_joint"), 10, "lfet_joint"),
+       "robot.urdf has no joint 'lfet_joint' (its continuous joints: left_joint, right_joint)"},
+      {"<robot name='x'><link name='a'></robot>", Overlay(),
+       "urdf: robot.urdf:1:"},  // not well-formed: the XML's own line
+      {"<robot name='x'/>", Overlay(), "urdf: robot.urdf: urdfdom cannot read it"},
+      {Robot(), Overlay("", "base_link: nope\n"), "base_link: robot.urdf has no link 'nope'"},
+      {Robot(), "wheels:\n  - {joint: left_joint}\n", "only with urdf:"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.expect);
+    Write("robot.urdf", c.urdf);
+    try {
+      LoadPlatformFile(Write("p.yaml", "name: t\n" + c.overlay));
+      ADD_FAILURE() << "no error";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_THAT(e.what(), HasSubstr("p.yaml:"));
+      EXPECT_THAT(e.what(), HasSubstr(c.expect));
+    }
+  }
+  // A URDF that is not there names the path it looked at.
+  try {
+    LoadPlatformFile(Write("q.yaml", "urdf: missing.urdf\n"));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("q.yaml:1:7: urdf: missing.urdf ("));
+    EXPECT_THAT(e.what(), HasSubstr("cannot be read"));
+  }
+}
+
+TEST_F(UrdfFiles, PackageUrisResolveThroughThePackagePaths) {
+  Write("pkgs/my_robot/meshes/body.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  std::string robot = Robot();
+  robot.replace(robot.find("<collision><geometry><box"), 0,
+                "<visual><geometry><mesh filename=\"package://my_robot/meshes/body.obj\"/>"
+                "</geometry></visual>");
+  Write("robot.urdf", robot);
+  const Platform p = LoadPlatformFile(Write("p.yaml", Overlay("", "package_paths: [pkgs]\n")));
+  EXPECT_EQ(fs::path(p.chassis_mesh), (dir_ / "pkgs/my_robot/meshes/body.obj").lexically_normal());
+  // Without the path: the error lists where it looked.
+  try {
+    LoadPlatformFile(Write("q.yaml", Overlay()));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("its mesh 'package://my_robot/meshes/body.obj' is not found"));
+    EXPECT_THAT(e.what(), HasSubstr("package_paths lists"));
+  }
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::platforms
