@@ -98,11 +98,15 @@ class Urdf {
 
   // Empty on success, else what is wrong (with the line where the XML says it).
   std::string Load() {
+    // A regular file of bounded size before a byte is read (/dev/zero never ends).
+    std::error_code ec;
+    if (!fs::exists(path_, ec)) return "does not exist";
+    if (!fs::is_regular_file(path_, ec)) return "is not a regular file (a device, a pipe?)";
+    if (fs::file_size(path_, ec) > FieldReader::kMaxFileBytes || ec) return "is larger than 16 MiB";
     std::ifstream in(path_, std::ios::binary);
-    if (!in || fs::is_directory(path_)) return "cannot be read";
+    if (!in) return "cannot be read";
     std::ostringstream text;
     text << in.rdbuf();
-    if (text.str().size() > FieldReader::kMaxFileBytes) return "is larger than 16 MiB";
     TiXmlDocument xml;
     xml.Parse(text.str().c_str());
     if (xml.Error()) {
@@ -590,10 +594,11 @@ void ImportRobotDescription(YAML::Node root, const FieldReader& rd) {
                             : fs::path(rd.file()).parent_path() / written;
   Urdf urdf(path.lexically_normal().string(), written);
   if (const std::string problem = urdf.Load(); !problem.empty()) {
+    // Problems of the file itself say where it was looked for; those of its text carry its name.
+    const bool of_file = problem.rfind(urdf.shown(), 0) != 0;
     rd.Fail(urdf_node, "urdf",
-            problem == "cannot be read" || problem == "is larger than 16 MiB"
-                ? fmt::format("{} ({}) {}", written, path.lexically_normal().string(), problem)
-                : problem);
+            of_file ? fmt::format("{} ({}) {}", written, path.lexically_normal().string(), problem)
+                    : problem);
   }
   Importer(root, rd, urdf).Run();
 }

@@ -228,7 +228,7 @@ TEST_F(UrdfFiles, ErrorsNameTheFileTheLineAndTheLinkOrJoint) {
     ADD_FAILURE() << "no error";
   } catch (const std::invalid_argument& e) {
     EXPECT_THAT(e.what(), HasSubstr("q.yaml:1:7: urdf: missing.urdf ("));
-    EXPECT_THAT(e.what(), HasSubstr("cannot be read"));
+    EXPECT_THAT(e.what(), HasSubstr("does not exist"));
   }
 }
 
