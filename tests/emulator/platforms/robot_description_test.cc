@@ -59,9 +59,10 @@ void ExpectSamePlatform(const Platform& a, const Platform& b) {
   ASSERT_EQ(a.sensors.size(), b.sensors.size());
 }
 
-TEST(UrdfPlatform, TheShippedUrdfRobotsAreTheirYamlTwins) {
+TEST(UrdfPlatform, TheShippedUrdfAndSdfRobotsAreTheirYamlTwins) {
   ExpectSamePlatform(LoadShipped("diff2_urdf"), LoadShipped("diff2"));
   ExpectSamePlatform(LoadShipped("mecanum4_omni3_urdf"), LoadShipped("mecanum4_omni3"));
+  ExpectSamePlatform(LoadShipped("diff2_sdf"), LoadShipped("diff2"));
   const Platform d = LoadShipped("diff2_urdf");
   EXPECT_TRUE(fs::is_regular_file(d.chassis_mesh)) << d.chassis_mesh;
 }
@@ -202,7 +203,7 @@ TEST_F(UrdfFiles, ErrorsNameTheFileTheLineAndTheLinkOrJoint) {
   };
   const std::vector<Case> cases = {
       {Robot("revolute"), Overlay(),
-       "wheels[0].joint: robot.urdf:26: joint 'left_joint' is not a continuous joint"},
+       "wheels[0].joint: robot.urdf:26: joint 'left_joint' is revolute, not a continuous joint"},
       {Robot(), Overlay().replace(Overlay().find("left_joint"), 10, "lfet_joint"),
        "robot.urdf has no joint 'lfet_joint' (its continuous joints: left_joint, right_joint)"},
       {"<robot name='x'><link name='a'></robot>", Overlay(),
@@ -229,6 +230,58 @@ TEST_F(UrdfFiles, ErrorsNameTheFileTheLineAndTheLinkOrJoint) {
   } catch (const std::invalid_argument& e) {
     EXPECT_THAT(e.what(), HasSubstr("q.yaml:1:7: urdf: missing.urdf ("));
     EXPECT_THAT(e.what(), HasSubstr("does not exist"));
+  }
+}
+
+TEST_F(UrdfFiles, SdfErrorsNameTheFileTheLineAndTheModelOrJoint) {
+  const std::string model = R"(<?xml version="1.0"?>
+<sdf version="1.8">
+  <model name="bot">
+    <link name="base"><inertial><mass>5</mass></inertial></link>
+    <link name="w"><pose>0 0.2 -0.1 0 0 0</pose>
+      <collision name="c"><geometry><sphere><radius>0.1</radius></sphere></geometry></collision>
+    </link>
+    <joint name="wj" type="revolute">
+      <parent>base</parent><child>w</child>
+      <axis><xyz>0 1 0</xyz><limit><lower>-1</lower><upper>1</upper></limit></axis>
+    </joint>
+  </model>
+</sdf>
+)";
+  Write("bot.sdf", model);
+  const std::string overlay =
+      "sdf: bot.sdf\n"
+      "wheel_defaults: {kind: conventional, inertia_kg_m2: 0.01,\n"
+      "  suspension: {free_length_m: 0.05, min_length_m: 0.01, max_length_m: 0.06,\n"
+      "               stiffness_n_m: 20000, damping_n_s_m: 300, hub_mass_kg: 0.3}}\n"
+      "wheels:\n  - {joint: wj}\n";
+  try {
+    LoadPlatformFile(Write("p.yaml", overlay));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("wheels[0].joint: bot.sdf:8: joint 'wj' is revolute, not a "
+                                    "continuous joint"));
+  }
+  try {
+    LoadPlatformFile(Write("q.yaml", overlay + "model: other\n"));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("sdf: bot.sdf has no model 'other' (its models: bot)"));
+  }
+  Write("bad.sdf",
+        "<sdf version=\"1.8\"><model name=\"x\"><link name=\"a\"><pose>1 2</pose>"
+        "</link></model></sdf>\n");
+  try {
+    LoadPlatformFile(Write("r.yaml", "sdf: bad.sdf\n"));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("r.yaml:1:6: sdf: not a valid SDF file: bad.sdf"));
+  }
+  try {
+    LoadPlatformFile(Write("s.yaml", "urdf: a.urdf\nsdf: bot.sdf\n"));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("a platform reads one description"));
   }
 }
 

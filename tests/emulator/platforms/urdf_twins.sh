@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The shipped URDF robots drive their scenarios to the same run as their hand-written YAML
-# twins: each scenarios/urdf/*_urdf.yaml against the smoke scenario it copies (the same text but
+# The shipped URDF and SDF robots drive their scenarios to the same run as their hand-written
+# YAML twins: each scenarios/urdf/*_{urdf,sdf}.yaml against the smoke scenario it copies (the same text but
 # the platform line), every artefact of physics, bus and firmware byte-identical, both passing.
 # Usage: urdf_twins.sh WHEELHIL_BIN SOURCE_DIR
 set -uo pipefail
@@ -9,7 +9,8 @@ src=$2
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 status=0
-for pair in paper000_slip_short:paper000_slip_short_urdf paper001_omni_short:paper001_omni_short_urdf; do
+for pair in paper000_slip_short:paper000_slip_short_urdf paper001_omni_short:paper001_omni_short_urdf \
+            paper000_slip_short:paper000_slip_short_sdf; do
   yaml=${pair%%:*}
   urdf=${pair##*:}
   "$wheelhil" run "$src/scenarios/smoke/$yaml.yaml" --out "$work/$yaml" >"$work/$yaml.log" 2>&1
