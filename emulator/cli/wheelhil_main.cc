@@ -16,6 +16,7 @@
 #include "emulator/cli/campaign_command.h"
 #include "emulator/cli/completion_command.h"
 #include "emulator/cli/log_command.h"
+#include "emulator/cli/new_command.h"
 #include "emulator/cli/run_command.h"
 
 namespace {
@@ -39,6 +40,7 @@ int main(int argc, char** argv) {
   wheelhil::emulator::BenchCommand bench_command(app);
   wheelhil::emulator::CampaignCommand campaign_command(app);
   wheelhil::emulator::LogCommand log_command(app);
+  wheelhil::emulator::NewCommand new_command(app);
   wheelhil::emulator::RunCommand run_command(app);
   wheelhil::emulator::CompletionCommand completion_command(app);
 
@@ -61,6 +63,7 @@ int main(int argc, char** argv) {
     if (auto code = bench_command.Run()) return *code;
     if (auto code = campaign_command.Run()) return *code;
     if (auto code = log_command.Run()) return *code;
+    if (auto code = new_command.Run()) return *code;
     if (auto code = run_command.Run()) return *code;
     if (auto code = completion_command.Run()) return *code;
   } catch (const std::invalid_argument& e) {

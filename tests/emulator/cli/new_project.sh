@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# `wheelhil new DIR` makes a project that runs at once: its scenario passes with the reference
+# firmware, its smoke list and its campaign run; a second `new` on it is refused (exit 2)
+# unless --force; a DIR that is a file is refused.
+# Usage: new_project.sh WHEELHIL_BIN
+set -uo pipefail
+wheelhil=$1
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+
+"$wheelhil" new "$work/my_bot" >"$work/new.log" 2>&1 || fail "new: $(cat "$work/new.log")"
+for f in platform.yaml scenario.yaml firmware.yaml outputs.yaml campaign.yaml smoke.list README.md; do
+  [ -s "$work/my_bot/$f" ] || fail "new wrote no $f"
+done
+grep -q "^name: my_bot$" "$work/my_bot/platform.yaml" || fail "platform.yaml not named my_bot"
+cd "$work/my_bot" || exit 1
+"$wheelhil" run scenario.yaml --out run >"$work/run.log" 2>&1 || fail "run: $(tail -5 "$work/run.log")"
+grep -q "verdict: pass" "$work/run.log" || fail "run did not pass: $(tail -5 "$work/run.log")"
+"$wheelhil" smoke --scenarios smoke.list --junit smoke.xml --out smoke >"$work/smoke.log" 2>&1 ||
+  fail "smoke: $(tail -5 "$work/smoke.log")"
+grep -q "smoke: 1/1 passed" "$work/smoke.log" || fail "smoke: $(tail -3 "$work/smoke.log")"
+"$wheelhil" campaign campaign.yaml -j 2 --out camp >"$work/camp.log" 2>&1 ||
+  fail "campaign: $(tail -5 "$work/camp.log")"
+echo "ok: new, run, smoke and campaign ($(grep -c . "$work/camp.log") lines of campaign output)"
+
+"$wheelhil" new "$work/my_bot" >"$work/again.log" 2>&1
+rc=$?
+[ "$rc" -eq 2 ] && grep -q "is not empty (--force" "$work/again.log" || fail "second new: rc $rc: $(cat "$work/again.log")"
+"$wheelhil" new --force "$work/my_bot" >/dev/null 2>&1 || fail "new --force"
+touch "$work/file"
+"$wheelhil" new "$work/file" >"$work/file.log" 2>&1
+rc=$?
+[ "$rc" -eq 2 ] && grep -q "exists and is not a directory" "$work/file.log" || fail "new on a file: rc $rc"
+echo "ok: refusals"
