@@ -201,8 +201,24 @@ YAML::Node FieldReader::Get(const YAML::Node& parent, const std::string& key) {
 
 bool FieldReader::Present(const YAML::Node& node) { return node.IsDefined() && !node.IsNull(); }
 
+namespace {
+thread_local FieldRecorder* t_recorder = nullptr;
+}  // namespace
+
+FieldRecorder* RecordFieldsOnThisThread(FieldRecorder* recorder) {
+  FieldRecorder* previous = t_recorder;
+  t_recorder = recorder;
+  return previous;
+}
+
+void FieldReader::Record(std::string_view field, FieldRecorder::Kind kind,
+                         std::optional<double> min, std::optional<double> max) const {
+  if (t_recorder != nullptr) t_recorder->Value(file_, field, kind, min, max);
+}
+
 void FieldReader::CheckKeys(const YAML::Node& map, std::string_view field,
                             const std::set<std::string>& allowed) const {
+  if (t_recorder != nullptr) t_recorder->Keys(file_, field, allowed);
   const std::string_view name = field.empty() ? "(document)" : field;
   if (!map.IsDefined() || !map.IsMap()) Fail(map, name, "must be a mapping");
   section_mark_ = map.Mark();
@@ -218,6 +234,11 @@ void FieldReader::CheckKeys(const YAML::Node& map, std::string_view field,
 }
 
 double FieldReader::ToNumber(const YAML::Node& node, std::string_view field) const {
+  Record(field, FieldRecorder::Kind::kNumber);
+  return NumberValue(node, field);
+}
+
+double FieldReader::NumberValue(const YAML::Node& node, std::string_view field) const {
   if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be a number");
   double v = 0;
   if (!YAML::convert<double>::decode(node, v)) {
@@ -229,13 +250,15 @@ double FieldReader::ToNumber(const YAML::Node& node, std::string_view field) con
 
 double FieldReader::ToNumber(const YAML::Node& node, std::string_view field, double min,
                              double max) const {
-  const double v = ToNumber(node, field);
+  Record(field, FieldRecorder::Kind::kNumber, min, max);
+  const double v = NumberValue(node, field);
   if (v < min || v > max) Fail(node, field, fmt::format("({}) must be in [{}, {}]", v, min, max));
   return v;
 }
 
 long long FieldReader::ToInteger(const YAML::Node& node, std::string_view field, long long min,
                                  long long max) const {
+  Record(field, FieldRecorder::Kind::kInteger, static_cast<double>(min), static_cast<double>(max));
   if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be an integer");
   long long v = 0;
   if (!YAML::convert<long long>::decode(node, v)) {
@@ -253,6 +276,7 @@ void FieldReader::CheckCount(const YAML::Node& list, std::string_view field,
 }
 
 bool FieldReader::ToBool(const YAML::Node& node, std::string_view field) const {
+  Record(field, FieldRecorder::Kind::kBool);
   bool v = false;
   if (!node.IsDefined() || !node.IsScalar() || !YAML::convert<bool>::decode(node, v)) {
     Fail(node, field, "must be true or false");
@@ -261,8 +285,19 @@ bool FieldReader::ToBool(const YAML::Node& node, std::string_view field) const {
 }
 
 std::string FieldReader::ToString(const YAML::Node& node, std::string_view field) const {
+  Record(field, FieldRecorder::Kind::kString);
   if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be a string");
   return node.Scalar();
+}
+
+void FieldReader::DeclareKeys(std::string_view field, const std::set<std::string>& keys) const {
+  if (t_recorder != nullptr) t_recorder->Keys(file_, field, keys);
+}
+
+std::string FieldReader::KeyName(const YAML::Node& key, std::string_view field) const {
+  if (t_recorder != nullptr) t_recorder->OpenMap(file_, field);
+  if (!key.IsDefined() || !key.IsScalar()) Fail(key, field, "must be a string");
+  return key.Scalar();
 }
 
 YAML::Node FieldReader::Required(const YAML::Node& parent, const std::string& key,

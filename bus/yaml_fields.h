@@ -26,6 +26,26 @@
 
 namespace wheelhil::bus::yaml {
 
+/// Sees what every FieldReader on the calling thread checks: the loaders' own definition of
+/// their files, from which `wheelhil schema` writes JSON Schemas. `field` is the dotted path
+/// as in messages (list indices included); `file` the reader's file().
+class FieldRecorder {
+ public:
+  enum class Kind { kNumber, kInteger, kBool, kString };
+  virtual ~FieldRecorder() = default;
+  /// A mapping at `field` whose keys must be among `allowed`.
+  virtual void Keys(const std::string& file, std::string_view field,
+                    const std::set<std::string>& allowed) = 0;
+  /// A mapping at `field` whose keys are names of the user's choosing (KeyName).
+  virtual void OpenMap(const std::string& file, std::string_view field) = 0;
+  /// A scalar at `field`; `min`/`max` when the reader checked a range.
+  virtual void Value(const std::string& file, std::string_view field, Kind kind,
+                     std::optional<double> min, std::optional<double> max) = 0;
+};
+
+/// Installs `recorder` for the calling thread (nullptr: none); returns the previous one.
+FieldRecorder* RecordFieldsOnThisThread(FieldRecorder* recorder);
+
 class FieldReader {
  public:
   /// `file` names the input in every message (and is what ReadFile opens).
@@ -88,6 +108,9 @@ class FieldReader {
   /// at the node, "field.key: unknown key (allowed: ...)" at the key.
   void CheckKeys(const YAML::Node& map, std::string_view field,
                  const std::set<std::string>& allowed) const;
+  /// Keys of the mapping at `field` that a step before CheckKeys reads and removes (a robot
+  /// description's): told to the FieldRecorder only.
+  void DeclareKeys(std::string_view field, const std::set<std::string>& keys) const;
 
   // A node that is present, as a value; each fails at the node, naming `field`.
   /// A finite number.
@@ -103,6 +126,9 @@ class FieldReader {
   bool ToBool(const YAML::Node& node, std::string_view field) const;
   /// Any scalar, as written.
   std::string ToString(const YAML::Node& node, std::string_view field) const;
+  /// A key of the mapping at `field` whose keys are the user's names (a wheel name, a
+  /// kinematic parameter): ToString, recorded as such a mapping rather than as a value.
+  std::string KeyName(const YAML::Node& key, std::string_view field) const;
 
   // parent[key], field Join(prefix, key). Absent (no key, or null) gives `def`, or fails
   // "field: is required" at `parent` when there is no default.
@@ -118,6 +144,9 @@ class FieldReader {
 
  private:
   [[noreturn]] void FailYaml(const YAML::Exception& e) const;
+  double NumberValue(const YAML::Node& node, std::string_view field) const;
+  void Record(std::string_view field, FieldRecorder::Kind kind, std::optional<double> min = {},
+              std::optional<double> max = {}) const;
   // One step from the document to a node: a key, an index, or a complex key's value (the
   // field name stays its parent's). The name is formatted only for a message: the walk over a
   // document of a million nodes must not build a million strings.

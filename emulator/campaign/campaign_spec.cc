@@ -295,7 +295,7 @@ CampaignSpec ReadCampaign(const Loader& L, const YAML::Node& root) {
     if (!set.IsMap()) L.Fail(set, "set", "must be a mapping of path: value");
     for (const auto& kv : set) {
       Override o;
-      o.path = L.ToString(kv.first, "set");
+      o.path = L.KeyName(kv.first, "set");
       o.line = L.Line(kv.first);
       o.column = L.Column(kv.first);
       o.value = L.ScalarOrList(kv.second, "set." + o.path);

@@ -33,6 +33,27 @@ fs::path ShippedScenarios() {
       bin.string()));
 }
 
+// The JSON Schemas (docs/schemas in a source tree, <datadir>/wheelhil/schemas installed), or
+// empty when neither is there.
+fs::path SchemaDir(const fs::path& scenarios) {
+  for (const fs::path& candidate :
+       {scenarios / ".." / "docs" / "schemas", scenarios / ".." / "schemas"}) {
+    std::error_code ec;
+    if (fs::is_regular_file(candidate / "scenario.schema.json", ec)) {
+      return fs::canonical(candidate, ec);
+    }
+  }
+  return {};
+}
+
+// The first line of a file of `kind`: the YAML language server checks it against its schema
+// as it is typed (docs/schemas.md).
+std::string SchemaLine(const fs::path& schemas, const std::string& kind) {
+  if (schemas.empty()) return {};
+  return fmt::format("# yaml-language-server: $schema={}\n",
+                     (schemas / (kind + ".schema.json")).string());
+}
+
 std::string Read(const fs::path& p) {
   std::ifstream in(p);
   if (!in) throw std::invalid_argument(fmt::format("new: cannot read {}", p.string()));
@@ -178,9 +199,11 @@ std::optional<int> NewCommand::Run() {
                     dir_));
   }
   const fs::path shipped = ShippedScenarios();
+  const fs::path schemas = SchemaDir(shipped);
   std::string name = dir.filename().string();
   if (name.empty()) name = "my_robot";
   const std::string platform =
+      SchemaLine(schemas, "platform") +
       "# Your robot (docs/physics.md, \"Platform files\"): paper 000's differential-drive robot "
       "to\n"
       "# start from. Or read your URDF or SDF: docs/platforms-from-urdf-sdf.md.\n" +
@@ -188,15 +211,17 @@ std::optional<int> NewCommand::Run() {
               "name: diff2", "name: " + name);
   const std::vector<std::pair<std::string, std::string>> files = {
       {"platform.yaml", platform},
-      {"scenario.yaml", Scenario(name)},
+      {"scenario.yaml", SchemaLine(schemas, "scenario") + Scenario(name)},
       {"firmware.yaml",
-       "# The reference firmware's configuration (docs/firmware.md); yours reads its own.\n" +
+       SchemaLine(schemas, "firmware-config") +
+           "# The reference firmware's configuration (docs/firmware.md); yours reads its own.\n" +
            Read(shipped / "firmware" / "paper000_diff_drive.yaml")},
       {"outputs.yaml",
-       "# Which frames of which DBC carry the firmware's estimate (docs/own-hardware.md): the\n"
-       "# reference firmware's. Point dbc: at yours and name your messages and signals.\n" +
+       SchemaLine(schemas, "outputs") +
+           "# Which frames of which DBC carry the firmware's estimate (docs/own-hardware.md): the\n"
+           "# reference firmware's. Point dbc: at yours and name your messages and signals.\n" +
            Read(shipped / "outputs" / "wheelhil_fw.yaml")},
-      {"campaign.yaml", Campaign(name)},
+      {"campaign.yaml", SchemaLine(schemas, "campaign") + Campaign(name)},
       {"smoke.list", "# The CI smoke suite (docs/ci.md): one scenario a line.\nscenario.yaml\n"},
       {"README.md", Readme(name)},
   };

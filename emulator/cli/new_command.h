@@ -5,7 +5,9 @@
 /// scenario.yaml (a 2 m drive that runs `firmware.command`), firmware.yaml (the reference
 /// firmware's configuration), outputs.yaml (which frames of which DBC carry the firmware's
 /// estimate), campaign.yaml (the scenario over ten seeds), smoke.list (the CI smoke suite) and
-/// a README.md saying what to change first. The shipped files it starts from come from the
+/// a README.md saying what to change first. Each YAML file opens with the line that makes an
+/// editor's YAML language server check it against its JSON Schema as it is typed
+/// (docs/schemas.md). The shipped files it starts from come from the
 /// source tree next to the build directory, else the installed data directory. DIR must be new
 /// or empty (--force: write into it anyway, replacing those files). Thread-compatible.
 

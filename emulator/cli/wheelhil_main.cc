@@ -18,6 +18,7 @@
 #include "emulator/cli/log_command.h"
 #include "emulator/cli/new_command.h"
 #include "emulator/cli/run_command.h"
+#include "emulator/cli/schema_command.h"
 
 namespace {
 
@@ -41,6 +42,7 @@ int main(int argc, char** argv) {
   wheelhil::emulator::CampaignCommand campaign_command(app);
   wheelhil::emulator::LogCommand log_command(app);
   wheelhil::emulator::NewCommand new_command(app);
+  wheelhil::emulator::SchemaCommand schema_command(app);
   wheelhil::emulator::RunCommand run_command(app);
   wheelhil::emulator::CompletionCommand completion_command(app);
 
@@ -64,6 +66,7 @@ int main(int argc, char** argv) {
     if (auto code = campaign_command.Run()) return *code;
     if (auto code = log_command.Run()) return *code;
     if (auto code = new_command.Run()) return *code;
+    if (auto code = schema_command.Run()) return *code;
     if (auto code = run_command.Run()) return *code;
     if (auto code = completion_command.Run()) return *code;
   } catch (const std::invalid_argument& e) {

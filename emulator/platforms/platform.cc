@@ -292,7 +292,7 @@ void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& 
   const std::string name = field.empty() ? "overrides" : field;
   if (!over.IsMap()) rd.Fail(over, name, "must be a mapping");
   for (const auto& kv : over) {
-    const std::string key = rd.ToString(kv.first, name);
+    const std::string key = rd.KeyName(kv.first, name);
     const std::string here = field.empty() ? key : field + "." + key;
     const YAML::Node value = kv.second;
     if (field.empty() && key == "wheels") {
@@ -301,7 +301,7 @@ void MergeOverrides(YAML::Node base, const YAML::Node& over, const std::string& 
         rd.Fail(value, here, "file has no wheel list");
       if (!value.IsMap()) rd.Fail(value, here, "must map wheel names (or globs) to overrides");
       for (const auto& w : value) {
-        const std::string pattern = rd.ToString(w.first, here);
+        const std::string pattern = rd.KeyName(w.first, here);
         std::size_t matched = 0;
         for (std::size_t i = 0; i < wheels.size(); ++i) {
           const YAML::Node name = wheels[i]["name"];
@@ -393,7 +393,7 @@ Platform ReadPlatform(const Reader& rd, const YAML::Node& root) {
             fmt::format("'{}' is not one of diff_drive, mecanum4, omni3", type));
   }
   for (const auto& kv : kin) {
-    const std::string key = rd.ToString(kv.first, "kinematics");
+    const std::string key = rd.KeyName(kv.first, "kinematics");
     if (key == "type") continue;
     // Every length of the layout divides something in the kinematics (a zero track width
     // turns a heading into inf), so lengths are positive and of robot size.

@@ -783,6 +783,12 @@ class Importer {
 }  // namespace
 
 void ImportRobotDescription(YAML::Node root, const FieldReader& rd) {
+  rd.DeclareKeys("", {"urdf", "sdf", "model", "base_link", "package_paths"});
+  if (const YAML::Node wheels = FieldReader::Get(root, "wheels"); wheels.IsSequence()) {
+    for (std::size_t i = 0; i < wheels.size(); ++i) {
+      rd.DeclareKeys(fmt::format("wheels[{}]", i), {"joint"});
+    }
+  }
   const YAML::Node urdf_node = FieldReader::Get(root, "urdf");
   const YAML::Node sdf_node = FieldReader::Get(root, "sdf");
   const bool urdf = FieldReader::Present(urdf_node);

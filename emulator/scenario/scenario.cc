@@ -545,7 +545,7 @@ Scenario ReadScenario(const Reader& r, const YAML::Node& root) {
   const YAML::Node p = Reader::Get(root, "platform");
   if (!p.IsDefined()) r.Fail(root, "platform", "is required");
   if (p.IsScalar()) {
-    const std::string path = r.Path(p.Scalar());
+    const std::string path = r.Path(r.ToString(p, "platform"));
     try {
       s.platform = platforms::LoadPlatformFile(path);
     } catch (const std::invalid_argument& e) {

@@ -14,6 +14,25 @@ for f in platform.yaml scenario.yaml firmware.yaml outputs.yaml campaign.yaml sm
   [ -s "$work/my_bot/$f" ] || fail "new wrote no $f"
 done
 grep -q "^name: my_bot$" "$work/my_bot/platform.yaml" || fail "platform.yaml not named my_bot"
+for f in platform scenario firmware outputs campaign; do
+  line=$(head -1 "$work/my_bot/$f.yaml")
+  schema=${line#\# yaml-language-server: \$schema=}
+  [ "$schema" != "$line" ] && [ -s "$schema" ] || fail "$f.yaml: first line '$line' names no schema file"
+done
+# Each file is valid against the schema its first line names (an independent validator).
+/usr/bin/python3 - "$work/my_bot" <<'PY' || fail "a skeleton file is not valid against its schema"
+import json, re, sys, glob, jsonschema, yaml
+yaml.SafeLoader.add_implicit_resolver("tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$"), list("-+0123456789."))
+for path in sorted(glob.glob(sys.argv[1] + "/*.yaml")):
+    text = open(path).read()
+    schema = json.load(open(text.splitlines()[0].split("$schema=", 1)[1]))
+    errors = list(jsonschema.Draft202012Validator(schema).iter_errors(yaml.safe_load(text)))
+    if errors:
+        print(path, list(errors[0].absolute_path), errors[0].message)
+        sys.exit(1)
+print("ok: every skeleton file valid against its schema")
+PY
 cd "$work/my_bot" || exit 1
 "$wheelhil" run scenario.yaml --out run >"$work/run.log" 2>&1 || fail "run: $(tail -5 "$work/run.log")"
 grep -q "verdict: pass" "$work/run.log" || fail "run did not pass: $(tail -5 "$work/run.log")"
