@@ -1,5 +1,6 @@
 #include "emulator/cli/new_command.h"
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -10,6 +11,7 @@
 #include <fmt/format.h>
 
 #include "bus/install_paths.h"
+#include "emulator/platforms/robot_description.h"
 
 namespace wheelhil::emulator {
 namespace {
@@ -84,7 +86,91 @@ std::string DropLines(const std::string& text, const std::string& what) {
   return out;
 }
 
-std::string Scenario(const std::string& name) {
+// What the scenario tells the reference firmware about the drive (paper 000's robot, or the
+// user's description).
+struct Drive {
+  double track_m = 0.32;
+  double wheel_radius_m = 0.075;
+  int left_sign = 1;
+  int right_sign = 1;
+};
+
+// platform.yaml that reads the user's URDF or SDF: what the description cannot say is paper
+// 000's robot's, to be set; the wheels from the description's wheel joints.
+std::string DescribedPlatform(const std::string& name, const fs::path& dir, const fs::path& shipped,
+                              const std::string& urdf, const std::string& sdf,
+                              const std::string& model, Drive* drive) {
+  const std::string file = urdf.empty() ? sdf : urdf;
+  const fs::path path = fs::absolute(file).lexically_normal();
+  bool base_has_box = false;
+  const std::vector<platforms::WheelJoint> joints =
+      platforms::FindWheelJoints(path.string(), model, &base_has_box);
+  std::vector<const platforms::WheelJoint*> across, casters;
+  std::string list;
+  for (const auto& j : joints) {
+    list += (list.empty() ? "" : ", ") + j.joint;
+    if (j.below_moving_joint) {
+      casters.push_back(&j);
+    } else if (std::abs(j.axis.y()) > 0.99) {
+      across.push_back(&j);
+    }
+  }
+  if (across.size() != 2 || across[0]->centre_m.y() * across[1]->centre_m.y() >= 0) {
+    throw std::invalid_argument(fmt::format(
+        "new: {} has {} wheel joints with a fixed axle across the robot (its wheel joints: {}): "
+        "wheelhil new starts a differential-drive robot from two, one on each side. Run it "
+        "without --{} and make platform.yaml read your file by hand "
+        "(docs/platforms-from-urdf-sdf.md)",
+        file, across.size(), list.empty() ? "none" : list, urdf.empty() ? "sdf" : "urdf"));
+  }
+  if (across[0]->centre_m.y() < across[1]->centre_m.y()) std::swap(across[0], across[1]);
+  const platforms::WheelJoint& left = *across[0];
+  const platforms::WheelJoint& right = *across[1];
+  drive->track_m = std::round((left.centre_m.y() - right.centre_m.y()) * 1e9) / 1e9;
+  drive->wheel_radius_m = left.radius_m;
+  drive->left_sign = left.axis.y() > 0 ? 1 : -1;
+  drive->right_sign = right.axis.y() > 0 ? 1 : -1;
+  const std::string diff2 = Read(shipped / "platforms" / "diff2.yaml");
+  const std::size_t s0 = diff2.find("\nsolver:");
+  const std::size_t s1 = diff2.find("\n# As built");
+  const std::string defaults =
+      s0 == std::string::npos || s1 == std::string::npos ? "" : diff2.substr(s0 + 1, s1 - s0);
+  std::string out = fmt::format(
+      "# {0}: your robot from {1} (docs/platforms-from-urdf-sdf.md). The chassis and the wheels'\n"
+      "# places, axles, radii, masses and inertias come from there; this file says what it\n"
+      "# cannot. The numbers below are paper 000's robot's (scenarios/platforms/diff2.yaml): set\n"
+      "# yours. wheel_defaults' radius, inertia and hub mass count only where {1} has none.\n"
+      "name: {0}\n"
+      "{2}: {3}\n",
+      name, path.filename().string(), urdf.empty() ? "sdf" : "urdf",
+      fs::relative(path, dir).string());
+  if (!model.empty()) out += fmt::format("model: {}\n", model);
+  if (!base_has_box) {
+    out +=
+        "chassis:\n  half_extents_m: [0.225, 0.175, 0.075]  # its base link has no collision box\n";
+  }
+  out += defaults;
+  out += "wheels:\n";
+  out +=
+      fmt::format("  - {{name: left, joint: {}, kind: conventional, motor: {{}}}}\n", left.joint);
+  out +=
+      fmt::format("  - {{name: right, joint: {}, kind: conventional, motor: {{}}}}\n", right.joint);
+  for (std::size_t i = 0; i < casters.size(); ++i) {
+    out +=
+        fmt::format("  - {{name: caster_{}, joint: {}, kind: caster}}\n", i + 1, casters[i]->joint);
+  }
+  out += fmt::format(
+      "kinematics:\n"
+      "  type: diff_drive\n"
+      "  track_m: {}  # from the two wheel joints\n"
+      "  wheel_radius_m: {}\n"
+      "sensors:\n"
+      "  - {{name: gyro, kind: gyro, mount_m: [0.0, 0.0, 0.05], axis: [0, 0, 1]}}\n",
+      drive->track_m, drive->wheel_radius_m);
+  return out;
+}
+
+std::string Scenario(const std::string& name, const Drive& drive) {
   return fmt::format(
       R"(# {0}: your firmware on your robot (docs/scenarios.md). `wheelhil run scenario.yaml`.
 # Starts as paper 000's robot driving 2 m with the reference firmware (wheelhil-fw) in the loop;
@@ -116,7 +202,8 @@ firmware:
   config: firmware.yaml
   outputs: outputs.yaml
   overrides:
-    paper000: {{track_width_m: 0.32, wheel_radius_m: 0.075, counts_per_rev: 2000}}
+    paper000: {{track_width_m: {1}, wheel_radius_m: {2}, counts_per_rev: 2000,
+               left: {{node_id: 1, sign: {3}}}, right: {{node_id: 2, sign: {4}}}}}
 timing:
   mode: lockstep
   sync_period_s: 0.25
@@ -126,7 +213,7 @@ expectations:
   - {{metric: pose.final_position_error_m, "<": 0.05}}
   - {{metric: pose.distance_m, ">=": 1.5}}
 )",
-      name);
+      name, drive.track_m, drive.wheel_radius_m, drive.left_sign, drive.right_sign);
 }
 
 std::string Campaign(const std::string& name) {
@@ -183,6 +270,11 @@ NewCommand::NewCommand(CLI::App& app) {
   new_ = app.add_subcommand("new", "A project skeleton for your robot and firmware (runs at once)");
   new_->add_option("DIR", dir_, "Directory to create (new or empty)")->required();
   new_->add_flag("--force", force_, "Write into DIR even if it holds files (replacing ours)");
+  auto* urdf = new_->add_option("--urdf", urdf_, "platform.yaml reads this URDF (your robot)");
+  auto* sdf = new_->add_option("--sdf", sdf_, "platform.yaml reads this SDF file (your robot)");
+  urdf->excludes(sdf);
+  new_->add_option("--model", model_, "With --sdf: the model to read (a world of several)")
+      ->needs(sdf);
 }
 
 std::optional<int> NewCommand::Run() {
@@ -202,16 +294,22 @@ std::optional<int> NewCommand::Run() {
   const fs::path schemas = SchemaDir(shipped);
   std::string name = dir.filename().string();
   if (name.empty()) name = "my_robot";
+  Drive drive;
   const std::string platform =
-      SchemaLine(schemas, "platform") +
-      "# Your robot (docs/physics.md, \"Platform files\"): paper 000's differential-drive robot "
-      "to\n"
-      "# start from. Or read your URDF or SDF: docs/platforms-from-urdf-sdf.md.\n" +
-      Replace(DropLines(From(Read(shipped / "platforms" / "diff2.yaml"), "name:"), "mesh:"),
-              "name: diff2", "name: " + name);
+      !urdf_.empty() || !sdf_.empty()
+          ? SchemaLine(schemas, "platform") +
+                DescribedPlatform(name, dir, shipped, urdf_, sdf_, model_, &drive)
+          : SchemaLine(schemas, "platform") +
+                "# Your robot (docs/physics.md, \"Platform files\"): paper 000's "
+                "differential-drive robot "
+                "to\n"
+                "# start from. Or read your URDF or SDF: docs/platforms-from-urdf-sdf.md.\n" +
+                Replace(
+                    DropLines(From(Read(shipped / "platforms" / "diff2.yaml"), "name:"), "mesh:"),
+                    "name: diff2", "name: " + name);
   const std::vector<std::pair<std::string, std::string>> files = {
       {"platform.yaml", platform},
-      {"scenario.yaml", SchemaLine(schemas, "scenario") + Scenario(name)},
+      {"scenario.yaml", SchemaLine(schemas, "scenario") + Scenario(name, drive)},
       {"firmware.yaml",
        SchemaLine(schemas, "firmware-config") +
            "# The reference firmware's configuration (docs/firmware.md); yours reads its own.\n" +

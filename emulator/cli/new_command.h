@@ -5,7 +5,11 @@
 /// scenario.yaml (a 2 m drive that runs `firmware.command`), firmware.yaml (the reference
 /// firmware's configuration), outputs.yaml (which frames of which DBC carry the firmware's
 /// estimate), campaign.yaml (the scenario over ten seeds), smoke.list (the CI smoke suite) and
-/// a README.md saying what to change first. Each YAML file opens with the line that makes an
+/// a README.md saying what to change first. With --urdf FILE (or --sdf FILE [--model NAME])
+/// platform.yaml reads the user's robot description instead: its two driven wheels are the
+/// continuous joints with a fixed horizontal axle across the robot, its casters those below a
+/// swivel (docs/platforms-from-urdf-sdf.md), and the scenario tells the firmware their track,
+/// radius and spin signs. Each YAML file opens with the line that makes an
 /// editor's YAML language server check it against its JSON Schema as it is typed
 /// (docs/schemas.md). The shipped files it starts from come from the
 /// source tree next to the build directory, else the installed data directory. DIR must be new
@@ -29,6 +33,9 @@ class NewCommand {
  private:
   CLI::App* new_ = nullptr;
   std::string dir_;
+  std::string urdf_;
+  std::string sdf_;
+  std::string model_;
   bool force_ = false;
 };
 

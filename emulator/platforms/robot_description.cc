@@ -393,6 +393,27 @@ std::string LoadSdf(RobotModel* m, const std::string& model_name) {
   return {};
 }
 
+// The pose of `link`'s frame in the frame of link `top` above it, through the joints between
+// at their zero positions; false when `link` is not under `top`. `moving`: the joints passed
+// that are not fixed.
+bool LinkInFrameOf(const RobotModel& m, const std::string& top, const std::string& link,
+                   Isometry3d* pose, std::vector<std::string>* moving) {
+  Isometry3d t = Isometry3d::Identity();
+  std::string at = link;
+  for (std::size_t depth = 0; at != top; ++depth) {
+    const auto l = m.links.find(at);
+    if (l == m.links.end() || l->second.parent_joint.empty() || depth > m.links.size()) {
+      return false;
+    }
+    const Joint& j = m.joints.at(l->second.parent_joint);
+    if (j.kind != Joint::kFixed && moving != nullptr) moving->push_back(l->second.parent_joint);
+    t = j.joint_in_parent * j.child_in_joint * t;
+    at = j.parent;
+  }
+  *pose = t;
+  return true;
+}
+
 // A wheel the overlay declares, as the description places it.
 struct WheelInModel {
   std::string joint;
@@ -457,18 +478,7 @@ class Importer {
   // that are not fixed.
   bool LinkIn(const std::string& top, const std::string& link, Isometry3d* pose,
               std::vector<std::string>* moving) const {
-    Isometry3d t = Isometry3d::Identity();
-    std::string at = link;
-    for (std::size_t depth = 0; at != top; ++depth) {
-      const std::string& pj = LinkNamed(at).parent_joint;
-      if (pj.empty() || depth > m_.links.size()) return false;
-      const Joint& j = m_.joints.at(pj);
-      if (j.kind != Joint::kFixed && moving != nullptr) moving->push_back(pj);
-      t = j.joint_in_parent * j.child_in_joint * t;
-      at = j.parent;
-    }
-    *pose = t;
-    return true;
+    return LinkInFrameOf(m_, top, link, pose, moving);
   }
 
   void Subtree(const std::string& link, std::set<std::string>* out) const {
@@ -835,6 +845,52 @@ void ImportRobotDescription(YAML::Node root, const FieldReader& rd) {
     rd.Fail(node, field, fmt::format("{} has no links", written));
   }
   Importer(root, rd, model).Run();
+}
+
+std::vector<WheelJoint> FindWheelJoints(const std::string& path, const std::string& model_name,
+                                        bool* base_has_box) {
+  RobotModel model;
+  model.path = path;
+  model.shown = path;
+  if (const std::string problem = CheckFile(path); !problem.empty()) {
+    throw std::invalid_argument(fmt::format("{}: {}", path, problem));
+  }
+  const bool sdf = fs::path(path).extension() == ".sdf" || fs::path(path).extension() == ".world";
+  const std::string problem = sdf ? LoadSdf(&model, model_name) : LoadUrdf(&model);
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  *base_has_box = false;
+  if (const auto base = model.links.find(model.root); base != model.links.end()) {
+    for (const Geometry& g : base->second.collisions) *base_has_box |= g.kind == Geometry::kBox;
+  }
+  std::vector<WheelJoint> out;
+  for (const auto& [name, j] : model.joints) {
+    if (j.kind != Joint::kContinuous) continue;
+    const auto child = model.links.find(j.child);
+    if (child == model.links.end()) continue;
+    double radius = 0;
+    for (const Geometry& g : child->second.collisions) {
+      if ((g.kind == Geometry::kCylinder || g.kind == Geometry::kSphere) && g.radius > 0) {
+        radius = g.radius;
+        break;
+      }
+    }
+    Isometry3d parent_in_base;
+    std::vector<std::string> moving;
+    if (radius <= 0 || !LinkInFrameOf(model, model.root, j.parent, &parent_in_base, &moving)) {
+      continue;
+    }
+    const Isometry3d joint_in_base = parent_in_base * j.joint_in_parent;
+    const Eigen::Vector3d axis = joint_in_base.linear() * j.axis.normalized();
+    if (std::abs(axis.z()) > 1e-6) continue;  // a swivel or a steering joint
+    WheelJoint w;
+    w.joint = name;
+    w.centre_m = joint_in_base.translation();
+    w.axis = axis;
+    w.radius_m = Nanometres(radius);
+    w.below_moving_joint = !moving.empty();
+    out.push_back(w);
+  }
+  return out;
 }
 
 }  // namespace wheelhil::emulator::platforms

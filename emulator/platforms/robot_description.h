@@ -26,7 +26,11 @@
 /// replaces a lumped inertia that is not diagonal in B.
 /// Not thread-safe: urdfdom reports through console_bridge's one process-wide log handler.
 
+#include <string>
+#include <vector>
+
 #include <yaml-cpp/yaml.h>
+#include <Eigen/Core>
 
 #include "bus/yaml_fields.h"
 
@@ -39,5 +43,21 @@ namespace wheelhil::emulator::platforms {
 /// reads as any other. Throws std::invalid_argument "file:line:col: field: problem" at the
 /// overlay's field, with the description's file, line and link or joint in the problem.
 void ImportRobotDescription(YAML::Node root, const bus::yaml::FieldReader& rd);
+
+/// A joint of a robot description that may be a wheel: continuous, with a horizontal axis and
+/// a collision cylinder or sphere on its child link.
+struct WheelJoint {
+  std::string joint;
+  Eigen::Vector3d centre_m = Eigen::Vector3d::Zero();  ///< in the root (canonical) link's frame
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitY();     ///< the same frame, unit
+  double radius_m = 0;
+  bool below_moving_joint = false;  ///< under a swivel: a caster's
+};
+
+/// The wheel joints of the URDF (or, for a .sdf file, the SDF model `model_name`, "" for the
+/// file's own) at `path`, in joint-name order; `base_has_box`: the root link has a collision
+/// box (the chassis' half extents). Throws std::invalid_argument naming the file.
+std::vector<WheelJoint> FindWheelJoints(const std::string& path, const std::string& model_name,
+                                        bool* base_has_box);
 
 }  // namespace wheelhil::emulator::platforms

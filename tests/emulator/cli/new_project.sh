@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
 # `wheelhil new DIR` makes a project that runs at once: its scenario passes with the reference
 # firmware, its smoke list and its campaign run; a second `new` on it is refused (exit 2)
-# unless --force; a DIR that is a file is refused.
-# Usage: new_project.sh WHEELHIL_BIN
+# unless --force; a DIR that is a file is refused. With --urdf / --sdf (the shipped paper-000
+# robot's descriptions) platform.yaml reads the description and the scenario passes too; a
+# robot that is not a differential drive is refused with its wheel joints named.
+# Usage: new_project.sh WHEELHIL_BIN SOURCE_DIR
 set -uo pipefail
 wheelhil=$1
+src=$2
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
@@ -52,3 +55,19 @@ touch "$work/file"
 rc=$?
 [ "$rc" -eq 2 ] && grep -q "exists and is not a directory" "$work/file.log" || fail "new on a file: rc $rc"
 echo "ok: refusals"
+
+for desc in "--urdf $src/scenarios/platforms/urdf/diff2.urdf" "--sdf $src/scenarios/platforms/sdf/diff2.sdf"; do
+  rm -rf "$work/described"
+  # shellcheck disable=SC2086
+  "$wheelhil" new "$work/described" $desc >"$work/d.log" 2>&1 || fail "new $desc: $(cat "$work/d.log")"
+  grep -q "joint: left_wheel_joint" "$work/described/platform.yaml" || fail "new $desc: no left wheel joint"
+  (cd "$work/described" && "$wheelhil" run scenario.yaml --out run >"$work/drun.log" 2>&1) ||
+    fail "run after new $desc: $(tail -5 "$work/drun.log")"
+  grep -q "verdict: pass" "$work/drun.log" || fail "new $desc: the run did not pass"
+  echo "ok: new $desc runs and passes"
+done
+"$wheelhil" new "$work/mecanum" --urdf "$src/scenarios/platforms/urdf/mecanum4_omni3.urdf" >"$work/m.log" 2>&1
+rc=$?
+[ "$rc" -eq 2 ] && grep -q "has 4 wheel joints with a fixed axle across the robot" "$work/m.log" ||
+  fail "new on a Mecanum robot: rc $rc: $(cat "$work/m.log")"
+echo "ok: a robot that is not a differential drive is refused with its joints named"
