@@ -5,6 +5,7 @@
 #include <fstream>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -111,6 +112,11 @@ struct Link {
   std::vector<Geometry> visuals;
   std::string parent_joint;  // "" for a root
   std::vector<std::string> child_links;
+  // Gazebo's anisotropic friction on the link's first collision that has it: the direction of
+  // mu (fdir1) in the link's frame, mu and mu2 (along fdir1 x normal), where it is stated.
+  std::optional<Vector3d> fdir1;
+  double mu = 1, mu2 = 1;
+  std::string fdir1_where;
 };
 
 struct Joint {
@@ -189,8 +195,33 @@ std::string LoadUrdf(RobotModel* m) {
     return fmt::format("{}: the root element is not <robot>", m->shown);
   }
   std::map<std::string, int> link_lines, joint_lines;
+  struct GazeboFriction {
+    Vector3d fdir1;
+    double mu = 1, mu2 = 1;
+    int line = 0;
+  };
+  std::map<std::string, GazeboFriction> gazebo;
   for (const TiXmlElement* e = robot->FirstChildElement(); e != nullptr;
        e = e->NextSiblingElement()) {
+    const char* reference = e->Attribute("reference");
+    if (std::string(e->Value()) == "gazebo" && reference != nullptr) {
+      const TiXmlElement* fdir1 = e->FirstChildElement("fdir1");
+      if (fdir1 != nullptr && fdir1->GetText() != nullptr) {
+        GazeboFriction g;
+        std::istringstream in(fdir1->GetText());
+        in >> g.fdir1.x() >> g.fdir1.y() >> g.fdir1.z();
+        if (!in) {
+          return fmt::format("{}:{}: <gazebo reference='{}'> fdir1 '{}' is not three numbers",
+                             m->shown, fdir1->Row(), reference, fdir1->GetText());
+        }
+        for (const auto& [tag, value] : {std::pair{"mu1", &g.mu}, std::pair{"mu2", &g.mu2}}) {
+          const TiXmlElement* mu = e->FirstChildElement(tag);
+          if (mu != nullptr && mu->GetText() != nullptr) *value = std::atof(mu->GetText());
+        }
+        g.line = fdir1->Row();
+        gazebo[reference] = g;
+      }
+    }
     const char* name = e->Attribute("name");
     if (name == nullptr) continue;
     if (std::string(e->Value()) == "link") link_lines.emplace(name, e->Row());
@@ -222,6 +253,16 @@ std::string LoadUrdf(RobotModel* m) {
     }
     for (const auto& c : l->collision_array) {
       if (c) link.collisions.push_back(FromUrdf(c->geometry));
+    }
+    if (const auto g = gazebo.find(name); g != gazebo.end()) {
+      // Gazebo reads these in the link's collision frame.
+      const Matrix3d r =
+          l->collision ? ToIsometry(l->collision->origin).linear() : Matrix3d(Matrix3d::Identity());
+      link.fdir1 = r * g->second.fdir1;
+      link.mu = g->second.mu;
+      link.mu2 = g->second.mu2;
+      link.fdir1_where =
+          fmt::format("{}:{}: <gazebo reference='{}'> fdir1", m->shown, g->second.line, name);
     }
     for (const auto& v : l->visual_array) {
       if (v) link.visuals.push_back(FromUrdf(v->geometry));
@@ -353,7 +394,26 @@ std::string LoadSdf(RobotModel* m, const std::string& model_name) {
       link.inertia = frame.linear() * moi * frame.linear().transpose();
     }
     for (uint64_t c = 0; c < l->CollisionCount(); ++c) {
-      link.collisions.push_back(FromSdf(l->CollisionByIndex(c)->Geom()));
+      const sdf::Collision* col = l->CollisionByIndex(c);
+      link.collisions.push_back(FromSdf(col->Geom()));
+      // <surface><friction><ode><fdir1>: in the collision's frame.
+      sdf::ElementPtr e = col->Element();
+      for (const char* step : {"surface", "friction", "ode"}) {
+        e = e && e->HasElement(step) ? e->FindElement(step) : nullptr;
+      }
+      if (link.fdir1 || !e || !e->HasElement("fdir1")) continue;
+      const auto f = e->Get<ignition::math::Vector3d>("fdir1");
+      if (f.Length() == 0) continue;
+      ignition::math::Pose3d in_link;
+      if (!col->SemanticPose().Resolve(in_link, l->Name()).empty()) continue;
+      link.fdir1 = ToIsometry(in_link).linear() * Vector3d(f.X(), f.Y(), f.Z());
+      link.mu = e->HasElement("mu") ? e->Get<double>("mu") : 1.0;
+      link.mu2 = e->HasElement("mu2") ? e->Get<double>("mu2") : 1.0;
+      const sdf::ElementPtr fe = e->FindElement("fdir1");
+      link.fdir1_where =
+          fe && fe->LineNumber()
+              ? fmt::format("{}:{}: link '{}' fdir1", m->shown, *fe->LineNumber(), l->Name())
+              : fmt::format("{}: link '{}' fdir1", m->shown, l->Name());
     }
     for (uint64_t v = 0; v < l->VisualCount(); ++v) {
       link.visuals.push_back(FromSdf(l->VisualByIndex(v)->Geom()));
@@ -543,11 +603,12 @@ class Importer {
   // Writes `value` at map[key] unless the overlay has it there already: then the two must
   // agree (`degrees`: as angles, modulo 360), or the error names both.
   void Provide(YAML::Node map, const std::string& key, const std::string& field, double value,
-               const std::string& source, bool degrees = false) const {
+               const std::string& source, bool degrees = false, double period = 360.0) const {
     const YAML::Node given = FieldReader::Get(map, key);
     if (FieldReader::Present(given)) {
       const double v = rd_.ToNumber(given, field);
-      const double diff = degrees ? std::remainder(v - value, 360.0) : v - value;
+      const double diff =
+          degrees || period != 360.0 ? std::remainder(v - value, period) : v - value;
       if (std::abs(diff) > kAgreement * std::max(1.0, std::abs(value))) {
         rd_.Fail(given, field,
                  fmt::format("{} here, but {} says {}: say it in one place", v, source, value));
@@ -744,6 +805,24 @@ class Importer {
               child.where +
                   (g.kind == Geometry::kCylinder ? " collision cylinder" : " collision sphere"));
       break;
+    }
+    // A Mecanum wheel modelled Gazebo's way (a sphere or cylinder whose friction acts along
+    // fdir1 only, or across it only): that direction is the roller axis.
+    if (WheelKind(entry) == "mecanum" && child.fdir1) {
+      const bool along = child.mu2 <= 1e-3 * child.mu;
+      const bool across = child.mu <= 1e-3 * child.mu2;
+      if (along || across) {
+        const Vector3d z = Vector3d::UnitZ();
+        Vector3d u = w.joint_in_base.linear() * (joint.child_in_joint.linear() * *child.fdir1);
+        if (across) u = z.cross(u);
+        const Vector3d f = w.axis_base.cross(z);
+        double alpha = std::atan2(u.dot(f), u.dot(w.axis_base)) * 180.0 / std::numbers::pi;
+        if (alpha > 90) alpha -= 180;
+        if (alpha <= -90) alpha += 180;
+        Provide(entry, "roller_angle_deg", field + ".roller_angle_deg", NanoDegrees(alpha),
+                child.fdir1_where + (along ? " (mu along it, mu2 0)" : " (mu 0, mu2 across it)"),
+                false, 180.0);
+      }
     }
     // Mass and inertia about the spin axis: the child link and everything under it, in the
     // joint's frame (where the axis is stated, so an inertia about it arrives bit for bit).

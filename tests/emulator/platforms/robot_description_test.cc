@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <string>
 
 #include <gmock/gmock.h>
@@ -282,6 +283,91 @@ TEST_F(UrdfFiles, SdfErrorsNameTheFileTheLineAndTheModelOrJoint) {
     ADD_FAILURE() << "no error";
   } catch (const std::invalid_argument& e) {
     EXPECT_THAT(e.what(), HasSubstr("a platform reads one description"));
+  }
+}
+
+// Four Mecanum wheels modelled Gazebo's way: friction only along fdir1 (mu2 0), the roller
+// axis. Paper 001's handedness: front-left and rear-right right-handed (-45 deg).
+TEST_F(UrdfFiles, GazebosFrictionDirectionIsTheMecanumRollerAngle) {
+  struct Wheel {
+    const char* name;
+    const char* xyz;
+    const char* fdir1_urdf;  // link frame = base frame
+    const char* fdir1_sdf;   // link rolled -90 deg about x: base (x, y, 0) is link (x, 0, y)
+    double roller_deg;
+  };
+  const std::vector<Wheel> wheels = {{"fl", "0.25 0.2 -0.075", "-1 1 0", "-1 0 1", -45},
+                                     {"fr", "0.25 -0.2 -0.075", "1 1 0", "1 0 1", 45},
+                                     {"rl", "-0.25 0.2 -0.075", "1 1 0", "1 0 1", 45},
+                                     {"rr", "-0.25 -0.2 -0.075", "-1 1 0", "-1 0 1", -45}};
+  std::string urdf = R"(<robot name="m"><link name="base"><inertial><mass value="20"/>
+    <inertia ixx="0.4" ixy="0" ixz="0" iyy="0.6" iyz="0" izz="0.9"/></inertial>
+    <collision><geometry><box size="0.6 0.44 0.12"/></geometry></collision></link>)";
+  std::string sdf = R"(<sdf version="1.8"><model name="m"><link name="base"><inertial>
+    <mass>20</mass><inertia><ixx>0.4</ixx><iyy>0.6</iyy><izz>0.9</izz></inertia></inertial>
+    <collision name="c"><geometry><box><size>0.6 0.44 0.12</size></box></geometry></collision>
+    </link>)";
+  std::string overlay_wheels;
+  for (const Wheel& w : wheels) {
+    const std::string n = w.name;
+    urdf += "<link name='" + n +
+            "'><inertial><mass value='0.8'/><inertia ixx='0.002' ixy='0' "
+            "ixz='0' iyy='0.004' iyz='0' izz='0.002'/></inertial><collision><geometry><sphere "
+            "radius='0.076'/></geometry></collision></link><joint name='" +
+            n +
+            "_j' "
+            "type='continuous'><parent link='base'/><child link='" +
+            n + "'/><origin xyz='" + w.xyz + "'/><axis xyz='0 1 0'/></joint><gazebo reference='" +
+            n +
+            "'><mu1>1.0</mu1>"
+            "<mu2>0</mu2><fdir1>" +
+            w.fdir1_urdf + "</fdir1></gazebo>\n";
+    sdf += "<link name='" + n + "'><pose>" + w.xyz +
+           " -1.5707963267948966 0 0</pose><inertial>"
+           "<mass>0.8</mass><inertia><ixx>0.002</ixx><iyy>0.002</iyy><izz>0.004</izz></inertia>"
+           "</inertial><collision name='c'><geometry><sphere><radius>0.076</radius></sphere>"
+           "</geometry><surface><friction><ode><mu>1</mu><mu2>0</mu2><fdir1>" +
+           w.fdir1_sdf + "</fdir1></ode></friction></surface></collision></link><joint name='" + n +
+           "_j' "
+           "type='continuous'><parent>base</parent><child>" +
+           n +
+           "</child><axis><xyz>0 0 1"
+           "</xyz></axis></joint>\n";
+    overlay_wheels += "  - {joint: " + n + "_j, motor: {}}\n";
+  }
+  urdf += "</robot>\n";
+  sdf += "</model></sdf>\n";
+  const std::string overlay =
+      "wheel_defaults: {kind: mecanum, suspension: {free_length_m: 0.06, min_length_m: 0.02,\n"
+      "  max_length_m: 0.075, stiffness_n_m: 20000, damping_n_s_m: 400},\n"
+      "  motor: {gear_ratio: 25, torque_constant_nm_a: 0.04, max_current_a: 10}}\n"
+      "kinematics: {type: mecanum4, l1_m: 0.2, l2_m: 0.25, wheel_radius_m: 0.076,\n"
+      "  roller_angle_deg: 45}\n"
+      "wheels:\n" +
+      overlay_wheels;
+  Write("m.urdf", urdf);
+  Write("m.sdf", sdf);
+  for (const char* source : {"urdf: m.urdf\n", "sdf: m.sdf\n"}) {
+    SCOPED_TRACE(source);
+    const Platform p = LoadPlatformFile(Write("p.yaml", source + overlay));
+    ASSERT_EQ(p.vehicle.wheels.size(), 4u);
+    for (std::size_t i = 0; i < 4; ++i) {
+      EXPECT_NEAR(p.vehicle.wheels[i].roller_angle_rad * 180 / std::numbers::pi,
+                  wheels[i].roller_deg, 1e-9)
+          << wheels[i].name;
+      EXPECT_NEAR(p.vehicle.wheels[i].heading_rad, 0, 1e-12) << wheels[i].name;
+    }
+    EXPECT_EQ(p.vehicle.wheels[0].radius_m, 0.076);
+  }
+  // The overlay saying the other hand disagrees with the description.
+  std::string wrong = overlay;
+  wrong.replace(wrong.find("{joint: fl_j,"), 13, "{joint: fl_j, roller_angle_deg: 45,");
+  try {
+    LoadPlatformFile(Write("q.yaml", "urdf: m.urdf\n" + wrong));
+    ADD_FAILURE() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("wheels[0].roller_angle_deg: 45 here, but m.urdf:"));
+    EXPECT_THAT(e.what(), HasSubstr("<gazebo reference='fl'> fdir1 (mu along it, mu2 0) says -45"));
   }
 }
 
