@@ -165,15 +165,70 @@ std::string UnitOf(const std::string& key) {
   return {};
 }
 
-json Emit(const Node& n, const std::string& key) {
+// Descriptions of fields by dotted path (list indices dropped): the docs' field tables.
+using Descriptions = std::map<std::string, std::string>;
+
+// The `| key | meaning |` tables of docs/scenarios.md's "Fields" section: each row's first
+// backticked name (up to its first ':', ' ', '(' or '['), under its "### `section`" heading.
+Descriptions ReadFieldTables(const fs::path& doc) {
+  Descriptions out;
+  std::ifstream in(doc);
+  std::string line, section;
+  bool in_fields = false, key_table = false;
+  auto strip = [](std::string s) {
+    s.erase(std::remove(s.begin(), s.end(), '`'), s.end());
+    while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.pop_back();
+    while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.erase(0, 1);
+    return s;
+  };
+  while (std::getline(in, line)) {
+    if (line.rfind("## ", 0) == 0) in_fields = line == "## Fields";
+    if (!in_fields) continue;
+    if (line.rfind("### ", 0) == 0) {
+      const std::size_t a = line.find('`');
+      const std::size_t b = a == std::string::npos ? a : line.find('`', a + 1);
+      section = b == std::string::npos ? "" : line.substr(a + 1, b - a - 1);
+      key_table = false;
+      continue;
+    }
+    if (line.rfind("| key |", 0) == 0) {
+      key_table = true;
+      continue;
+    }
+    if (line.rfind("|", 0) != 0) {
+      key_table = false;
+      continue;
+    }
+    if (!key_table || line.rfind("|---", 0) == 0) continue;
+    const std::size_t a = line.find('`');
+    const std::size_t bar = line.find('|', 1);
+    if (a == std::string::npos || bar == std::string::npos || a > bar) continue;
+    const std::size_t end = line.find_first_of(":`([ ", a + 1);
+    const std::string key = line.substr(a + 1, end - a - 1);
+    std::string meaning = line.substr(bar + 1);
+    if (!meaning.empty() && meaning.back() == '|') meaning.pop_back();
+    if (key.empty()) continue;
+    out[section.empty() ? key : section + "." + key] = strip(meaning);
+  }
+  return out;
+}
+
+json Emit(const Node& n, const std::string& key, const std::string& path,
+          const Descriptions& docs) {
   json out = json::object();
   const std::string unit = UnitOf(key);
+  auto child_path = [&](const std::string& k) { return path.empty() ? k : path + "." + k; };
   std::vector<json> alternatives;
   if (n.keys_checked) {
     json props = json::object();
     for (const std::string& k : n.keys) {
       const auto c = n.children.find(k);
-      props[k] = c == n.children.end() ? json::object() : Emit(*c->second, k);
+      props[k] = c == n.children.end() ? json::object() : Emit(*c->second, k, child_path(k), docs);
+      if (c == n.children.end()) {
+        if (const auto d = docs.find(child_path(k)); d != docs.end()) {
+          props[k]["description"] = d->second;
+        }
+      }
     }
     alternatives.push_back(
         {{"type", "object"}, {"properties", props}, {"additionalProperties", false}});
@@ -181,12 +236,15 @@ json Emit(const Node& n, const std::string& key) {
     json o = {{"type", "object"}};
     if (!n.children.empty() && !n.open_map) {
       json props = json::object();
-      for (const auto& [k, c] : n.children) props[k] = Emit(*c, k);
+      for (const auto& [k, c] : n.children) props[k] = Emit(*c, k, child_path(k), docs);
       o["properties"] = props;
     }
     alternatives.push_back(o);
   }
-  if (n.items) alternatives.push_back({{"type", "array"}, {"items", Emit(*n.items, key)}});
+  if (n.items) {
+    alternatives.push_back(
+        {{"type", "array"}, {"items", Emit(*n.items, key, path, Descriptions{})}});
+  }
   if (!n.kinds.empty()) {
     json scalar = json::object();
     const bool number = n.kinds.count(FieldRecorder::Kind::kNumber) != 0;
@@ -211,7 +269,10 @@ json Emit(const Node& n, const std::string& key) {
   } else if (alternatives.size() > 1) {
     out["anyOf"] = alternatives;
   }
-  if (!unit.empty()) out["description"] = "unit: " + unit;
+  std::string description;
+  if (const auto d = docs.find(path); d != docs.end()) description = d->second;
+  if (!unit.empty()) description += (description.empty() ? "" : " ") + ("(unit: " + unit + ")");
+  if (!description.empty()) out["description"] = description;
   return out;
 }
 
@@ -274,7 +335,21 @@ nlohmann::json FileSchema(const std::string& kind, const std::vector<std::string
     bus::yaml::RecordFieldsOnThisThread(previous);
     Merge(all, recorder.root());
   }
-  json schema = Emit(all, "");
+  // The field tables of the docs where they are: the source tree's docs/, the installed ones.
+  Descriptions docs;
+  if (kind == "scenario") {
+    const fs::path bin = bus::RunningExecutableDir();
+    for (const fs::path& doc :
+         {bin / ".." / ".." / "docs" / "scenarios.md",
+          bin / bus::InstalledDataDirFromBin() / ".." / "doc" / "wheelhil" / "scenarios.md"}) {
+      std::error_code ec;
+      if (fs::is_regular_file(doc, ec)) {
+        docs = ReadFieldTables(doc);
+        break;
+      }
+    }
+  }
+  json schema = Emit(all, "", "", docs);
   schema["$schema"] = "https://json-schema.org/draft/2020-12/schema";
   schema["$id"] = fmt::format("https://wheelhil.invalid/schemas/{}.schema.json", kind);
   schema["title"] = Titles().at(kind);
