@@ -41,6 +41,17 @@ grep -q '"verdict": "pass"' "$tmp/run/report.json" ||
   { grep -m3 '"verdict"\|"failure"' "$tmp/run/report.json" >&2; fail "the installed run did not pass"; }
 [ -s "$tmp/run/can.log" ] || fail "no can.log"
 
+# 1b. A project from `wheelhil new` (the installed templates, a URDF robot, the installed
+#     schemas named at the top of each file) runs and passes.
+"${clean_env[@]}" "$p/bin/wheelhil" new "$tmp/proj" \
+  --urdf "$p/share/wheelhil/scenarios/platforms/urdf/diff2.urdf" >"$tmp/new.log" 2>&1 ||
+  { cat "$tmp/new.log" >&2; fail "wheelhil new"; }
+grep -q "^# yaml-language-server: \$schema=.*/share/wheelhil/schemas/scenario.schema.json$" \
+  "$tmp/proj/scenario.yaml" || fail "the new project's scenario names no installed schema"
+(cd "$tmp/proj" && "${clean_env[@]}" "$p/bin/wheelhil" run scenario.yaml --out run --quiet \
+  >"$tmp/proj.log" 2>&1) || { cat "$tmp/proj.log" >&2; fail "run of the new project"; }
+grep -q '"verdict": "pass"' "$tmp/proj/run/report.json" || fail "the new project's run did not pass"
+
 # 2. A third-party SocketCAN program on an installed userspace bus.
 if command -v cansend >/dev/null; then
   "${clean_env[@]}" WHEELHIL_UCAN_DIR="$tmp/ucan" "$p/bin/wheelhil" exec --bus ucan7 -- \
@@ -83,4 +94,4 @@ cmake --build "$tmp/consumer/build" >>"$tmp/consumer.log" 2>&1 ||
   { cat "$tmp/consumer.log" >&2; fail "building against wheelhil::bus"; }
 out="$("$tmp/consumer/build/decode_pose")"
 [ "$out" = "680 1.2500 -0.5000" ] || fail "the consumer decoded '$out', expected '680 1.2500 -0.5000'"
-echo "installed tree: run passed, exec worked, find_package(wheelhil) consumer: $out"
+echo "installed tree: run passed, a new project ran, exec worked, find_package(wheelhil) consumer: $out"
