@@ -35,6 +35,18 @@ std::string FindShippedDbcDir(const std::string& exe_dir) {
   return {};
 }
 
+std::string FindShippedDataRoot(const std::string& exe_dir) {
+  for (const fs::path& dir :
+       {fs::path(exe_dir) / ".." / "..", fs::path(exe_dir) / WHEELHIL_BIN_TO_DATA}) {
+    std::error_code ec;
+    if (fs::is_regular_file(dir / "scenarios" / "platforms" / "diff2.yaml", ec)) {
+      const fs::path canonical = fs::canonical(dir, ec);
+      return (ec ? dir.lexically_normal() : canonical).string();
+    }
+  }
+  return {};
+}
+
 std::string FindPreloadLibrary(const std::string& exe_dir, const std::string& file) {
   const fs::path build_tree = fs::path(exe_dir) / ".." / "lib" / file;
   std::error_code ec;

@@ -22,6 +22,11 @@ std::string InstalledDataDirFromBin();
 /// <exe_dir>/<bin-to-data>/dbc (an install); canonical. Empty when neither has it.
 std::string FindShippedDbcDir(const std::string& exe_dir);
 
+/// The directory holding the shipped scenarios/ (and docs/schemas or schemas/): the source
+/// root above a build directory (<exe_dir>/../..), else <exe_dir>/<bin-to-data> (an install);
+/// canonical. Empty when neither has scenarios/platforms/diff2.yaml.
+std::string FindShippedDataRoot(const std::string& exe_dir);
+
 /// A preload library (`file`, e.g. "libwheelhil_ucan.so"): <exe_dir>/../lib/<file> (a build
 /// tree), else <exe_dir>/<bin-to-preload>/<file> (an install). When neither exists, the install
 /// path, so that the caller's "not found" names where it should be.

@@ -21,18 +21,15 @@ namespace fs = std::filesystem;
 // The shipped scenarios: next to the build directory that holds this executable (a build
 // tree), else the installed data directory.
 fs::path ShippedScenarios() {
-  const fs::path bin = bus::RunningExecutableDir();
-  for (const fs::path& candidate :
-       {bin / ".." / ".." / "scenarios", bin / bus::InstalledDataDirFromBin() / "scenarios"}) {
-    std::error_code ec;
-    if (fs::is_regular_file(candidate / "platforms" / "diff2.yaml", ec)) {
-      return candidate.lexically_normal();
-    }
+  const std::string bin = bus::RunningExecutableDir();
+  const std::string root = bus::FindShippedDataRoot(bin);
+  if (root.empty()) {
+    throw std::invalid_argument(fmt::format(
+        "new: the shipped scenarios (scenarios/platforms/diff2.yaml) are not next to {} nor in "
+        "its installed data directory: is wheelhil installed whole?",
+        bin));
   }
-  throw std::invalid_argument(fmt::format(
-      "new: the shipped scenarios (scenarios/platforms/diff2.yaml) are not next to {} nor in its "
-      "installed data directory: is wheelhil installed whole?",
-      bin.string()));
+  return fs::path(root) / "scenarios";
 }
 
 // The JSON Schemas (docs/schemas in a source tree, <datadir>/wheelhil/schemas installed), or

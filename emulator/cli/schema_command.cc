@@ -338,10 +338,9 @@ nlohmann::json FileSchema(const std::string& kind, const std::vector<std::string
   // The field tables of the docs where they are: the source tree's docs/, the installed ones.
   Descriptions docs;
   if (kind == "scenario") {
-    const fs::path bin = bus::RunningExecutableDir();
+    const fs::path root = bus::FindShippedDataRoot(bus::RunningExecutableDir());
     for (const fs::path& doc :
-         {bin / ".." / ".." / "docs" / "scenarios.md",
-          bin / bus::InstalledDataDirFromBin() / ".." / "doc" / "wheelhil" / "scenarios.md"}) {
+         {root / "docs" / "scenarios.md", root / ".." / "doc" / "wheelhil" / "scenarios.md"}) {
       std::error_code ec;
       if (fs::is_regular_file(doc, ec)) {
         docs = ReadFieldTables(doc);
@@ -357,19 +356,11 @@ nlohmann::json FileSchema(const std::string& kind, const std::vector<std::string
 }
 
 std::vector<std::string> ShippedExamples(const std::string& kind) {
-  const fs::path bin = bus::RunningExecutableDir();
-  fs::path dir;
-  for (const fs::path& candidate :
-       {bin / ".." / ".." / "scenarios", bin / bus::InstalledDataDirFromBin() / "scenarios"}) {
-    std::error_code ec;
-    if (fs::is_directory(candidate / "platforms", ec)) {
-      dir = candidate.lexically_normal();
-      break;
-    }
-  }
-  if (dir.empty()) {
+  const std::string root = bus::FindShippedDataRoot(bus::RunningExecutableDir());
+  if (root.empty()) {
     throw std::invalid_argument("schema: the shipped scenarios are not next to this program");
   }
+  const fs::path dir = fs::path(root) / "scenarios";
   std::vector<std::string> out;
   auto yaml_in = [&](const fs::path& d) {
     std::error_code ec;
