@@ -86,5 +86,10 @@ if diff -u "$LIST" "$actual" >"$out/diff.txt"; then
 fi
 echo "golden_artefacts: artefacts differ from $LIST (- committed, + this build):" >&2
 grep '^[-+][^-+]' "$out/diff.txt" >&2 || true
+# What each such run said (a timeout under load and a change of behaviour look different).
+for scen in $(grep '^+[^+]' "$out/diff.txt" | awk '{print $2}' | sed 's|/[^/]*$||' | sort -u); do
+  name="$(echo "${scen%.yaml}" | tr '/' '_')"
+  [ -f "$out/$name.stdout" ] && { echo "--- $scen: the run's last lines:" >&2; tail -5 "$out/$name.stdout" >&2; }
+done
 [ -n "$keep" ] || echo "golden_artefacts: rerun with --keep DIR to look at the runs" >&2
 exit 1
