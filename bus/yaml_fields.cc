@@ -212,8 +212,9 @@ FieldRecorder* RecordFieldsOnThisThread(FieldRecorder* recorder) {
 }
 
 void FieldReader::Record(std::string_view field, FieldRecorder::Kind kind,
-                         std::optional<double> min, std::optional<double> max) const {
-  if (t_recorder != nullptr) t_recorder->Value(file_, field, kind, min, max);
+                         std::optional<double> min, std::optional<double> max,
+                         std::string_view text) const {
+  if (t_recorder != nullptr) t_recorder->Value(file_, field, kind, min, max, text);
 }
 
 void FieldReader::CheckKeys(const YAML::Node& map, std::string_view field,
@@ -285,7 +286,9 @@ bool FieldReader::ToBool(const YAML::Node& node, std::string_view field) const {
 }
 
 std::string FieldReader::ToString(const YAML::Node& node, std::string_view field) const {
-  Record(field, FieldRecorder::Kind::kString);
+  Record(
+      field, FieldRecorder::Kind::kString, {}, {},
+      node.IsDefined() && node.IsScalar() ? std::string_view(node.Scalar()) : std::string_view());
   if (!node.IsDefined() || !node.IsScalar()) Fail(node, field, "must be a string");
   return node.Scalar();
 }

@@ -38,9 +38,11 @@ class FieldRecorder {
                     const std::set<std::string>& allowed) = 0;
   /// A mapping at `field` whose keys are names of the user's choosing (KeyName).
   virtual void OpenMap(const std::string& file, std::string_view field) = 0;
-  /// A scalar at `field`; `min`/`max` when the reader checked a range.
+  /// A scalar at `field`; `min`/`max` when the reader checked a range; `text`: a string's value
+  /// as written (a `type:` or `kind:` that selects which keys its mapping has).
   virtual void Value(const std::string& file, std::string_view field, Kind kind,
-                     std::optional<double> min, std::optional<double> max) = 0;
+                     std::optional<double> min, std::optional<double> max,
+                     std::string_view text) = 0;
 };
 
 /// Installs `recorder` for the calling thread (nullptr: none); returns the previous one.
@@ -146,7 +148,7 @@ class FieldReader {
   [[noreturn]] void FailYaml(const YAML::Exception& e) const;
   double NumberValue(const YAML::Node& node, std::string_view field) const;
   void Record(std::string_view field, FieldRecorder::Kind kind, std::optional<double> min = {},
-              std::optional<double> max = {}) const;
+              std::optional<double> max = {}, std::string_view text = {}) const;
   // One step from the document to a node: a key, an index, or a complex key's value (the
   // field name stays its parent's). The name is formatted only for a message: the walk over a
   // document of a million nodes must not build a million strings.

@@ -36,6 +36,10 @@ struct Node {
   bool unbounded = false;          // read once without a range
   std::map<std::string, std::unique_ptr<Node>> children;
   std::unique_ptr<Node> items;  // a list's entries
+  // A mapping whose keys depend on its `type:` (or `kind:`): the keys allowed with each value.
+  std::string selector;
+  std::map<std::string, std::set<std::string>> variants;
+  bool mixed = false;  // entries chosen by different keys: only their union is described
 
   Node& Child(const std::string& key) {
     auto& c = children[key];
@@ -77,20 +81,30 @@ class Recorder : public FieldRecorder {
  public:
   Recorder(std::string file, std::string root) : file_(std::move(file)), root_(std::move(root)) {}
 
+  // Held per mapping (list indices kept) until Finish: its `type:` may be read after its keys.
   void Keys(const std::string& file, std::string_view field,
             const std::set<std::string>& allowed) override {
     Node* n = At(file, field);
     if (n == nullptr) return;
-    n->keys_checked = true;
-    n->keys.insert(allowed.begin(), allowed.end());
+    Pending& p = pending_[std::string(field)];
+    p.node = n;
+    p.keys.insert(allowed.begin(), allowed.end());
   }
   void OpenMap(const std::string& file, std::string_view field) override {
     if (Node* n = At(file, field)) n->open_map = true;
   }
   void Value(const std::string& file, std::string_view field, Kind kind, std::optional<double> min,
-             std::optional<double> max) override {
+             std::optional<double> max, std::string_view text) override {
     Node* n = At(file, field);
     if (n == nullptr) return;
+    for (const std::string_view s : {std::string_view(".type"), std::string_view(".kind")}) {
+      if (kind == Kind::kString && field.size() > s.size() && field.ends_with(s)) {
+        Pending& p = pending_[std::string(field.substr(0, field.size() - s.size()))];
+        if (p.selector == "type") continue;  // a fault's `type:` chooses, its `kind:` does not
+        p.selector = std::string(s.substr(1));
+        p.value = std::string(text);
+      }
+    }
     n->kinds.insert(kind);
     if (!min || !max) {
       n->unbounded = true;
@@ -99,9 +113,32 @@ class Recorder : public FieldRecorder {
       n->max = n->max ? std::max(*n->max, *max) : *max;
     }
   }
+  // The mappings seen, each with its keys: under its type's value where a type chose them.
+  void Finish() {
+    for (auto& [field, p] : pending_) {
+      if (p.node == nullptr) continue;
+      p.node->keys.insert(p.keys.begin(), p.keys.end());
+      if (!p.selector.empty() && p.keys.count(p.selector) != 0) {
+        if (!p.node->selector.empty() && p.node->selector != p.selector) p.node->mixed = true;
+        p.node->selector = p.selector;
+        p.node->variants[p.value].insert(p.keys.begin(), p.keys.end());
+      } else {
+        p.node->keys_checked = true;
+      }
+    }
+    pending_.clear();
+  }
+
   Node& root() { return root_node_; }
 
  private:
+  struct Pending {
+    Node* node = nullptr;
+    std::set<std::string> keys;
+    std::string selector, value;
+  };
+  std::map<std::string, Pending> pending_;
+
   // The node at `field` of the file being described; nullptr for another file.
   Node* At(const std::string& file, std::string_view field) {
     if (fs::path(file).lexically_normal() != fs::path(file_).lexically_normal()) return nullptr;
@@ -129,6 +166,10 @@ void Merge(Node& a, Node& b) {
   a.unbounded = a.unbounded || b.unbounded;
   if (b.min) a.min = a.min ? std::min(*a.min, *b.min) : *b.min;
   if (b.max) a.max = a.max ? std::max(*a.max, *b.max) : *b.max;
+  a.mixed = a.mixed || b.mixed ||
+            (!a.selector.empty() && !b.selector.empty() && a.selector != b.selector);
+  if (a.selector.empty()) a.selector = b.selector;
+  for (const auto& [v, keys] : b.variants) a.variants[v].insert(keys.begin(), keys.end());
   for (auto& [k, c] : b.children) Merge(a.Child(k), *c);
   if (b.items) Merge(a.Items(), *b.items);
 }
@@ -219,7 +260,38 @@ json Emit(const Node& n, const std::string& key, const std::string& path,
   const std::string unit = UnitOf(key);
   auto child_path = [&](const std::string& k) { return path.empty() ? k : path + "." + k; };
   std::vector<json> alternatives;
-  if (n.keys_checked) {
+  auto property = [&](const std::string& k) {
+    const auto c = n.children.find(k);
+    json schema = c == n.children.end() ? json::object() : Emit(*c->second, k, child_path(k), docs);
+    if (c == n.children.end()) {
+      if (const auto d = docs.find(child_path(k)); d != docs.end())
+        schema["description"] = d->second;
+    }
+    return schema;
+  };
+  // Keys chosen by a type: one object per type value seen, its type pinned, and an open one for
+  // the values no shipped file has (the loader knows them; the schema does not refuse them).
+  std::set<std::set<std::string>> distinct;
+  for (const auto& [v, keys] : n.variants) distinct.insert(keys);
+  const bool by_type = !n.keys_checked && !n.mixed && distinct.size() > 1;
+  if (by_type) {
+    json variants = json::array();
+    json seen = json::array();
+    for (const auto& [v, keys] : n.variants) {
+      json props = json::object();
+      for (const std::string& k : keys) props[k] = property(k);
+      props[n.selector]["const"] = v;
+      variants.push_back({{"type", "object"},
+                          {"properties", props},
+                          {"required", json::array({n.selector})},
+                          {"additionalProperties", false}});
+      seen.push_back(v);
+    }
+    variants.push_back(
+        {{"type", "object"}, {"properties", {{n.selector, {{"not", {{"enum", seen}}}}}}}});
+    alternatives.push_back({{"anyOf", variants}});
+  }
+  if (!by_type && (n.keys_checked || !n.variants.empty())) {
     json props = json::object();
     for (const std::string& k : n.keys) {
       const auto c = n.children.find(k);
@@ -232,7 +304,7 @@ json Emit(const Node& n, const std::string& key, const std::string& path,
     }
     alternatives.push_back(
         {{"type", "object"}, {"properties", props}, {"additionalProperties", false}});
-  } else if (n.open_map || !n.children.empty()) {
+  } else if (distinct.empty() && (n.open_map || !n.children.empty())) {
     json o = {{"type", "object"}};
     if (!n.children.empty() && !n.open_map) {
       json props = json::object();
@@ -333,6 +405,7 @@ nlohmann::json FileSchema(const std::string& kind, const std::vector<std::string
       throw;
     }
     bus::yaml::RecordFieldsOnThisThread(previous);
+    recorder.Finish();
     Merge(all, recorder.root());
   }
   // The field tables of the docs where they are: the source tree's docs/, the installed ones.
