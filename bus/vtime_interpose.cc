@@ -1676,13 +1676,20 @@ int MoveLibraryFd(int fd) {
     // A thread polling the old number would look at the program's new file there from its
     // next wake-up on (poll resolves numbers each time): the wake signal sends it round again.
     // Signalled on its way into that ppoll, it would enter it after the handler ran: it is
-    // signalled until it is out (a bounded number of times; the firmware's threads share a
-    // CPU, so each yield lets it run).
+    // signalled until it is out, for at most 50 ms of the host's time (a thread that blocks the
+    // signal stays in its ppoll on the eventfd, which the host still reaches by its new number).
     if (i != t_slot) {
       EnsureWakeSignal();
-      for (int tries = 0; tries < 10000 && g_polling_wake_plus1[i].load() == fd + 1; ++tries) {
+      timespec t0{}, now{};
+      real_clock_gettime()(CLOCK_MONOTONIC, &t0);
+      static const timespec kPause{0, 20'000};
+      while (g_polling_wake_plus1[i].load() == fd + 1) {
         real_syscall()(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
-        ::sched_yield();
+        real_nanosleep()(&kPause, nullptr);
+        real_clock_gettime()(CLOCK_MONOTONIC, &now);
+        if ((now.tv_sec - t0.tv_sec) * 1'000'000'000L + (now.tv_nsec - t0.tv_nsec) > 50'000'000L) {
+          break;
+        }
       }
     }
     return 0;
