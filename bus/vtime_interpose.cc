@@ -952,6 +952,7 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
     errno = ENOMEM;
     return -1;
   }
+  bool moved = false;
   for (;;) {
     std::memcpy(all, fds, n * sizeof(pollfd));
     all[n] = pollfd{wake, POLLIN, 0};
@@ -959,8 +960,11 @@ int PollUntil(pollfd* fds, nfds_t n, std::int64_t deadline, const sigset_t* mask
     target.wake_fd = wake;
     const int rc = WaitOnFds(s, all, n, wake, mask, deadline, target);
     const int err = errno;
-    if (rc < 0 && err == EINTR && g_wake_fd_plus1[t_slot].load() != wake + 1) {
-      wake = g_wake_fd_plus1[t_slot].load() - 1;  // moved away from a dup2 (MoveLibraryFd)
+    // Moved away by a dup2 (MoveLibraryFd), which signals this thread until it has seen the
+    // move: an EINTR after that, in this call, is one of those signals, not the program's.
+    if (rc < 0 && err == EINTR && (moved || g_wake_fd_plus1[t_slot].load() != wake + 1)) {
+      moved = true;
+      wake = g_wake_fd_plus1[t_slot].load() - 1;
       if (wake < 0) wake = WakeFd();
       if (wake >= 0) continue;
     }
@@ -1678,14 +1682,14 @@ int MoveLibraryFd(int fd) {
     // Signalled on its way into that ppoll, it would enter it after the handler ran: it is
     // signalled until it is out, for at most 50 ms of the host's time (a thread that blocks the
     // signal stays in its ppoll on the eventfd, which the host still reaches by its new number).
+    // This thread yields rather than sleeps: asleep, the host would take it for blocked.
     if (i != t_slot) {
       EnsureWakeSignal();
       timespec t0{}, now{};
       real_clock_gettime()(CLOCK_MONOTONIC, &t0);
-      static const timespec kPause{0, 20'000};
       while (g_polling_wake_plus1[i].load() == fd + 1) {
         real_syscall()(SYS_tgkill, s.pid.load(), s.tid.load(), vt::kWakeSignal);
-        real_nanosleep()(&kPause, nullptr);
+        ::sched_yield();
         real_clock_gettime()(CLOCK_MONOTONIC, &now);
         if ((now.tv_sec - t0.tv_sec) * 1'000'000'000L + (now.tv_nsec - t0.tv_nsec) > 50'000'000L) {
           break;
