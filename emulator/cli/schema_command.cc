@@ -293,15 +293,7 @@ json Emit(const Node& n, const std::string& key, const std::string& path,
   }
   if (!by_type && (n.keys_checked || !n.variants.empty())) {
     json props = json::object();
-    for (const std::string& k : n.keys) {
-      const auto c = n.children.find(k);
-      props[k] = c == n.children.end() ? json::object() : Emit(*c->second, k, child_path(k), docs);
-      if (c == n.children.end()) {
-        if (const auto d = docs.find(child_path(k)); d != docs.end()) {
-          props[k]["description"] = d->second;
-        }
-      }
-    }
+    for (const std::string& k : n.keys) props[k] = property(k);
     alternatives.push_back(
         {{"type", "object"}, {"properties", props}, {"additionalProperties", false}});
   } else if (distinct.empty() && (n.open_map || !n.children.empty())) {

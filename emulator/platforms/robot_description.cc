@@ -119,6 +119,15 @@ struct Link {
   std::string fdir1_where;
 };
 
+// The collision a wheel rolls on: the link's first cylinder or sphere with a radius; nullptr
+// when it has none.
+const Geometry* RollingCollision(const Link& link) {
+  for (const Geometry& g : link.collisions) {
+    if ((g.kind == Geometry::kCylinder || g.kind == Geometry::kSphere) && g.radius > 0) return &g;
+  }
+  return nullptr;
+}
+
 struct Joint {
   std::string where;
   enum Kind { kFixed, kContinuous, kOther } kind = kOther;
@@ -798,13 +807,10 @@ class Importer {
       Provide(entry, "heading_deg", field + ".heading_deg", heading, joint.where + " axis", true);
     }
     // Radius: the child link's collision cylinder or sphere.
-    for (const Geometry& g : child.collisions) {
-      if (g.kind != Geometry::kCylinder && g.kind != Geometry::kSphere) continue;
-      if (g.radius <= 0) continue;
-      Provide(entry, "radius_m", field + ".radius_m", Nanometres(g.radius),
+    if (const Geometry* g = RollingCollision(child)) {
+      Provide(entry, "radius_m", field + ".radius_m", Nanometres(g->radius),
               child.where +
-                  (g.kind == Geometry::kCylinder ? " collision cylinder" : " collision sphere"));
-      break;
+                  (g->kind == Geometry::kCylinder ? " collision cylinder" : " collision sphere"));
     }
     // A Mecanum wheel modelled Gazebo's way (a sphere or cylinder whose friction acts along
     // fdir1 only, or across it only): that direction is the roller axis.
@@ -946,16 +952,11 @@ std::vector<WheelJoint> FindWheelJoints(const std::string& path, const std::stri
     if (j.kind != Joint::kContinuous) continue;
     const auto child = model.links.find(j.child);
     if (child == model.links.end()) continue;
-    double radius = 0;
-    for (const Geometry& g : child->second.collisions) {
-      if ((g.kind == Geometry::kCylinder || g.kind == Geometry::kSphere) && g.radius > 0) {
-        radius = g.radius;
-        break;
-      }
-    }
+    const Geometry* rolling = RollingCollision(child->second);
     Isometry3d parent_in_base;
     std::vector<std::string> moving;
-    if (radius <= 0 || !LinkInFrameOf(model, model.root, j.parent, &parent_in_base, &moving)) {
+    if (rolling == nullptr ||
+        !LinkInFrameOf(model, model.root, j.parent, &parent_in_base, &moving)) {
       continue;
     }
     const Isometry3d joint_in_base = parent_in_base * j.joint_in_parent;
@@ -965,7 +966,7 @@ std::vector<WheelJoint> FindWheelJoints(const std::string& path, const std::stri
     w.joint = name;
     w.centre_m = joint_in_base.translation();
     w.axis = axis;
-    w.radius_m = Nanometres(radius);
+    w.radius_m = Nanometres(rolling->radius);
     w.below_moving_joint = !moving.empty();
     out.push_back(w);
   }
