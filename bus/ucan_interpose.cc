@@ -204,13 +204,25 @@ void Release(UcanSocket* s) {
   }
 }
 
-/// Before every call the broker sees on a socket rather than in a ring (a connection, a frame
-/// sent or received as a message, a doorbell for it, a close): the virtual clock's library
-/// (bus/vtime_interpose.cc) counts them, so the emulator knows when a look at the sockets can
-/// find nothing new from the firmware. Nothing without that library.
+/// Before and after every call the broker sees on a socket rather than in a ring (a
+/// connection, a frame sent or received as a message, a doorbell for it, a close): the virtual
+/// clock's library (bus/vtime_interpose.cc) counts them, so the emulator knows when a look at
+/// the sockets can find nothing new from the firmware. Counted after the call as well: a look
+/// taken between the count and the call's effect did not see it. Nothing without that library.
 internal::PeerSymbol<void (*)()> g_vtime_note_bus_call("wheelhil_vtime_note_bus_call");
 void NoteBusCall() {
   if (auto f = g_vtime_note_bus_call.get()) f();
+}
+
+/// `call()` (a system call on a socket of the broker's), counted before and after it.
+template <typename Call>
+auto BrokerSocketCall(Call&& call) {
+  NoteBusCall();
+  const auto rc = call();
+  const int err = errno;
+  NoteBusCall();
+  errno = err;
+  return rc;
 }
 
 /// Every frame sent counts for the virtual clock's library (Page::bus_sends): while the firmware
@@ -291,7 +303,6 @@ bool GetView(int fd, View* v) {
 /// Connects to the broker of the current runtime directory. -1 and errno when there is none
 /// (or the directory is not private).
 int ConnectBroker() {
-  NoteBusCall();
   std::string dir;
   try {
     dir = wheelhil::bus::ResolveUcanRuntimeDir();
@@ -313,7 +324,8 @@ int ConnectBroker() {
   std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
   const int s = real_socket()(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
   if (s < 0) return -1;
-  if (::connect(s, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+  if (BrokerSocketCall(
+          [&] { return ::connect(s, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)); }) != 0) {
     const int err = errno;
     real_close()(s);
     errno = err;
@@ -338,7 +350,8 @@ int Transact(const ucan::Request& req, const can_filter* filters, ucan::Reply* r
   msg.msg_iovlen = (filters != nullptr && req.options.filter_count > 0) ? 2 : 1;
   internal::PassedFdControl send_control;
   if (send_fd >= 0) internal::AttachFd(msg, send_control, send_fd);
-  if (real_sendmsg()(s, &msg, MSG_NOSIGNAL) < 0 && errno != EPIPE && errno != ECONNRESET) {
+  if (BrokerSocketCall([&] { return real_sendmsg()(s, &msg, MSG_NOSIGNAL); }) < 0 &&
+      errno != EPIPE && errno != ECONNRESET) {
     const int err = errno;
     real_close()(s);
     errno = err;
@@ -692,8 +705,8 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   std::memcpy(msg + frame_len, &stamp, sizeof(stamp));
   const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
   if (tail - r.head.load(std::memory_order_acquire) >= h->slots) {
-    NoteBusCall();
-    const ssize_t n = real_send()(fd, msg, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+    const ssize_t n = BrokerSocketCall(
+        [&] { return real_send()(fd, msg, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT)); });
     const int err = errno;
     pthread_mutex_unlock(&r.lock);
     if (n < 0) {
@@ -710,9 +723,10 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   // A doorbell too many (-1: the word kept changing) is harmless: they may be spurious.
   if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0 &&
       h->tx_drained_every_pass.load(std::memory_order_relaxed) == 0) {
-    NoteBusCall();
     const std::uint64_t bell = 1;
-    if (real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT) < 0 &&
+    if (BrokerSocketCall([&] {
+          return real_send()(fd, &bell, sizeof(bell), MSG_NOSIGNAL | MSG_DONTWAIT);
+        }) < 0 &&
         (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)) {
       return Fail(ENETDOWN);
     }
@@ -842,8 +856,8 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   ucan::TxStamp stamp;
   stamp.monotonic_ns = StampNow();
   std::memcpy(buf + total, &stamp, sizeof(stamp));
-  NoteBusCall();
-  const ssize_t n = real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+  const ssize_t n = BrokerSocketCall(
+      [&] { return real_send()(fd, buf, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT)); });
   if (n < 0) {
     if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN) return Fail(ENETDOWN);
     return -1;
@@ -882,10 +896,13 @@ ssize_t RecvFrame(int fd, const View& v, msghdr* msg, int flags) {
   msghdr m{};
   m.msg_iov = &iov;
   m.msg_iovlen = 1;
-  if (v.rings == nullptr) NoteBusCall();  // room on the socket for the broker's next frame
-  const ssize_t n = v.rings != nullptr
-                        ? RingRecv(fd, v.rings->header, buf, sizeof(buf), flags)
-                        : real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));
+  // A message taken off the socket makes room for the broker's next frame.
+  const ssize_t n =
+      v.rings != nullptr
+          ? RingRecv(fd, v.rings->header, buf, sizeof(buf), flags)
+          : BrokerSocketCall([&] {
+              return real_recvmsg()(fd, &m, flags & (MSG_DONTWAIT | MSG_PEEK | MSG_WAITALL));
+            });
   if (n < 0) {
     if (errno == ECONNRESET || errno == EPIPE) return Fail(ENETDOWN);
     return -1;
@@ -1093,12 +1110,11 @@ UCAN_EXPORT int bind(int fd, const sockaddr* addr, socklen_t len) {
 }
 
 UCAN_EXPORT int close(int fd) {
-  if (IsUcan(fd)) {
-    LockTable();
-    DetachLocked(fd);
-    UnlockTable();
-  }
-  return real_close()(fd);
+  if (!IsUcan(fd)) return real_close()(fd);
+  LockTable();
+  DetachLocked(fd);
+  UnlockTable();
+  return BrokerSocketCall([&] { return real_close()(fd); });
 }
 
 UCAN_EXPORT int close_range(unsigned first, unsigned last, int flags) {

@@ -1215,6 +1215,8 @@ void RegisterProcess() {
   } else {
     g_proc = ClaimProcessSlot(vt::kProcAlive, me);
   }
+  // An exec closed the old program's close-on-exec sockets: counted once they are closed.
+  g_page->bus_calls.fetch_add(1);
   Transition();
 }
 

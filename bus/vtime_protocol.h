@@ -194,10 +194,12 @@ struct Page {
   std::atomic<std::uint32_t> fd_wakes{0};
   /// Per wake channel: the fd_wakes value of the last write on it (NoteWake).
   std::atomic<std::uint32_t> channel_wakes[kWakeChannels] = {};
-  /// Bumped by the firmware's bus library before every call the broker sees on a socket
-  /// rather than in a ring (a connection, a frame sent or received as a message, a doorbell,
-  /// a close), and by an exec: while it stays, a look at the broker's sockets finds nothing
-  /// new from the firmware.
+  /// Bumped by the firmware's bus library before and after every call the broker sees on a
+  /// socket rather than in a ring (a connection, a frame sent or received as a message, a
+  /// doorbell, a close), and by an exec (before it, and by the new program as it registers):
+  /// while it stays what it was when the host began a look at the broker's sockets, that look
+  /// saw everything of the firmware's there (a look begun between the bump before a call and
+  /// the call's effect sees the bump after it change).
   std::atomic<std::uint32_t> bus_calls{0};
   /// Set by the host before it sleeps on `transitions`; the first transition after takes it
   /// (exchange to 0) and wakes the host.
