@@ -425,10 +425,10 @@ std::uint64_t VirtualClock::local_advances() const { return page_->local_advance
 bool VirtualClock::Blocked() {
   bool asked_kernel = false;
   std::uint32_t word = page_->runahead.load();
-  if (vt::RunaheadStateOf(word) == vt::kHostClock) return AllThreadsBlocked(&asked_kernel);
-  if (!AllThreadsBlocked(&asked_kernel) || vt::RunaheadStateOf(word) != vt::kGranted) {
-    return false;
-  }
+  const bool all_blocked = AllThreadsBlocked(&asked_kernel);
+  if (all_blocked && asked_kernel) ++blocked_seen_in_kernel_;
+  if (vt::RunaheadStateOf(word) == vt::kHostClock) return all_blocked;
+  if (!all_blocked || vt::RunaheadStateOf(word) != vt::kGranted) return false;
   // Every thread blocked with the clock granted and nobody holding it since before the look:
   // a thread holds it (kLocalAdvance) from before it publishes its wait until it has moved the
   // clock or given it back, so nobody will (a thread asleep outside the library's waits, or

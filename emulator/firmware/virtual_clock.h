@@ -91,6 +91,10 @@ class VirtualClock {
   bool FirmwareStopped() const { return stopped_seen_; }
   /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
   std::uint64_t kernel_looks() const { return kernel_looks_; }
+  /// Times Blocked() found the firmware blocked only through such looks (a thread asleep
+  /// outside the waits the library vouches for). Unlike kernel_looks it does not grow with the
+  /// host's load (a busy machine only makes the looks that find a thread running more).
+  std::uint64_t blocked_seen_in_kernel() const { return blocked_seen_in_kernel_; }
   /// Changes whenever the firmware made a call the broker sees on a socket rather than in a
   /// ring (bus/vtime_protocol.h, Page::bus_calls) or a thread of it was found gone: while it
   /// stays, a look at the broker's sockets finds nothing new from the firmware.
@@ -161,6 +165,7 @@ class VirtualClock {
   std::vector<ProcFiles> files_;
   std::uint32_t transitions_seen_ = 0;
   std::uint64_t kernel_looks_ = 0;
+  std::uint64_t blocked_seen_in_kernel_ = 0;
   std::uint64_t threads_freed_ = 0;  // FreeDeadThread
   bool stopped_seen_ = false;         // FirmwareStopped
   bool shares_cpu_ = false;

@@ -842,6 +842,7 @@ json Run::Report(double wall_s) {
       {"handover_us_each", handovers > 0 ? wall_.handover_s / handovers * 1e6 : 0.0},
       {"firmware_cpu_s", firmware_cpu_s_ >= 0 ? json(firmware_cpu_s_) : json()},
       {"kernel_looks", clock_ ? json(clock_->kernel_looks()) : json()},
+      {"blocked_seen_in_kernel", clock_ ? json(clock_->blocked_seen_in_kernel()) : json()},
       {"physics_s", wall_.physics_s},
       {"devices_bus_s", wall_.devices_bus_s},
       {"forecast_s", wall_.forecast_s},

@@ -423,13 +423,15 @@ TEST_F(VirtualTimeRun, TheWallBlockAccountsForHandoversAndStages) {
   ASSERT_TRUE(w["firmware_cpu_s"].is_number()) << w.dump();
   EXPECT_GE(w["firmware_cpu_s"].get<double>(), 0.0);
   ASSERT_TRUE(w["kernel_looks"].is_number()) << w.dump();
+  ASSERT_TRUE(w["blocked_seen_in_kernel"].is_number()) << w.dump();
 }
 
 // The waits of the C firmware (its epoll set of a timerfd, its reader thread's receive) are
 // ones only the emulator can end, so it knows the firmware blocked without asking the kernel.
 // The same firmware with a pipe in its epoll set (the self-pipe of a signal handler; never
 // written in the run) waits where only the kernel knows: a look in /proc per turn or more.
-// What it does is the same either way.
+// What it does is the same either way. On a busy machine either run looks in the kernel more
+// (at threads woken but not yet run), but finds the firmware blocked there only with the pipe.
 TEST_F(VirtualTimeRun, WaitsOnlyTheEmulatorCanEndNeedNoLookInTheKernel) {
   auto run = [&](const std::string& name, bool self_pipe) {
     Scenario s = LoadScenarioFile(kCustomerC);
@@ -444,9 +446,10 @@ TEST_F(VirtualTimeRun, WaitsOnlyTheEmulatorCanEndNeedNoLookInTheKernel) {
   const nlohmann::json piped = run("piped", true);
   const auto turns = vouched["handovers"].get<double>();
   ASSERT_GT(turns, 100);
-  EXPECT_LT(vouched["kernel_looks"].get<double>(), 0.2 * turns) << vouched.dump();
-  EXPECT_GT(piped["kernel_looks"].get<double>(), 0.9 * piped["handovers"].get<double>())
+  EXPECT_LT(vouched["blocked_seen_in_kernel"].get<double>(), 0.2 * turns) << vouched.dump();
+  EXPECT_GT(piped["blocked_seen_in_kernel"].get<double>(), 0.9 * piped["handovers"].get<double>())
       << piped.dump();
+  EXPECT_GE(piped["kernel_looks"].get<double>(), piped["blocked_seen_in_kernel"].get<double>());
   EXPECT_EQ(Slurp(dir_ / "vouched" / "can.log"), Slurp(dir_ / "piped" / "can.log"));
   EXPECT_EQ(Slurp(dir_ / "vouched" / "estimate.csv"), Slurp(dir_ / "piped" / "estimate.csv"));
 }
