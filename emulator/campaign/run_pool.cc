@@ -40,6 +40,9 @@ pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log_file) {
   args.push_back(nullptr);
   const int log_fd = ::open(log_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (log_fd < 0) return -1;
+  // Made before the fork: the child of a threaded process may only make async-signal-safe
+  // calls (no allocation) before its exec.
+  const std::string cannot = fmt::format("cannot execute {}: ", argv[0]);
   const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
   if (pid == 0) {
@@ -51,8 +54,12 @@ pid_t Spawn(const std::vector<std::string>& argv, const fs::path& log_file) {
     const int null_fd = ::open("/dev/null", O_RDONLY);
     if (null_fd >= 0) ::dup2(null_fd, STDIN_FILENO);
     ::execv(args[0], args.data());
-    const std::string msg = fmt::format("cannot execute {}: {}\n", argv[0], std::strerror(errno));
-    (void)!::write(STDERR_FILENO, msg.data(), msg.size());
+    // strerrordesc_np: a constant string, no locale, no allocation.
+    const char* why = ::strerrordesc_np(errno);
+    if (why == nullptr) why = "exec failed";
+    (void)!::write(STDERR_FILENO, cannot.data(), cannot.size());
+    (void)!::write(STDERR_FILENO, why, std::strlen(why));
+    (void)!::write(STDERR_FILENO, "\n", 1);
     ::_exit(127);
   }
   ::close(log_fd);

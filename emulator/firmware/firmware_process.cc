@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -20,7 +21,32 @@
 #include "emulator/firmware/crash_frames.h"
 #include "emulator/sim/signal_name.h"
 
+extern char** environ;
+
 namespace wheelhil::emulator::firmware {
+namespace {
+
+// This process's environment with `set` applied as setenv would (a key present replaced where
+// it is, a new one appended), as "KEY=VALUE" strings.
+std::vector<std::string> EnvironmentWith(
+    const std::vector<std::pair<std::string, std::string>>& set) {
+  std::vector<std::string> out;
+  for (char** e = environ; e != nullptr && *e != nullptr; ++e) out.emplace_back(*e);
+  for (const auto& [key, value] : set) {
+    const std::string entry = key + "=" + value;
+    const auto same_key = [&](const std::string& e) {
+      return e.compare(0, key.size() + 1, key + "=") == 0;
+    };
+    if (const auto at = std::find_if(out.begin(), out.end(), same_key); at != out.end()) {
+      *at = entry;
+    } else {
+      out.push_back(entry);
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 void FirmwareProcess::Start(const std::string& command,
                             const std::vector<std::pair<std::string, std::string>>& env,
@@ -33,7 +59,17 @@ void FirmwareProcess::Start(const std::string& command,
   crash_frames_.clear();
   std::error_code ec;
   cwd_ = std::filesystem::current_path(ec).string();
-  const auto [marker_key, marker_value] = scope_.EnvironmentEntry();
+  // Everything the child needs is made here: the run's process has threads, and a child of a
+  // threaded process may only make async-signal-safe calls before its exec (an allocation
+  // could wait forever for a lock another thread held at the fork).
+  std::vector<std::pair<std::string, std::string>> child_env = env;
+  child_env.push_back(scope_.EnvironmentEntry());
+  const std::vector<std::string> env_entries = EnvironmentWith(child_env);
+  std::vector<char*> envp;
+  for (const auto& e : env_entries) envp.push_back(const_cast<char*>(e.c_str()));
+  envp.push_back(nullptr);
+  const std::string sh = "exec " + command;
+  const char* argv[] = {"sh", "-c", sh.c_str(), nullptr};
   const pid_t parent = ::getpid();
   pid_ = ::fork();
   started_pid_ = pid_;
@@ -45,14 +81,11 @@ void FirmwareProcess::Start(const std::string& command,
     ::setpgid(0, 0);
     (void)::prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (::getppid() != parent) ::_exit(127);  // the run died before the line above
-    for (const auto& [k, v] : env) ::setenv(k.c_str(), v.c_str(), 1);
-    ::setenv(marker_key.c_str(), marker_value.c_str(), 1);
     if (log_fd >= 0) {
       ::dup2(log_fd, 1);
       ::dup2(log_fd, 2);
     }
-    const std::string sh = "exec " + command;
-    ::execl("/bin/sh", "sh", "-c", sh.c_str(), static_cast<char*>(nullptr));
+    ::execve("/bin/sh", const_cast<char* const*>(argv), envp.data());
     ::_exit(127);
   }
   // Also here: the group exists before the parent may signal it, whichever runs first.
