@@ -347,10 +347,10 @@ bool FirmwareLink::StillWaiting(VirtualClock& clock, double wall_s, double timeo
   std::string who = running_threads();
   if (const pid_t p = clock.UnregisteredProcess(); p != 0) {
     who += fmt::format(
-        "{}process {} is not on the virtual clock: it never loaded "
+        "{}process {} ({}) is not on the virtual clock: it never loaded "
         "libwheelhil_vtime.so, or exec'd a program without it (a static "
         "binary, or LD_PRELOAD cleared: see docs/virtual-time.md)",
-        who.empty() ? "" : "; ", p);
+        who.empty() ? "" : "; ", p, VirtualClock::DescribeProcess(p));
   }
   run_.events.push_back(nlohmann::json{{"t_s", run_.MotionSeconds(run_.now_ns)},
                                        {"event", "firmware_not_blocking"},

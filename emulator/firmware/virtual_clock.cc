@@ -589,6 +589,31 @@ pid_t VirtualClock::UnregisteredProcess() const {
   return outside;
 }
 
+std::string VirtualClock::DescribeProcess(pid_t pid) {
+  const std::string stat = ReadProcFile(fmt::format("/proc/{}/stat", pid));
+  const char state = TaskState(stat);
+  if (stat.empty() || Gone(state)) return "gone";
+  std::string name = ReadProcFile(fmt::format("/proc/{}/comm", pid));
+  while (!name.empty() && name.back() == '\n') name.pop_back();
+  std::string out = fmt::format("'{}', {} ({})", name,
+                                state == 'R'                   ? "running"
+                                : state == 'T' || state == 't' ? "stopped"
+                                                               : "asleep",
+                                state);
+  if (state != 'R') {
+    const std::string wchan = ReadProcFile(fmt::format("/proc/{}/wchan", pid));
+    if (!wchan.empty() && wchan != "0") out += " in " + wchan;
+    const std::string call = ReadProcFile(fmt::format("/proc/{}/syscall", pid));
+    if (!call.empty() && call.find_first_of(" \n") > 0) {
+      out += ", system call " + call.substr(0, call.find_first_of(" \n"));
+    }
+  }
+  const std::string maps = ReadProcFile(fmt::format("/proc/{}/maps", pid));
+  out += maps.find("libwheelhil_vtime") != std::string::npos ? ", libwheelhil_vtime.so loaded"
+                                                             : ", libwheelhil_vtime.so not loaded";
+  return out;
+}
+
 bool VirtualClock::FoundOffTheClock(pid_t pid) {
   // Until its exec is done the process has the old program's environment, which has the
   // library; after it, a program that has it registers soon, one without it never does.

@@ -133,6 +133,9 @@ class VirtualClock {
   /// A process not on the clock: one whose library has not registered it yet (the run cannot
   /// go on while it starts), else one found running without the library; its pid, else 0.
   pid_t UnregisteredProcess() const;
+  /// What the kernel says of process `pid`, for a run that gives up on it: "'sh', asleep (S)
+  /// in do_wait, system call 61, libwheelhil_vtime.so loaded"; "gone" when it is.
+  static std::string DescribeProcess(pid_t pid);
 
  private:
   enum class Kernel { kAsleep, kRunning, kGone };

@@ -157,6 +157,34 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
 
 constexpr std::int64_t kMs = 1'000'000;
 
+// What a run that gives up on a process says of it: its name, where it sleeps, whether the
+// library is in it.
+TEST(VirtualClock, DescribeProcessSaysWhereAProcessIsAndWhetherTheLibraryIsIn) {
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::close(fds[1]);
+    char c;
+    (void)!::read(fds[0], &c, 1);  // until the parent closes its end
+    ::_exit(0);
+  }
+  ::close(fds[0]);
+  std::string said;
+  for (int i = 0; i < 2000 && said.find("asleep") == std::string::npos; ++i) {
+    said = VirtualClock::DescribeProcess(child);
+    ::usleep(1000);
+  }
+  EXPECT_THAT(said, ::testing::HasSubstr("asleep (S)"));
+  EXPECT_THAT(said, ::testing::HasSubstr("system call 0"));  // read
+  EXPECT_THAT(said, ::testing::HasSubstr("libwheelhil_vtime.so not loaded"));
+  ::close(fds[1]);
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  EXPECT_EQ(VirtualClock::DescribeProcess(child), "gone");
+}
+
 TEST(VirtualClock, SleepsEndAtTheirVirtualDeadlinesWithoutTheWallClock) {
   const ProbeRun r = RunProbe("sleeps");
   ASSERT_TRUE(r.finished) << r.out;
