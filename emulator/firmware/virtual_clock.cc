@@ -423,10 +423,10 @@ bool VirtualClock::RunaheadGranted() const {
 std::uint64_t VirtualClock::local_advances() const { return page_->local_advances.load(); }
 
 bool VirtualClock::Blocked() {
-  bool asked_kernel = false;
+  bool unvouchable = false;
   std::uint32_t word = page_->runahead.load();
-  const bool all_blocked = AllThreadsBlocked(&asked_kernel);
-  if (all_blocked && asked_kernel) ++blocked_seen_in_kernel_;
+  const bool all_blocked = AllThreadsBlocked(&unvouchable);
+  if (all_blocked && unvouchable) ++blocked_seen_in_kernel_;
   if (vt::RunaheadStateOf(word) == vt::kHostClock) return all_blocked;
   if (!all_blocked || vt::RunaheadStateOf(word) != vt::kGranted) return false;
   // Every thread blocked with the clock granted and nobody holding it since before the look:
@@ -437,7 +437,7 @@ bool VirtualClock::Blocked() {
   return page_->runahead.compare_exchange_strong(word, vt::NextRunaheadWord(word, vt::kHostClock));
 }
 
-bool VirtualClock::AllThreadsBlocked(bool* asked_kernel) {
+bool VirtualClock::AllThreadsBlocked(bool* unvouchable) {
   stopped_seen_ = false;
   const std::uint32_t t0 = page_->transitions.load();
   transitions_seen_ = t0;
@@ -482,7 +482,9 @@ bool VirtualClock::AllThreadsBlocked(bool* asked_kernel) {
         continue;
       }
       // An fd or a condition variable may have woken it before it could say so.
-      *asked_kernel = true;
+      if (kind != vt::kFdWait || s.vouched.load() == 0 || s.resumed.load() != 0) {
+        *unvouchable = true;
+      }
       const Kernel k = KernelState(i, pid, tid, nullptr);
       if (k == Kernel::kGone) {
         FreeDeadThread(i);
@@ -496,7 +498,7 @@ bool VirtualClock::AllThreadsBlocked(bool* asked_kernel) {
     // run since it was last seen asleep. A wait another firmware thread ended (runahead) was
     // not seen ending by the host: it runs, whatever the kernel says yet.
     if (vt::LocallyWoken(*page_, i)) return false;
-    *asked_kernel = true;
+    *unvouchable = true;
     std::uint64_t runs = 0;
     const Kernel k = KernelState(i, pid, tid, &runs);
     ProcFiles& f = files_[static_cast<std::size_t>(i)];

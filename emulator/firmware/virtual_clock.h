@@ -91,9 +91,11 @@ class VirtualClock {
   bool FirmwareStopped() const { return stopped_seen_; }
   /// Threads looked up in the kernel (/proc/<pid>/task/<tid>/stat reads) so far.
   std::uint64_t kernel_looks() const { return kernel_looks_; }
-  /// Times Blocked() found the firmware blocked only through such looks (a thread asleep
-  /// outside the waits the library vouches for). Unlike kernel_looks it does not grow with the
-  /// host's load (a busy machine only makes the looks that find a thread running more).
+  /// Times Blocked() found the firmware blocked only through such looks at a thread in a wait
+  /// the library cannot vouch for (a pipe, a futex, ...) or asleep outside its waits. Not
+  /// counted: a vouched wait that a write on one of its channels made the host ask about (the
+  /// write may have come after the thread took what it wrote: more often on a busy machine).
+  /// Unlike kernel_looks it does not grow with the host's load.
   std::uint64_t blocked_seen_in_kernel() const { return blocked_seen_in_kernel_; }
   /// Changes whenever the firmware made a call the broker sees on a socket rather than in a
   /// ring (bus/vtime_protocol.h, Page::bus_calls) or a thread of it was found gone: while it
@@ -147,9 +149,10 @@ class VirtualClock {
     std::uint64_t runs_seen = UINT64_MAX;  // schedstat timeslices when last seen asleep
     std::vector<long> calls_reported;      // host-clock waits already reported
   };
-  // Blocked() without the runahead grant's part; `*asked_kernel`: some thread was found blocked
-  // only by a look in the kernel (not in a wait the library vouches for).
-  bool AllThreadsBlocked(bool* asked_kernel);
+  // Blocked() without the runahead grant's part. `*unvouchable`: some thread was found blocked
+  // only by a look in the kernel at a wait the library could not vouch for, or at a thread
+  // asleep outside its waits.
+  bool AllThreadsBlocked(bool* unvouchable);
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
   // timed wait the library did not see.
