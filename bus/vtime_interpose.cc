@@ -346,6 +346,7 @@ void EndWait(vt::ThreadSlot& s) {
 /// Gives the clock back to the host (this thread holds kLocalAdvance) and wakes it.
 void YieldClock() {
   g_page->runahead.store(vt::NextRunaheadWord(g_page->runahead.load(), vt::kHostClock));
+  Futex(&g_page->runahead, FUTEX_WAKE, 1);  // the host may sleep on it (WaitWhileGranted)
   Transition(true);
 }
 

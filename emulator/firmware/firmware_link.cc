@@ -376,8 +376,9 @@ bool FirmwareLink::RunAhead(VirtualClock& clock, double timeout_s, FirmwareProce
   bool ok = true;
   bool checked_exit = false;
   // No broker pass meanwhile: what the firmware sends is taken at the instant it sent it,
-  // once the run's bus is there. While the firmware holds the clock, a look at its threads
-  // (in the kernel) is made only every millisecond: it gives the clock back when it blocks.
+  // once the run's bus is there. While the firmware holds the clock the host sleeps, and looks
+  // at its threads (in the kernel) only every millisecond: the firmware wakes it when it gives
+  // the clock back.
   auto last_look = t0;
   for (;;) {
     if (run_.failed()) {
@@ -392,7 +393,11 @@ bool FirmwareLink::RunAhead(VirtualClock& clock, double timeout_s, FirmwareProce
       ok = false;
       break;
     }
-    clock.WaitForChange(200);
+    if (clock.RunaheadGranted()) {
+      clock.WaitWhileGranted(1000);
+    } else {
+      clock.WaitForChange(200);
+    }
   }
   (void)broker_->SettlePrepared();
   // What it sent is in its ring: the next settle, at its instant, takes it.

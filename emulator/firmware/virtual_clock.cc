@@ -517,6 +517,16 @@ bool VirtualClock::AllThreadsBlocked(bool* unvouchable) {
   return blocked && page_->transitions.load() == t0;
 }
 
+void VirtualClock::WaitWhileGranted(int timeout_us) {
+  const std::uint32_t word = page_->runahead.load();
+  if (vt::RunaheadStateOf(word) == vt::kHostClock) return;
+  // The word also changes while a thread holds the clock (no wake then): a changed word makes
+  // the wait return at once, and the caller looks and comes back.
+  const timespec ts{0, static_cast<long>(timeout_us) * 1000};
+  ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&page_->runahead), FUTEX_WAIT, word, &ts,
+            nullptr, 0);
+}
+
 void VirtualClock::WaitForChange(int timeout_us) {
   if (shares_cpu_ && yields_in_vain_ < kYieldsBeforeSleep) {
     // The firmware runs on this CPU once this thread makes way, and the host is back when it

@@ -84,6 +84,9 @@ class VirtualClock {
   void RevokeRunahead();
   /// The firmware may still move the clock (granted, or moving it now).
   bool RunaheadGranted() const;
+  /// Sleeps until the firmware gave the clock back (it wakes the host then), at most
+  /// timeout_us: while it moves the clock itself, the host has nothing to do.
+  void WaitWhileGranted(int timeout_us);
   /// Instants the firmware moved its clock to itself so far.
   std::uint64_t local_advances() const;
   /// The last Blocked() found a thread stopped or traced (a debugger has it): the firmware
