@@ -24,12 +24,10 @@ namespace cmp = campaign;
 // the installed examples (<bindir>/../share/wheelhil/scenarios/smoke).
 std::string DefaultSmokeDir() {
   if (fs::is_directory("scenarios/smoke")) return "scenarios/smoke";
-  const fs::path bin = bus::RunningExecutableDir();
-  for (const fs::path& candidate :
-       {bin / ".." / ".." / "scenarios" / "smoke",
-        bin / bus::InstalledDataDirFromBin() / "scenarios" / "smoke"}) {
-    std::error_code ec;
-    if (fs::is_directory(candidate, ec)) return candidate.lexically_normal().string();
+  const std::string root = bus::FindShippedDataRoot(bus::RunningExecutableDir());
+  std::error_code ec;
+  if (!root.empty() && fs::is_directory(fs::path(root) / "scenarios" / "smoke", ec)) {
+    return (fs::path(root) / "scenarios" / "smoke").string();
   }
   return "scenarios/smoke";
 }
