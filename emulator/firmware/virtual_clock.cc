@@ -522,7 +522,7 @@ void VirtualClock::WaitWhileGranted(int timeout_us) {
   if (vt::RunaheadStateOf(word) == vt::kHostClock) return;
   // The word also changes while a thread holds the clock (no wake then): a changed word makes
   // the wait return at once, and the caller looks and comes back.
-  const timespec ts{0, static_cast<long>(timeout_us) * 1000};
+  const timespec ts{timeout_us / 1000000, static_cast<long>(timeout_us % 1000000) * 1000};
   ::syscall(SYS_futex, reinterpret_cast<std::uint32_t*>(&page_->runahead), FUTEX_WAIT, word, &ts,
             nullptr, 0);
 }

@@ -48,6 +48,8 @@ struct ProbeRun {
   std::string out;
   std::uint64_t host_moves = 0;      // instants the host moved the clock to
   std::uint64_t local_advances = 0;  // ... and the probe itself (runahead)
+  double give_back_wait_s = -1;      // Grant::host_sleeps: how long the host slept
+  bool granted_after_wait = false;
 };
 
 // Runahead for RunProbe: granted once the probe first blocked, up to run time until_ns on the
@@ -55,6 +57,9 @@ struct ProbeRun {
 struct Grant {
   std::int64_t until_ns = 0;
   std::int64_t step_ns = 0;
+  // After the grant the host sleeps until the firmware gives the clock back
+  // (WaitWhileGranted), rather than looking at its threads.
+  bool host_sleeps = false;
 };
 
 // Runs the probe on a fresh clock: whenever it is blocked, the clock moves to its next deadline.
@@ -131,6 +136,16 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
         // As a run does: the waits published before the grant (all of them, perhaps, if the
         // firmware ran before the grant) are not looked at again unless something wakes.
         EXPECT_TRUE(clock.KickRunahead());
+        if (grant->host_sleeps) {
+          // Each sleep up to 30 s: only the firmware's wake-up ends one sooner (or a change of
+          // the word before it began, which makes it return at once and go round again).
+          const auto slept_from = Clock::now();
+          while (clock.RunaheadGranted() && Clock::now() - slept_from < std::chrono::seconds(60)) {
+            clock.WaitWhileGranted(30'000'000);
+          }
+          r.give_back_wait_s = std::chrono::duration<double>(Clock::now() - slept_from).count();
+          r.granted_after_wait = clock.RunaheadGranted();
+        }
         grant.reset();
       }
     }
@@ -313,6 +328,16 @@ TEST(VirtualClock, RunaheadMovesTheClockThroughTheFirmwaresOwnWaitsInOrder) {
   const ProbeRun grid = RunProbe("ahead", 20, Grant{1000 * kMs, 2 * kMs});
   ExpectAheadWaits(grid);
   EXPECT_EQ(grid.local_advances, 0u);
+}
+
+// The host need not look at the firmware while it holds the clock: the library wakes the host
+// when it gives the clock back (here at the end of a grant to 5 ms).
+TEST(VirtualClock, RunaheadWakesTheSleepingHostWhenItGivesTheClockBack) {
+  const ProbeRun r = RunProbe("ahead", 120, Grant{5 * kMs, kMs, /*host_sleeps=*/true});
+  ExpectAheadWaits(r);
+  EXPECT_FALSE(r.granted_after_wait);
+  EXPECT_LT(r.give_back_wait_s, 20.0) << "the host slept out its 30 s: no wake-up came";
+  EXPECT_EQ(r.local_advances, 2u);
 }
 
 // A thread asleep in the kernel where the library does not see it (a read on a pipe) may be
