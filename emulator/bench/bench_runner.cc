@@ -23,9 +23,8 @@
 #include "emulator/bench/bench_workloads.h"
 #include "emulator/campaign/campaign_spec.h"
 #include "emulator/campaign/scenario_writer.h"
+#include "emulator/firmware/process_scope.h"
 #include "emulator/scenario/scenario.h"
-
-extern char** environ;
 
 namespace wheelhil::emulator::bench {
 namespace {
@@ -465,15 +464,7 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
                                bool expect_json) {
   WorkerOutcome out;
   // Everything the child needs is built before fork (no allocation between fork and exec).
-  std::vector<std::string> env_strings;
-  for (char** e = environ; *e; ++e) {
-    const std::string s = *e;
-    const std::string key = s.substr(0, s.find('='));
-    const bool replaced = std::any_of(extra_env.begin(), extra_env.end(),
-                                      [&](const auto& kv) { return kv.first == key; });
-    if (!replaced) env_strings.push_back(s);
-  }
-  for (const auto& [k, v] : extra_env) env_strings.push_back(k + "=" + v);
+  std::vector<std::string> env_strings = firmware::EnvironmentWith(extra_env);
   std::vector<char*> envp, args;
   for (auto& s : env_strings) envp.push_back(s.data());
   envp.push_back(nullptr);

@@ -7,7 +7,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -21,32 +20,7 @@
 #include "emulator/firmware/crash_frames.h"
 #include "emulator/sim/signal_name.h"
 
-extern char** environ;
-
 namespace wheelhil::emulator::firmware {
-namespace {
-
-// This process's environment with `set` applied as setenv would (a key present replaced where
-// it is, a new one appended), as "KEY=VALUE" strings.
-std::vector<std::string> EnvironmentWith(
-    const std::vector<std::pair<std::string, std::string>>& set) {
-  std::vector<std::string> out;
-  for (char** e = environ; e != nullptr && *e != nullptr; ++e) out.emplace_back(*e);
-  for (const auto& [key, value] : set) {
-    const std::string entry = key + "=" + value;
-    const auto same_key = [&](const std::string& e) {
-      return e.compare(0, key.size() + 1, key + "=") == 0;
-    };
-    if (const auto at = std::find_if(out.begin(), out.end(), same_key); at != out.end()) {
-      *at = entry;
-    } else {
-      out.push_back(entry);
-    }
-  }
-  return out;
-}
-
-}  // namespace
 
 void FirmwareProcess::Start(const std::string& command,
                             const std::vector<std::pair<std::string, std::string>>& env,

@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -74,6 +75,24 @@ std::vector<pid_t> ListPids() {
     if (end != e->d_name && *end == '\0' && v > 0) out.push_back(static_cast<pid_t>(v));
   }
   ::closedir(d);
+  return out;
+}
+
+std::vector<std::string> EnvironmentWith(
+    const std::vector<std::pair<std::string, std::string>>& set) {
+  std::vector<std::string> out;
+  for (char** e = environ; e != nullptr && *e != nullptr; ++e) out.emplace_back(*e);
+  for (const auto& [key, value] : set) {
+    const std::string prefix = key + "=";
+    const auto at = std::find_if(out.begin(), out.end(), [&](const std::string& e) {
+      return e.compare(0, prefix.size(), prefix) == 0;
+    });
+    if (at != out.end()) {
+      *at = prefix + value;
+    } else {
+      out.push_back(prefix + value);
+    }
+  }
   return out;
 }
 

@@ -60,5 +60,10 @@ std::string ReadProcFile(const std::string& path);
 std::vector<pid_t> ListPids();
 /// Whether /proc/<pid>/environ holds the entry `key=value` (false when it cannot be read).
 bool EnvironHas(pid_t pid, const std::string& key, const std::string& value);
+/// This process's environment with `set` applied as setenv would (a key present replaced where
+/// it is, a new one appended), as "KEY=VALUE" strings: for a child's execve, made before its
+/// fork (the child of a threaded process may not allocate before its exec).
+std::vector<std::string> EnvironmentWith(
+    const std::vector<std::pair<std::string, std::string>>& set);
 
 }  // namespace wheelhil::emulator::firmware
