@@ -545,7 +545,7 @@ void VirtualClock::WaitForChange(int timeout_us) {
   page_->host_waiting.store(0);
 }
 
-std::string VirtualClock::ThreadName(pid_t pid, pid_t tid) const {
+std::string VirtualClock::ThreadName(pid_t pid, pid_t tid) {
   std::string name = ReadProcFile(fmt::format("/proc/{}/task/{}/comm", pid, tid));
   while (!name.empty() && name.back() == '\n') name.pop_back();
   return name.empty() ? std::string("?") : name;
@@ -605,9 +605,7 @@ std::string VirtualClock::DescribeProcess(pid_t pid) {
   const std::string stat = ReadProcFile(fmt::format("/proc/{}/stat", pid));
   const char state = TaskState(stat);
   if (stat.empty() || Gone(state)) return "gone";
-  std::string name = ReadProcFile(fmt::format("/proc/{}/comm", pid));
-  while (!name.empty() && name.back() == '\n') name.pop_back();
-  std::string out = fmt::format("'{}', {} ({})", name,
+  std::string out = fmt::format("'{}', {} ({})", ThreadName(pid, pid),
                                 state == 'R'                   ? "running"
                                 : state == 'T' || state == 't' ? "stopped"
                                                                : "asleep",

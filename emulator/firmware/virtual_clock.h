@@ -160,7 +160,7 @@ class VirtualClock {
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
   // timed wait the library did not see.
   void CheckKernelWait(int slot, pid_t pid, pid_t tid);
-  std::string ThreadName(pid_t pid, pid_t tid) const;
+  static std::string ThreadName(pid_t pid, pid_t tid);
   // This process's copy of fd `fd` of process `pid` (pidfd_getfd), cached while `tag` (the
   // thread, or the timer's generation) is the same; -1 when copies cannot be had.
   int CopyOfFd(pid_t pid, int fd, std::uint64_t tag);
