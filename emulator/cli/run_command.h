@@ -31,7 +31,7 @@ class RunCommand {
   std::vector<std::string> logs_;  // --logs
   std::optional<double> stop_at_s_;  // --stop-at
   bool check_runahead_ = false;
-  std::string runahead_ = "off";
+  std::string runahead_ = "auto";
   std::string clock_;          // empty: the scenario's timing.clock
   std::string sync_producer_;  // empty: the scenario's timing.sync_producer
   bool quiet_ = false;

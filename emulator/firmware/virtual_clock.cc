@@ -275,7 +275,13 @@ int VirtualClock::WakeDue() {
   return ended;
 }
 
-void VirtualClock::NoteFdWakes(std::uint32_t channels) { vt::NoteWake(*page_, channels); }
+void VirtualClock::NoteFdWakes(std::uint32_t channels) { unnoted_channels_ |= channels; }
+
+void VirtualClock::CountFdWakes() {
+  if (unnoted_channels_ == 0) return;
+  vt::NoteWake(*page_, unnoted_channels_);
+  unnoted_channels_ = 0;
+}
 
 std::uint64_t VirtualClock::socket_activity() const {
   return page_->bus_calls.load() + threads_freed_;
@@ -368,6 +374,7 @@ void VirtualClock::FreeDeadThread(int slot) {
 
 void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
                                  std::int64_t phase_ns) {
+  CountFdWakes();
   // A vouched fd wait that a write of the host's came after (the host counts its writes after
   // making them, when the thread may have begun its next wait already) is no longer vouched
   // for, and the firmware's library would take its thread for on its way out of it and never
@@ -396,6 +403,7 @@ void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
 }
 
 bool VirtualClock::KickRunahead() {
+  CountFdWakes();
   for (int p = 0; p < vt::kMaxProcesses; ++p) {
     vt::ProcessSlot& proc = page_->processes[p];
     if (proc.state.load() != vt::kProcAlive) continue;
@@ -423,6 +431,7 @@ bool VirtualClock::RunaheadGranted() const {
 std::uint64_t VirtualClock::local_advances() const { return page_->local_advances.load(); }
 
 bool VirtualClock::Blocked() {
+  CountFdWakes();
   bool unvouchable = false;
   std::uint32_t word = page_->runahead.load();
   const bool all_blocked = AllThreadsBlocked(&unvouchable);
@@ -518,6 +527,7 @@ bool VirtualClock::AllThreadsBlocked(bool* unvouchable) {
 }
 
 void VirtualClock::WaitWhileGranted(int timeout_us) {
+  CountFdWakes();
   const std::uint32_t word = page_->runahead.load();
   if (vt::RunaheadStateOf(word) == vt::kHostClock) return;
   // The word also changes while a thread holds the clock (no wake then): a changed word makes
@@ -528,6 +538,7 @@ void VirtualClock::WaitWhileGranted(int timeout_us) {
 }
 
 void VirtualClock::WaitForChange(int timeout_us) {
+  CountFdWakes();
   if (shares_cpu_ && yields_in_vain_ < kYieldsBeforeSleep) {
     // The firmware runs on this CPU once this thread makes way, and the host is back when it
     // blocks: no wake-up for it to send (a system call on its side).

@@ -66,7 +66,10 @@ class VirtualClock {
   int WakeDue();
   /// After the host wrote to the firmware's sockets (a broker pass that wrote to a client): an
   /// fd wait on those `channels` (bus/vtime_protocol.h: BusSocketChannel of the clients
-  /// written to, kAnyChannel for anything else) may have ended (ThreadSlot::vouched).
+  /// written to, kAnyChannel for anything else) may have ended (ThreadSlot::vouched). Counted
+  /// with the turn's other writes (WakeDue's) at the next look at the firmware (Blocked,
+  /// WaitForChange, the runahead calls): one count a turn, and a firmware thread that looks
+  /// before then finds what was written in its fds.
   void NoteFdWakes(std::uint32_t channels);
   /// Runahead (bus/vtime_protocol.h, Page::runahead): the firmware's library may move the
   /// clock itself, to the instants its own waits and timers are due, up to run time until_ns,
@@ -156,6 +159,10 @@ class VirtualClock {
   // only by a look in the kernel at a wait the library could not vouch for, or at a thread
   // asleep outside its waits.
   bool AllThreadsBlocked(bool* unvouchable);
+  // Counts the writes NoteFdWakes was told of (Page::fd_wakes), once for all of them: before
+  // any look at the firmware's waits and before the host waits or grants the clock.
+  void CountFdWakes();
+  std::uint32_t unnoted_channels_ = 0;  // NoteFdWakes since the last CountFdWakes
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a
   // timed wait the library did not see.

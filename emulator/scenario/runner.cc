@@ -211,10 +211,19 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   static constexpr std::size_t kRunaheadMaxFrames = 512;
   static constexpr std::int64_t kRunaheadMaxNs = 500'000'000;
   static constexpr std::uint32_t kNoFrameSent = 0xFFFFFFFFu;
+  // --runahead on: a window costs the firmware's library about what three turns of the host's
+  // do on an idle machine (the grant, the kick of its agent, its own doorbells, the wake of the
+  // host at its end), so one that saves fewer turns makes the run slower. auto measures both.
+  static constexpr std::size_t kRunaheadMinTurnsSaved = 4;
+  double turn_wall_s_ = 0;  // a turn of the firmware's outside windows, wall s (moving average)
   struct RunaheadHistory {
-    bool saved_nothing = false;
-    std::uint32_t skipped = 0;
+    std::uint32_t skip = 0;     // turns to let pass before the next try
+    std::uint32_t backoff = 0;  // what `skip` becomes after another window that did not pay
     std::int64_t ran_ns = -1;  // how far the firmware ran last time (-1: unknown)
+    // auto: wall s a window took beyond what the turns it saved would have (moving average:
+    // one window slowed by the machine does not stop the next).
+    double excess_s = 0;
+    bool measured = false;
   };
   std::map<std::uint32_t, RunaheadHistory> runahead_history_;
   std::uint32_t last_sent_id_ = kNoFrameSent;  // the firmware's latest frame, and its instant
@@ -332,13 +341,18 @@ void Run::SettleFirmware() {
   const bool deadline_turn = o_.check_runahead && clock_->NextDeadlineNs() <= now;
   const std::uint64_t sent_before = firmware_frames_seen_;
   const std::uint64_t handovers_before = link_->handovers();
+  const auto settle_start = Clock::now();
   clock_->SetNow(now);
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+  const bool turn = link_->handovers() != handovers_before;
   if (o_.check_runahead) {
-    CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before,
-                  link_->handovers() != handovers_before, to_firmware_);
-  } else if (o_.runahead) {
+    CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before, turn, to_firmware_);
+  } else if (o_.runahead != RunOptions::Runahead::kOff && turn) {
+    const double turn_s = WallSeconds(settle_start);
+    turn_wall_s_ = turn_wall_s_ == 0 ? turn_s : 0.9 * turn_wall_s_ + 0.1 * turn_s;
+    // After a turn: a settle that found the firmware blocked with nothing for it (most steps)
+    // leaves it where it is, and the next turn's window starts from there as well.
     RunAhead(now);
   }
   to_firmware_.clear();
@@ -442,12 +456,21 @@ void Run::RunAhead(std::int64_t now_ns) {
     return;
   }
   // What the firmware sent in this turn says how long its next run through frames will be: a
-  // window after the same frame of its (its SYNC, which the devices answer at once) that saved
-  // no turn last time is not made again, but one in 16 such turns, to follow a firmware that
-  // changes. Turns without a frame of its share one history.
+  // window after the same frame of its (its SYNC, which the devices answer at once) that did
+  // not pay last time is not made again for the next 16 such turns, then 32, ... 1024 while it
+  // keeps not paying, to follow a firmware or a load that changes. Turns without a frame of its
+  // share one history. A window pays (auto) when it took less wall time, its forecast and its
+  // last turn included, than the turns it saved (the instants the firmware moved its clock to
+  // itself: frames and its own deadlines) and that last turn would have taken; with --runahead
+  // on, when it ran through frames of kRunaheadMinTurnsSaved instants.
   const std::uint32_t key = last_sent_at_ns_ == now_ns ? last_sent_id_ : kNoFrameSent;
   RunaheadHistory& history = runahead_history_[key];
-  if (history.saved_nothing && ++history.skipped % 16 != 0) return;
+  if (history.skip > 0) {
+    --history.skip;
+    return;
+  }
+  const auto window_start = Clock::now();
+  const std::uint64_t advances_before = clock_->local_advances();
   std::int64_t until = 0;
   {
     sim::WallTimer timer(wall_.forecast_s);
@@ -497,7 +520,20 @@ void Run::RunAhead(std::int64_t now_ns) {
     if (f.t_ns < firmware_ahead_ns_ && f.t_ns != last_instant) ++turns_saved;
     last_instant = f.t_ns;
   }
-  runahead_history_[key].saved_nothing = turns_saved == 0;
+  RunaheadHistory& after = runahead_history_[key];
+  const double excess_s =
+      WallSeconds(window_start) -
+      static_cast<double>(clock_->local_advances() - advances_before + 1) * turn_wall_s_;
+  after.excess_s = after.measured ? 0.75 * after.excess_s + 0.25 * excess_s : excess_s;
+  after.measured = true;
+  const bool paid = o_.runahead == RunOptions::Runahead::kOn ? turns_saved >= kRunaheadMinTurnsSaved
+                                                             : after.excess_s < 0;
+  if (!paid) {
+    after.backoff = std::min<std::uint32_t>(1024, after.backoff == 0 ? 16 : 2 * after.backoff);
+    after.skip = after.backoff;
+  } else {
+    after.backoff = 0;
+  }
   runahead_history_[key].ran_ns = firmware_ahead_ns_ - now_ns;
   if (firmware_ahead_ns_ <= now_ns) {
     firmware_ahead_ns_ = -1;
@@ -594,7 +630,7 @@ void Run::Build() {
   }
   hub_->OpenLog(out_ + "/can.log", link_->interface());
   hub_->SetFirmwareSend([this](const bus::CanFrame& f) {
-    if (o_.check_runahead || o_.runahead) to_firmware_.push_back(f);
+    if (o_.check_runahead || o_.runahead != RunOptions::Runahead::kOff) to_firmware_.push_back(f);
     // The firmware got the frames of its window up to its own clock from its rings.
     if (firmware_ahead_ns_ >= 0 && run_.now_ns <= firmware_ahead_ns_) return true;
     return link_->Send(f);
@@ -639,7 +675,8 @@ void Run::StartFirmware() {
   if (link_->private_bus() && o_.ucan_child_env) env = o_.ucan_child_env(link_->runtime_dir());
   env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
   // Runahead: the firmware's sockets get their own doorbell (bus/ucan_protocol.h).
-  if (virtual_time_ && o_.runahead) env.emplace_back(bus::ucan::kOwnBellEnv, "1");
+  if (virtual_time_ && o_.runahead != RunOptions::Runahead::kOff)
+    env.emplace_back(bus::ucan::kOwnBellEnv, "1");
   if (virtual_time_) {
     // The clock's library goes first: the bus library's own waits are then virtual too.
     const std::string lib = VtimeLibrary(env);
@@ -847,8 +884,9 @@ json Run::Report(double wall_s) {
       {"devices_bus_s", wall_.devices_bus_s},
       {"forecast_s", wall_.forecast_s},
       {"other_s", std::max(0.0, wall_s - staged_s)}};
-  if (o_.runahead && clock_) {
-    r["wall"]["runahead"] = json{{"windows", runahead_.windows},
+  if (o_.runahead != RunOptions::Runahead::kOff && clock_) {
+    r["wall"]["runahead"] = json{{"mode", o_.runahead == RunOptions::Runahead::kOn ? "on" : "auto"},
+                                 {"windows", runahead_.windows},
                                  {"frames_run_through", runahead_.frames},
                                  {"local_advances", clock_->local_advances()}};
   }

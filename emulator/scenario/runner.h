@@ -62,7 +62,12 @@ struct RunOptions {
   /// the bus is forecast, the forecast frames put in the firmware's rings ahead, and the
   /// firmware moves its clock itself through them and its own deadlines until it sends; the
   /// run then moves its bus up to there, checking it hands the firmware exactly those frames.
-  bool runahead = false;
+  /// kOn makes a window wherever one saved enough turns last time; kAuto (the default) only
+  /// where one took less wall time than the turns it saved (on a loaded machine, or with a
+  /// firmware that sends every few frames, the run goes one frame at a time). Either way every
+  /// artefact is what kOff gives.
+  enum class Runahead { kOff, kOn, kAuto };
+  Runahead runahead = Runahead::kAuto;
   std::function<void(pid_t pid)> on_firmware_stopped;
   std::string bin_dir;                ///< ${BIN}; directory of wheelhil-fw.
   std::string dbc_dir;                ///< Directory of the bus/dbc files.

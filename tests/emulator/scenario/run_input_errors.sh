@@ -25,7 +25,7 @@ echo "ok: rc $rc: $(cat "$work/log2")"
 "$wheelhil" run "$src/scenarios/smoke/paper000_slip_short.yaml" --runahead maybe \
   --out "$work/out3" >"$work/log3" 2>&1
 rc=$?
-want="--runahead: maybe not in {on,off}"
+want="--runahead: maybe not in {auto,on,off}"
 if [ "$rc" -ne 2 ] || ! grep -qF -- "$want" "$work/log3"; then
   echo "FAIL: --runahead maybe: rc $rc (want 2 and '$want'); output:"
   cat "$work/log3"

@@ -106,7 +106,7 @@ double LastEstimateX(const fs::path& dir, const std::string& stream) {
 // run's result and its can.log.
 std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs::path& dir) {
   RunOptions one_by_one = testing::BuildTreeRunOptions(dir / "a");
-  one_by_one.runahead = false;
+  one_by_one.runahead = RunOptions::Runahead::kOff;
   RunResult a = RunScenario(s, one_by_one);
   RunOptions checked = testing::BuildTreeRunOptions(dir / "b");
   checked.check_runahead = true;
@@ -114,7 +114,7 @@ std::pair<RunResult, std::string> RunTwiceSameBytes(const Scenario& s, const fs:
   EXPECT_EQ(a.failure, b.failure);
   EXPECT_TRUE(b.report["wall"].contains("runahead_check"));
   RunOptions ahead = testing::BuildTreeRunOptions(dir / "c");
-  ahead.runahead = true;
+  ahead.runahead = RunOptions::Runahead::kOn;
   const RunResult c = RunScenario(s, ahead);
   EXPECT_EQ(a.failure, c.failure);
   EXPECT_EQ(Slurp(dir / "a" / "can.log"), Slurp(dir / "c" / "can.log"));
@@ -163,7 +163,7 @@ std::pair<RunResult, RunResult> RunPlainAndWith(const fs::path& dir, const char*
   const Scenario s =
       LoadScenarioFile(fmt::format("{}/scenarios/{}.yaml", WHEELHIL_SOURCE_DIR, name));
   RunOptions one_by_one = testing::BuildTreeRunOptions(dir / "plain");
-  one_by_one.runahead = false;
+  one_by_one.runahead = RunOptions::Runahead::kOff;
   RunResult plain = RunScenario(s, one_by_one);
   RunOptions o = testing::BuildTreeRunOptions(dir / "other");
   with(o);
@@ -205,8 +205,9 @@ TEST_F(VirtualTimeRun, TheRunHandsTheFirmwareExactlyTheBusForecast) {
 TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughTheForecastAndNothingChanges) {
   for (const char* name : kRunaheadScenarios) {
     SCOPED_TRACE(name);
-    const auto [plain, ahead] = RunPlainAndWith(dir_ / fs::path(name).filename(), name,
-                                                [](RunOptions& o) { o.runahead = true; });
+    const auto [plain, ahead] =
+        RunPlainAndWith(dir_ / fs::path(name).filename(), name,
+                        [](RunOptions& o) { o.runahead = RunOptions::Runahead::kOn; });
     const auto& wall = ahead.report["wall"];
     EXPECT_GE(wall["runahead"]["frames_run_through"].get<int>(), 100) << wall.dump();
     EXPECT_GE(wall["runahead"]["local_advances"].get<int>(), 100) << wall.dump();
