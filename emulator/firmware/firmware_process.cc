@@ -13,7 +13,9 @@
 #include <fstream>
 #include <functional>
 #include <stdexcept>
+#include <string_view>
 #include <thread>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -21,6 +23,52 @@
 #include "emulator/sim/signal_name.h"
 
 namespace wheelhil::emulator::firmware {
+
+namespace {
+
+// `command` as the words of a program and its arguments when the shell would do nothing with
+// it but split it at spaces (no quoting, expansion, redirection or assignment), followed by the
+// program's file, found on PATH as the shell would; empty when the shell is needed. The shell's
+// start (its own exec, and the clock's and the bus's libraries loaded into it) is then saved:
+// ~0.5 ms of every run.
+std::vector<std::string> PlainCommand(const std::string& command) {
+  auto plain = [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+           std::string_view("_-./,:+@%=").find(c) != std::string_view::npos;
+  };
+  std::vector<std::string> words;
+  std::string word;
+  for (const char c : command + ' ') {
+    if (c == ' ') {
+      if (!word.empty()) words.push_back(std::exchange(word, {}));
+    } else if (plain(c)) {
+      word += c;
+    } else {
+      return {};
+    }
+  }
+  if (words.empty() || words[0].find('=') != std::string::npos) return {};
+  if (words[0].find('/') != std::string::npos) {
+    words.push_back(words[0]);
+    return words;
+  }
+  const char* path = std::getenv("PATH");
+  std::string_view dirs(path != nullptr ? path : "/usr/local/bin:/usr/bin:/bin");
+  for (;;) {
+    const std::size_t colon = dirs.find(':');
+    const std::string_view dir = dirs.substr(0, colon);
+    const std::string candidate =
+        (dir.empty() ? std::string(".") : std::string(dir)) + "/" + words[0];
+    if (::access(candidate.c_str(), X_OK) == 0 && !std::filesystem::is_directory(candidate)) {
+      words.push_back(candidate);
+      return words;
+    }
+    if (colon == std::string_view::npos) return {};  // the shell says it is not found
+    dirs.remove_prefix(colon + 1);
+  }
+}
+
+}  // namespace
 
 void FirmwareProcess::Start(const std::string& command,
                             const std::vector<std::pair<std::string, std::string>>& env,
@@ -43,7 +91,11 @@ void FirmwareProcess::Start(const std::string& command,
   for (const auto& e : env_entries) envp.push_back(const_cast<char*>(e.c_str()));
   envp.push_back(nullptr);
   const std::string sh = "exec " + command;
-  const char* argv[] = {"sh", "-c", sh.c_str(), nullptr};
+  const std::vector<std::string> words = PlainCommand(command);
+  const char* sh_argv[] = {"sh", "-c", sh.c_str(), nullptr};
+  std::vector<const char*> argv;
+  for (std::size_t i = 0; i + 1 < words.size(); ++i) argv.push_back(words[i].c_str());
+  argv.push_back(nullptr);
   const pid_t parent = ::getpid();
   pid_ = ::fork();
   started_pid_ = pid_;
@@ -59,7 +111,12 @@ void FirmwareProcess::Start(const std::string& command,
       ::dup2(log_fd, 1);
       ::dup2(log_fd, 2);
     }
-    ::execve("/bin/sh", const_cast<char* const*>(argv), envp.data());
+    if (!words.empty()) {
+      ::execve(words.back().c_str(), const_cast<char* const*>(argv.data()), envp.data());
+    }
+    // Also when that failed (a script without #!, a file that vanished): the shell runs it, or
+    // says why not, as it would have.
+    ::execve("/bin/sh", const_cast<char* const*>(sh_argv), envp.data());
     ::_exit(127);
   }
   // Also here: the group exists before the parent may signal it, whichever runs first.

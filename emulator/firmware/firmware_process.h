@@ -1,5 +1,6 @@
 #pragma once
-/// The firmware under test as a child process: started through `/bin/sh -c "exec COMMAND"` in a
+/// The firmware under test as a child process: started through `/bin/sh -c "exec COMMAND"` (or,
+/// for a COMMAND of plain words the shell would only split, its program exec'd directly) in a
 /// process group of its own, with extra environment variables and its stdout/stderr in a log
 /// file. Stop() ends every process the firmware started (its ProcessScope: the group, `setsid`
 /// children, orphans): SIGTERM, up to 2 s of grace, then SIGKILL until none is left; the

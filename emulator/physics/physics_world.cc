@@ -7,6 +7,8 @@
 #include <btBulletDynamicsCommon.h>
 #include <fmt/format.h>
 
+#include "emulator/physics/collision_configuration.h"
+
 namespace wheelhil::emulator::physics {
 namespace {
 
@@ -63,7 +65,7 @@ PhysicsWorld::PhysicsWorld(const WorldOptions& options)
   }
   if (!gravity_W_.allFinite()) throw std::invalid_argument("world: gravity_W: must be finite");
   terrain_ = std::make_unique<Terrain>();
-  config_ = std::make_unique<btDefaultCollisionConfiguration>();
+  config_ = MakeCollisionConfiguration();
   dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
   broadphase_ = std::make_unique<btDbvtBroadphase>();
   solver_ = std::make_unique<btSequentialImpulseConstraintSolver>();

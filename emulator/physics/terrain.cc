@@ -14,6 +14,8 @@
 #include <Eigen/Geometry>
 #include <assimp/Importer.hpp>
 
+#include "emulator/physics/collision_configuration.h"
+
 namespace wheelhil::emulator {
 
 namespace {
@@ -104,7 +106,7 @@ void Terrain::AddTriangles(const std::vector<Eigen::Vector3d>& vertices_W,
     }
   }
   if (!world_) {
-    config_ = std::make_unique<btDefaultCollisionConfiguration>();
+    config_ = physics::MakeCollisionConfiguration();
     dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
     broadphase_ = std::make_unique<btDbvtBroadphase>();
     world_ =

@@ -1,5 +1,6 @@
 // The firmware's process start (emulator/firmware/firmware_process.h): the environment it is
-// given (made before the fork, since the child of the run's threaded process may not allocate).
+// given (made before the fork, since the child of the run's threaded process may not allocate),
+// and a command the shell would only split at spaces run without a shell.
 #include "emulator/firmware/firmware_process.h"
 
 #include <gtest/gtest.h>
@@ -25,6 +26,11 @@ int WaitExit(FirmwareProcess& p, std::chrono::seconds limit) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
   return -1;
+}
+
+// `env`'s output has a PWD entry.
+bool HasPwd(const std::string& env) {
+  return env.rfind("PWD=", 0) == 0 || env.find("\nPWD=") != std::string::npos;
 }
 
 class FirmwareProcessTest : public ::testing::Test {
@@ -54,6 +60,33 @@ TEST_F(FirmwareProcessTest, TheEnvironmentIsOursWithTheRunsEntriesSetOrReplaced)
   EXPECT_EQ(WaitExit(p, std::chrono::seconds(30)), 3) << Log();
   ::unsetenv("WHEELHIL_FWPROC_KEPT");
   ::unsetenv("WHEELHIL_FWPROC_REPLACED");
+}
+
+// A plain command (words, no quoting or expansion) is its program, found on PATH, exec'd with
+// no shell before it: it gets exactly the environment it is given (a shell adds PWD when there
+// is none). A command that needs the shell (here a quoted word) still gets one; a program not
+// found is the shell's "not found" (status 127), as before.
+TEST_F(FirmwareProcessTest, APlainCommandRunsWithoutAShellAndAnyOtherThroughOne) {
+  const char* pwd = std::getenv("PWD");
+  const std::string saved_pwd = pwd != nullptr ? pwd : "";
+  ::unsetenv("PWD");
+  FirmwareProcess plain;
+  plain.Start("env", {{"WHEELHIL_FWPROC_PLAIN", "1"}}, log_);
+  EXPECT_EQ(WaitExit(plain, std::chrono::seconds(30)), 0) << Log();
+  EXPECT_NE(Log().find("WHEELHIL_FWPROC_PLAIN=1\n"), std::string::npos) << Log();
+  EXPECT_FALSE(HasPwd(Log())) << Log();
+
+  FirmwareProcess shell;
+  shell.Start("env 'WHEELHIL_FWPROC_QUOTED=a b'", {}, log_);
+  EXPECT_EQ(WaitExit(shell, std::chrono::seconds(30)), 0) << Log();
+  EXPECT_NE(Log().find("WHEELHIL_FWPROC_QUOTED=a b\n"), std::string::npos) << Log();
+  EXPECT_TRUE(HasPwd(Log())) << Log();
+  if (pwd != nullptr) ::setenv("PWD", saved_pwd.c_str(), 1);
+
+  FirmwareProcess missing;
+  missing.Start("wheelhil-no-such-program --can ucan0", {}, log_);
+  EXPECT_EQ(WaitExit(missing, std::chrono::seconds(30)), 127) << Log();
+  EXPECT_NE(Log().find("not found"), std::string::npos) << Log();
 }
 
 }  // namespace
