@@ -737,8 +737,9 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
 /// rx ring, lock held; the ring was found empty at `head` (or its last entry just taken).
 void SettleRx(int fd, ucan::RingIndex& r, std::uint64_t head) {
   ucan::RingSettle(r, head, [fd] {
-    std::uint64_t bell = 0;
-    return real_recv()(fd, &bell, sizeof(bell), MSG_DONTWAIT) == sizeof(bell);
+    return ucan::ReceiveDoorbell(
+        fd, ucan::kDoorbellInFlightMs,
+        [](int s, void* b, std::size_t n, int fl) { return real_recv()(s, b, n, fl); }, ::poll);
   });
 }
 

@@ -30,7 +30,9 @@
 /// Plain C layout, host byte order (both ends run on the same machine). No C++ runtime needed,
 /// so the interposition library can include it.
 
+#include <poll.h>
 #include <pthread.h>
+#include <sys/socket.h>
 
 #include <atomic>
 #include <cstddef>
@@ -217,10 +219,9 @@ inline int RingTakeDoorbell(RingIndex& r, int max_tries) {
 
 /// A client consumer, `lock` held, after it found the ring empty at `head` or took its last
 /// entry: clears `pending`; if the ring is still empty after that, discards the doorbells
-/// triggered before the clear (`discard_one()`: receive one without waiting, false when none is
-/// there yet: a doorbell still in flight is discarded by a later call). Doorbells triggered
-/// after the clear announce later pushes and stay. `between` runs between the clear and the
-/// re-check (tests widen that window with it).
+/// triggered before the clear (`discard_one()`: ReceiveDoorbell, false when none came: then a
+/// later call discards it). Doorbells triggered after the clear announce later pushes and stay.
+/// `between` runs between the clear and the re-check (tests widen that window with it).
 template <typename DiscardOne, typename Between>
 void RingSettle(RingIndex& r, std::uint64_t head, DiscardOne discard_one, Between between) {
   const std::uint64_t w = r.bell.fetch_and(~std::uint64_t{1});  // seq_cst
@@ -233,6 +234,26 @@ void RingSettle(RingIndex& r, std::uint64_t head, DiscardOne discard_one, Betwee
 template <typename DiscardOne>
 void RingSettle(RingIndex& r, std::uint64_t head, DiscardOne discard_one) {
   RingSettle(r, head, discard_one, [] {});
+}
+
+/// How long RingSettle's consumer waits for a doorbell on its way.
+inline constexpr int kDoorbellInFlightMs = 1000;
+
+/// One doorbell off socket `fd` for RingSettle: at once if it is there, else (the producer
+/// sends one right after it took it with RingTakeDoorbell, so one counted and not yet here is on
+/// its way) waiting up to `wait_ms` for it. Left to a later call, it would arrive after the
+/// consumer emptied the ring: the socket readable with nothing to read, and a blocking receive
+/// after a poll that said readable would wait for the next frame. `recv_fn(fd, buf, len, flags)`
+/// and `poll_fn(pollfd*, nfds, timeout_ms)` as recv(2) and poll(2). False when none came.
+template <typename RecvFn, typename PollFn>
+bool ReceiveDoorbell(int fd, int wait_ms, RecvFn recv_fn, PollFn poll_fn) {
+  std::uint64_t bell = 0;
+  if (recv_fn(fd, &bell, sizeof(bell), MSG_DONTWAIT) == static_cast<long>(sizeof(bell))) {
+    return true;
+  }
+  pollfd p{fd, POLLIN, 0};
+  if (wait_ms <= 0 || poll_fn(&p, 1, wait_ms) <= 0) return false;
+  return recv_fn(fd, &bell, sizeof(bell), MSG_DONTWAIT) == static_cast<long>(sizeof(bell));
 }
 
 static_assert(std::atomic<std::uint64_t>::is_always_lock_free);

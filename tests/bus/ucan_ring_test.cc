@@ -13,6 +13,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <random>
 #include <set>
 #include <thread>
@@ -335,8 +336,7 @@ TEST(UcanRingEventcount, NoDoorbellIsLostUnderRacingProducerAndConsumers) {
   auto consume = [&](unsigned seed) {
     std::minstd_rand rng(seed);
     auto discard_one = [&] {
-      std::uint64_t bell = 0;
-      return ::recv(sv[1], &bell, sizeof(bell), MSG_DONTWAIT) == sizeof(bell);
+      return ucan::ReceiveDoorbell(sv[1], ucan::kDoorbellInFlightMs, ::recv, ::poll);
     };
     auto spin = [&] { SpinSometimes(rng); };
     for (;;) {
@@ -402,6 +402,36 @@ TEST(UcanRingEventcount, NoDoorbellIsLostUnderRacingProducerAndConsumers) {
   ::close(sv[0]);
   ::close(sv[1]);
   ::munmap(mem, sizeof(SharedRing));
+}
+
+// A doorbell on its way when the consumer empties the ring (the producer took it, and sends it
+// a moment later) is waited for and taken then: afterwards the socket is not readable with the
+// ring empty. Left to a later call (as the library did), it made the socket readable with
+// nothing to read, and a blocking read after a poll that said readable waited for the next
+// frame: a reader that polls with a timeout to see whether it should stop hung in its read
+// (wheelhil bench's fan-out readers, once).
+TEST(UcanRingEventcount, ADoorbellOnItsWayIsTakenBeforeTheConsumerCallsTheRingEmpty) {
+  ucan::RingIndex r;
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv), 0);
+  r.tail.store(1);  // one entry pushed
+  ASSERT_EQ(ucan::RingTakeDoorbell(r, ucan::kDoorbellTries), 1);
+  std::thread late_bell([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const std::uint64_t bell = 1;
+    ::send(sv[0], &bell, sizeof(bell), MSG_NOSIGNAL);
+  });
+  // The consumer takes the entry and settles before the doorbell is there.
+  r.head.store(1);
+  ucan::RingSettle(r, 1, [&] {
+    return ucan::ReceiveDoorbell(sv[1], ucan::kDoorbellInFlightMs, ::recv, ::poll);
+  });
+  late_bell.join();
+  pollfd p{sv[1], POLLIN, 0};
+  EXPECT_EQ(::poll(&p, 1, 0), 0) << "a doorbell left with the ring empty";
+  EXPECT_EQ(r.bells_taken, 1u);
+  ::close(sv[0]);
+  ::close(sv[1]);
 }
 
 }  // namespace
