@@ -103,6 +103,7 @@ REAL_FN(recvmmsg, int, (int, mmsghdr*, unsigned, int, timespec*))
 REAL_FN(if_nametoindex, unsigned, (const char*))
 REAL_FN(if_indextoname, char*, (unsigned, char*))
 REAL_FN(clock_gettime, int, (clockid_t, timespec*))
+REAL_FN(poll, int, (pollfd*, nfds_t, int))
 
 // ---- per-fd state ----
 
@@ -736,10 +737,14 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
 
 /// rx ring, lock held; the ring was found empty at `head` (or its last entry just taken).
 void SettleRx(int fd, ucan::RingIndex& r, std::uint64_t head) {
+  // libc's poll, past libwheelhil_vtime.so's: with the ring's lock held, its look at this
+  // socket's ring (wheelhil_ucan_bus_socket_state) would wait for this very lock; and the wait
+  // for a doorbell on its way is the library's own, a few microseconds, no wait of the program.
   ucan::RingSettle(r, head, [fd] {
     return ucan::ReceiveDoorbell(
         fd, ucan::kDoorbellInFlightMs,
-        [](int s, void* b, std::size_t n, int fl) { return real_recv()(s, b, n, fl); }, ::poll);
+        [](int s, void* b, std::size_t n, int fl) { return real_recv()(s, b, n, fl); },
+        [](pollfd* p, nfds_t n, int ms) { return real_poll()(p, n, ms); });
   });
 }
 
