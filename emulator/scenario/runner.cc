@@ -216,6 +216,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // host at its end), so one that saves fewer turns makes the run slower. auto measures both.
   static constexpr std::size_t kRunaheadMinTurnsSaved = 4;
   double turn_wall_s_ = 0;  // a turn of the firmware's outside windows, wall s (moving average)
+  double before_motion_s_ = -1;  // wall s from the run's start to its motion phase
   struct RunaheadHistory {
     std::uint32_t skip = 0;     // turns to let pass before the next try
     std::uint32_t backoff = 0;  // what `skip` becomes after another window that did not pay
@@ -771,6 +772,7 @@ void Run::RunPhases() {
   run_.motion0_ns = run_.now_ns;
   run_.motion0_s = static_cast<double>(run_.now_ns) * 1e-9;
   motion_started_ = true;
+  before_motion_s_ = WallSeconds(wall0_);
   syncs_before_motion_ = handshake_->syncs_sent();
   physics_->StartMotion(run_.now_ns);
   truth_->StartMotion(run_.now_ns, physics_->vehicle().body_truth());
@@ -873,6 +875,7 @@ json Run::Report(double wall_s) {
       {"physics_inline_from_s",
        physics_inline_from_ns_ >= 0 ? json(run_.MotionSeconds(physics_inline_from_ns_)) : json()},
       {"virtual_s", virtual_s},
+      {"before_motion_s", before_motion_s_ >= 0 ? json(before_motion_s_) : json()},
       {"handovers", handovers},
       {"handovers_per_sim_s", virtual_s > 0 ? handovers / virtual_s : 0.0},
       {"handover_s", wall_.handover_s},

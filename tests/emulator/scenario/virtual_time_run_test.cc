@@ -425,6 +425,10 @@ TEST_F(VirtualTimeRun, TheWallBlockAccountsForHandoversAndStages) {
   EXPECT_GE(w["firmware_cpu_s"].get<double>(), 0.0);
   ASSERT_TRUE(w["kernel_looks"].is_number()) << w.dump();
   ASSERT_TRUE(w["blocked_seen_in_kernel"].is_number()) << w.dump();
+  // The start (world, devices, firmware, boot) is a part of the wall time.
+  ASSERT_TRUE(w["before_motion_s"].is_number()) << w.dump();
+  EXPECT_GT(w["before_motion_s"].get<double>(), 0.0);
+  EXPECT_LT(w["before_motion_s"].get<double>(), w["wall_time_s"].get<double>());
 }
 
 // The waits of the C firmware (its epoll set of a timerfd, its reader thread's receive) are
