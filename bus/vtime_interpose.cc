@@ -1198,11 +1198,14 @@ void RegisterProcess() {
       break;
     }
   }
-  // The host registers the firmware's first process before it knows its pid (-1).
+  // The host registers the firmware's first process before it knows its pid (-1), and sets
+  // the pid once its fork returned: here, or between the look above and this one (a host
+  // slower than the new program's start: then the swap finds `me` there already, and the slot
+  // is this process's all the same; a second slot would leave this one starting for ever).
   for (int i = 0; g_proc < 0 && i < vt::kMaxProcesses; ++i) {
     std::int32_t expect = vt::kFirstProcessPid;
     if (g_page->processes[i].state.load() == vt::kProcStarting &&
-        g_page->processes[i].pid.compare_exchange_strong(expect, me)) {
+        (g_page->processes[i].pid.compare_exchange_strong(expect, me) || expect == me)) {
       g_proc = i;
     }
   }
