@@ -47,8 +47,9 @@ Scenario ShortPaper000() {
 std::vector<pid_t> ProcessesWith(const std::string& token) {
   std::vector<pid_t> out;
   for (pid_t pid : firmware::ListPids()) {
-    std::ifstream in("/proc/" + std::to_string(pid) + "/cmdline", std::ios::binary);
-    const std::string cmd((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    // ReadProcFile, not an ifstream: a process that ends while it is read makes the read fail
+    // (ESRCH), which a stream buffer throws.
+    const std::string cmd = firmware::ReadProcFile("/proc/" + std::to_string(pid) + "/cmdline");
     if (cmd.find(token) != std::string::npos && pid != ::getpid()) out.push_back(pid);
   }
   return out;
