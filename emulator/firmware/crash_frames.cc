@@ -11,6 +11,8 @@
 
 #include <fmt/format.h>
 
+#include "emulator/firmware/process_scope.h"
+
 namespace wheelhil::emulator::firmware {
 namespace {
 
@@ -28,17 +30,6 @@ std::string Quote(const std::string& s) {
   std::string out = "'";
   for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return out + "'";
-}
-
-std::string FindInPath(const std::string& name) {
-  if (name.find('/') != std::string::npos) return name;
-  const char* path = std::getenv("PATH");
-  std::istringstream dirs(path ? path : "/usr/bin:/bin");
-  for (std::string dir; std::getline(dirs, dir, ':');) {
-    const fs::path p = fs::path(dir.empty() ? "." : dir) / name;
-    if (::access(p.c_str(), X_OK) == 0) return p.string();
-  }
-  return {};
 }
 
 /// stdout of a shell command (its stderr dropped).
@@ -97,7 +88,7 @@ CrashFrames ReadCrashFrames(pid_t pid, const std::string& cwd, const std::string
     }
     if (!ec) core = kept;
     out.core_path = core.string();
-    const std::string gdb = FindInPath("gdb");
+    const std::string gdb = FindOnPath("gdb");
     if (gdb.empty()) {
       out.note = "gdb is not installed (apt-get install gdb)";
       return out;
@@ -112,7 +103,7 @@ CrashFrames ReadCrashFrames(pid_t pid, const std::string& cwd, const std::string
       std::istringstream words(command);
       words >> exe;
     }
-    if (!exe.empty() && exe.find('/') == std::string::npos) exe = FindInPath(exe);
+    if (!exe.empty() && exe.find('/') == std::string::npos) exe = FindOnPath(exe);
     const std::string bt =
         Output("cd " + Quote(cwd) + " && timeout 20 " + Quote(gdb) + " -batch -nx -ex 'bt 8' " +
                (exe.empty() ? std::string() : Quote(exe) + " ") + Quote(core.string()));

@@ -49,24 +49,12 @@ std::vector<std::string> PlainCommand(const std::string& command) {
     }
   }
   if (words.empty() || words[0].find('=') != std::string::npos) return {};
-  if (words[0].find('/') != std::string::npos) {
-    words.push_back(words[0]);
-    return words;
-  }
-  const char* path = std::getenv("PATH");
-  std::string_view dirs(path != nullptr ? path : "/usr/local/bin:/usr/bin:/bin");
-  for (;;) {
-    const std::size_t colon = dirs.find(':');
-    const std::string_view dir = dirs.substr(0, colon);
-    const std::string candidate =
-        (dir.empty() ? std::string(".") : std::string(dir)) + "/" + words[0];
-    if (::access(candidate.c_str(), X_OK) == 0 && !std::filesystem::is_directory(candidate)) {
-      words.push_back(candidate);
-      return words;
-    }
-    if (colon == std::string_view::npos) return {};  // the shell says it is not found
-    dirs.remove_prefix(colon + 1);
-  }
+  // Without PATH each shell has a default of its own: it finds the program.
+  if (words[0].find('/') == std::string::npos && std::getenv("PATH") == nullptr) return {};
+  std::string file = FindOnPath(words[0]);
+  if (file.empty()) return {};  // the shell says it is not found
+  words.push_back(std::move(file));
+  return words;
 }
 
 constexpr std::size_t kChildStackBytes = 64 * 1024;

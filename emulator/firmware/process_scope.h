@@ -60,6 +60,10 @@ std::string ReadProcFile(const std::string& path);
 std::vector<pid_t> ListPids();
 /// Whether /proc/<pid>/environ holds the entry `key=value` (false when it cannot be read).
 bool EnvironHas(pid_t pid, const std::string& key, const std::string& value);
+/// The file `program` names as the shell would find it: as it is when it holds a '/', else the
+/// first executable (not a directory) of that name in PATH's directories (an empty one is the
+/// current directory; "/usr/bin:/bin" when PATH is unset). Empty when there is none.
+std::string FindOnPath(const std::string& program);
 /// This process's environment with `set` applied as setenv would (a key present replaced where
 /// it is, a new one appended), as "KEY=VALUE" strings: for a child's execve, made before its
 /// fork (the child of a threaded process may not allocate before its exec).

@@ -699,19 +699,6 @@ std::string ProgramOf(const std::string& command) {
   }
 }
 
-std::string ResolveOnPath(const std::string& program) {
-  if (program.find('/') != std::string::npos) return program;
-  const char* path = std::getenv("PATH");
-  std::string dirs = path != nullptr ? path : "/usr/bin:/bin";
-  for (std::size_t start = 0; start <= dirs.size();) {
-    const std::size_t end = std::min(dirs.find(':', start), dirs.size());
-    const std::string candidate = dirs.substr(start, end - start) + "/" + program;
-    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
-    start = end + 1;
-  }
-  return {};
-}
-
 }  // namespace
 
 HostClockWait ClassifyKernelWait(const std::string& line) {
@@ -783,7 +770,7 @@ bool IsStaticExecutable(const std::string& file) {
 
 std::string WhyNotVirtualClock(const std::string& command) {
   const std::string program = ProgramOf(command);
-  const std::string file = program.empty() ? std::string() : ResolveOnPath(program);
+  const std::string file = program.empty() ? std::string() : FindOnPath(program);
   if (file.empty() || !IsStaticExecutable(file)) return {};
   return fmt::format("{} is a statically linked executable: no library can be preloaded into it, "
                      "so its clock cannot be the run's (link it dynamically, or run it with "

@@ -342,7 +342,7 @@ void Run::SettleFirmware() {
   const bool deadline_turn = o_.check_runahead && clock_->NextDeadlineNs() <= now;
   const std::uint64_t sent_before = firmware_frames_seen_;
   const std::uint64_t handovers_before = link_->handovers();
-  const auto settle_start = Clock::now();
+  const double handover_s_before = wall_.handover_s;
   clock_->SetNow(now);
   link_->Settle(*clock_, s_.timing.timeout_s, firmware_,
                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
@@ -350,7 +350,7 @@ void Run::SettleFirmware() {
   if (o_.check_runahead) {
     CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before, turn, to_firmware_);
   } else if (o_.runahead != RunOptions::Runahead::kOff && turn) {
-    const double turn_s = WallSeconds(settle_start);
+    const double turn_s = wall_.handover_s - handover_s_before;  // the link times its turns
     turn_wall_s_ = turn_wall_s_ == 0 ? turn_s : 0.9 * turn_wall_s_ + 0.1 * turn_s;
     // After a turn: a settle that found the firmware blocked with nothing for it (most steps)
     // leaves it where it is, and the next turn's window starts from there as well.
