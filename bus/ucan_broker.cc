@@ -1051,13 +1051,15 @@ struct UcanBroker::Impl {
 
   /// Routes, in stamp order (ties: read order), every pending frame stamped before `before_ns`;
   /// later ones stay pending for the next pass, which starts without blocking.
-  void Dispatch(std::int64_t before_ns) {
+  /// At most `max_frames` of them (PumpFirstSent).
+  void Dispatch(std::int64_t before_ns, std::size_t max_frames = SIZE_MAX) {
     auto by_stamp = [](const Pending& a, const Pending& b) { return a.stamp_ns < b.stamp_ns; };
     if (!std::is_sorted(pending.begin(), pending.end(), by_stamp)) {
       std::stable_sort(pending.begin(), pending.end(), by_stamp);
     }
     auto end = pending.begin();
-    while (end != pending.end() && end->stamp_ns < before_ns) {
+    while (end != pending.end() && end->stamp_ns < before_ns &&
+           static_cast<std::size_t>(end - pending.begin()) < max_frames) {
       Route(*end);
       ++end;
     }
@@ -1306,7 +1308,8 @@ struct UcanBroker::Impl {
   /// stamp order. A write that returned before T0 is then either routed already or read in this
   /// pass, so a frame is never routed before one whose write() returned before it was sent.
   /// Waits up to `timeout_ms` (-1: forever) for traffic first. False once the broker must stop.
-  bool Pass(std::vector<epoll_event>& events, int timeout_ms, bool look_at_sockets = true) {
+  bool Pass(std::vector<epoll_event>& events, int timeout_ms, bool look_at_sockets = true,
+            std::size_t max_frames = SIZE_MAX) {
     bool more_pending = false;
     {
       std::lock_guard lk(mu);
@@ -1361,7 +1364,8 @@ struct UcanBroker::Impl {
     // Every ring, ready or not: a push that returned before T0 may have found its doorbell
     // already pending (one rung in an earlier pass, not yet read), so readiness says nothing.
     for (std::size_t i = 0; i < ring_clients.size(); ++i) DrainRing(ring_clients[i]);
-    Dispatch(pass_start_ns);
+    // PumpFirstSent: the frames already sent, whatever this host's clock says.
+    Dispatch(max_frames == SIZE_MAX ? pass_start_ns : INT64_MAX, max_frames);
     ApplyDeferredOptions();
     FlushDirty();
     ExpireSilentConnections();
@@ -1542,6 +1546,31 @@ bool UcanBroker::PumpQuiet() {
   if (impl_->Pass(impl_->pump_events, 0, false)) return true;
   impl_->Finish();
   return false;
+}
+
+bool UcanBroker::PumpFirstSent(std::size_t frames) {
+  if (impl_->thread.joinable()) {
+    throw std::logic_error(
+        "UcanBroker::PumpFirstSent: the broker thread still runs (UseCallerThread)");
+  }
+  {
+    std::lock_guard lk(impl_->mu);
+    if (impl_->stopped) return false;
+  }
+  if (frames == 0) return true;
+  if (impl_->Pass(impl_->pump_events, 0, false, frames)) return true;
+  impl_->Finish();
+  return false;
+}
+
+bool UcanBroker::FramesReachOnlyPorts() const {
+  std::lock_guard lk(impl_->mu);
+  int clients = 0;
+  for (const auto& [id, c] : impl_->clients) {
+    if (c->dead || c->local || !c->data) continue;
+    if (++clients > 1 || (c->options.recv_own && c->options.loopback)) return false;
+  }
+  return true;
 }
 
 bool UcanBroker::Pump(int timeout_ms) {

@@ -138,6 +138,14 @@ class UcanBroker {
   bool SendLocal(int port, const CanFrame& frame);
   /// Takes the next frame routed to the port; false when none is there.
   bool ReceiveLocal(int port, CanFrame* frame);
+  /// Runahead: a pass like PumpQuiet that routes only the first `frames` frames waiting in
+  /// the clients' rings (in their order); the rest wait for a later pass. For an owner that
+  /// takes what a program sent ahead of it, instant by instant. Call with none of the owner's
+  /// own frames pending.
+  bool PumpFirstSent(std::size_t frames);
+  /// Runahead: a frame any client sends now reaches no other client (nor itself), only the
+  /// in-process ports: one data client at most, not taking its own frames.
+  bool FramesReachOnlyPorts() const;
   /// Runahead (docs/virtual-time.md): a frame from the port that its recipients get at the
   /// virtual CLOCK_MONOTONIC instant `instant_ns` (not before the frames prepared before it),
   /// routed as SendLocal's would be once everything sent before is routed, and put in each

@@ -227,10 +227,13 @@ auto BrokerSocketCall(Call&& call) {
 }
 
 /// Every frame sent counts for the virtual clock's library (Page::bus_sends): while the firmware
-/// runs ahead on its own clock, a send gives the clock back to the emulator.
-internal::PeerSymbol<void (*)()> g_vtime_note_frame_sent("wheelhil_vtime_note_frame_sent");
-void NoteFrameSent() {
-  if (auto f = g_vtime_note_frame_sent.get()) f();
+/// runs ahead on its own clock, a send gives the clock back to the emulator unless the library
+/// finds it cannot change what the emulator prepared (`frame`: the frame as written, nullptr
+/// for one sent another way than through the socket's ring).
+internal::PeerSymbol<void (*)(const void*, std::size_t)> g_vtime_note_frame_sent(
+    "wheelhil_vtime_note_frame_sent");
+void NoteFrameSent(const void* frame, std::size_t frame_len) {
+  if (auto f = g_vtime_note_frame_sent.get()) f(frame, frame_len);
 }
 
 /// The run asked for runahead (ucan::kOwnBellEnv) and the virtual clock's library is loaded:
@@ -706,6 +709,7 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   std::memcpy(msg + frame_len, &stamp, sizeof(stamp));
   const std::uint64_t tail = r.tail.load(std::memory_order_relaxed);
   if (tail - r.head.load(std::memory_order_acquire) >= h->slots) {
+    NoteFrameSent(nullptr, 0);
     const ssize_t n = BrokerSocketCall(
         [&] { return real_send()(fd, msg, len, MSG_NOSIGNAL | (flags & MSG_DONTWAIT)); });
     const int err = errno;
@@ -720,6 +724,9 @@ ssize_t RingSend(int fd, ucan::RingHeader* h, std::uint8_t* msg, std::size_t fra
   std::memcpy(slot.bytes, msg, len);
   slot.len = static_cast<std::uint32_t>(len);
   r.tail.store(tail + 1, std::memory_order_release);
+  // Under the ring's lock: the sends the virtual clock's library lets through a window are
+  // judged in the ring's order, the order the run takes them in.
+  NoteFrameSent(len == frame_len + sizeof(ucan::TxStamp) ? msg : nullptr, frame_len);
   pthread_mutex_unlock(&r.lock);
   // A doorbell too many (-1: the word kept changing) is harmless: they may be spurious.
   if (ucan::RingTakeDoorbell(r, ucan::kDoorbellTries) != 0 &&
@@ -828,7 +835,6 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
   for (std::size_t i = 0; i < iovcnt; ++i) total += iov[i].iov_len;
   if (total != ucan::kCanMtu && total != ucan::kCanFdMtu) return Fail(EINVAL);
   if (total == ucan::kCanFdMtu && !v.fd_frames) return Fail(EINVAL);
-  NoteFrameSent();
   std::uint8_t buf[ucan::kCanFdMtu + sizeof(ucan::TxStamp) + sizeof(ucan::TxAddress)];
   std::size_t off = 0;
   for (std::size_t i = 0; i < iovcnt; ++i) {
@@ -857,6 +863,7 @@ ssize_t SendFrame(int fd, const View& v, const iovec* iov, std::size_t iovcnt, i
     len += sizeof(to);
   }
   if (v.rings != nullptr) return RingSend(fd, v.rings->header, buf, total, len, flags);
+  NoteFrameSent(nullptr, 0);
   // Stamped last, right before the send: a write that returned before this one began has a
   // smaller stamp (see ucan::TxStamp).
   ucan::TxStamp stamp;

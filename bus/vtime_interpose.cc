@@ -15,6 +15,7 @@
 
 #include <dlfcn.h>
 #include <fcntl.h>
+#include <linux/can.h>
 #include <linux/futex.h>
 #include <poll.h>
 #include <pthread.h>
@@ -458,8 +459,13 @@ bool AdvanceOnce() {
   const std::int64_t now = Now();
   const std::int64_t step = g_page->runahead_step_ns.load();
   const bool on_grid = step <= 0 || (next - g_page->runahead_phase_ns.load()) % step == 0;
+  // A foreseen send not made by then: what the host forecast after it does not hold.
+  const vt::SendRules& rules = g_page->sends;
+  const std::uint32_t taken = rules.foreseen_taken.load();
+  const bool foreseen_missed = rules.enabled.load() != 0 && taken < rules.foreseen_count &&
+                               rules.foreseen[taken].instant_ns < next;
   if (next == vt::kNoDeadline || next <= now || next > g_page->runahead_until_ns.load() ||
-      !on_grid || g_page->bus_sends.load() != g_page->runahead_sends.load() ||
+      !on_grid || g_page->bus_sends.load() != g_page->runahead_sends.load() || foreseen_missed ||
       !LocallyEndable(next, me)) {
     YieldClock();
     return false;
@@ -2124,10 +2130,60 @@ VTIME_EXPORT void wheelhil_vtime_note_bus_call() {
   if (g_page != nullptr) g_page->bus_calls.fetch_add(1);
 }
 
-/// The bus library sent a frame (Page::bus_sends): a clock granted to the firmware goes back
-/// to the host at its next turn, which takes the frame at the instant it was sent.
-VTIME_EXPORT void wheelhil_vtime_note_frame_sent() {
-  if (g_page != nullptr) g_page->bus_sends.fetch_add(1);
+/// A send that leaves the window open (Page::sends): the frame foreseen next, at its instant;
+/// or, with no foreseen one due now, a standard data frame no device reads that would find
+/// the forecast bus idle, losing every arbitration on the way, and leave it before anything
+/// else starts, queued behind the firmware's earlier such frames (at most their stuffed length).
+bool SendRunsThrough(const void* frame, std::size_t frame_len) {
+  vt::SendRules& r = g_page->sends;
+  if (frame == nullptr || frame_len != sizeof(can_frame) || r.enabled.load() == 0 ||
+      vt::RunaheadStateOf(g_page->runahead.load()) != vt::kGranted) {
+    return false;
+  }
+  can_frame f;
+  std::memcpy(&f, frame, sizeof(f));
+  const std::int64_t now = Now();
+  while (r.lock.exchange(1, std::memory_order_acquire) != 0) ::sched_yield();
+  bool through = false;
+  const std::uint32_t taken = r.foreseen_taken.load();
+  const vt::ForeseenSend* next = taken < r.foreseen_count ? &r.foreseen[taken] : nullptr;
+  if (next != nullptr && next->instant_ns <= now) {
+    // Only the frame foreseen here, as foreseen, and before any other.
+    through = next->instant_ns == now && next->can_id == f.can_id && next->len == f.len &&
+              f.len <= CAN_MAX_DLEN && std::memcmp(next->data, f.data, f.len) == 0;
+    if (through) r.foreseen_taken.store(taken + 1);
+  } else if ((f.can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) == 0 &&
+             f.len <= CAN_MAX_DLEN && r.bit_ns > 0 &&
+             (r.unread_ids[f.can_id / 64] >> (f.can_id % 64) & 1u) != 0) {
+    const std::int64_t step = g_page->runahead_step_ns.load();
+    const std::int64_t since = now - r.gap_first_ns;
+    if (step > 0 && since >= 0 && since % step == 0 && since / step < r.gap_count) {
+      const vt::SendGap& g = r.gaps[since / step];
+      const std::int64_t start = std::max(g.idle_ns, r.free_ns.load());
+      const std::int64_t end = start + vt::StandardFrameBitsAtMost(f.len) * r.bit_ns;
+      through = vt::StandardDataKey(f.can_id) > g.max_key && end <= g.busy_ns;
+      if (through) r.free_ns.store(end);
+    }
+  }
+  if (through) {
+    const std::uint32_t n = r.sent_count.load();
+    through = n < vt::kMaxSendsThrough;
+    if (through) {
+      r.sent_at[n] = now;
+      r.sent_count.store(n + 1);
+      r.through.fetch_add(1);
+    }
+  }
+  r.lock.store(0, std::memory_order_release);
+  return through;
+}
+
+/// The bus library sent a frame (`frame`, `frame_len` bytes as written; nullptr: one it could
+/// not show). Unless it runs through a window (SendRunsThrough), a clock granted to the
+/// firmware goes back to the host at its next turn (Page::bus_sends), which takes the frame at
+/// the instant it was sent. Called before the sending thread can wait again.
+VTIME_EXPORT void wheelhil_vtime_note_frame_sent(const void* frame, std::size_t frame_len) {
+  if (g_page != nullptr && !SendRunsThrough(frame, frame_len)) g_page->bus_sends.fetch_add(1);
 }
 
 // ---- signals between the firmware's threads: they may end a wait the host takes for vouched ----

@@ -174,6 +174,68 @@ struct alignas(64) TimerSlot {
   std::atomic<std::int64_t> interval_ns{0};
 };
 
+/// Runahead through the firmware's own sends (Page::sends, docs/virtual-time.md "Sends in a
+/// window"): a send the host foresaw, or one that cannot change what the firmware is handed
+/// next, does not end the window.
+inline constexpr int kMaxForeseenSends = 256;
+inline constexpr int kMaxSendGaps = 1024;
+inline constexpr int kStandardIds = 2048;
+inline constexpr int kMaxSendsThrough = 4096;  ///< In one window.
+
+/// A frame the host expects the firmware to send at an instant (it sent it so before): the
+/// forecast holds it, so the firmware must send exactly it, there, before any other frame.
+struct ForeseenSend {
+  std::int64_t instant_ns = 0;  ///< Virtual CLOCK_MONOTONIC.
+  std::uint32_t can_id = 0;     ///< struct can_frame's, flags included.
+  std::uint8_t len = 0;
+  std::uint8_t pad[3] = {};
+  std::uint8_t data[8] = {};
+};
+
+/// The forecast bus seen from one instant of the window, for a frame the firmware sends there
+/// that nobody foresaw: it first contends with frames whose highest arbitration key is
+/// `max_key` (0: none), which it must lose to, then finds the bus idle from `idle_ns` with
+/// nothing starting before `busy_ns`. It changes nothing if it lies wholly in there.
+struct SendGap {
+  std::int64_t idle_ns = 0;
+  std::int64_t busy_ns = 0;
+  std::uint32_t max_key = 0;
+  std::uint32_t pad = 0;
+};
+
+/// The arbitration key of a classic standard data frame (emulator::ArbitrationKey's layout:
+/// base id, RTR, IDE, extension, lower wins).
+inline constexpr std::uint32_t StandardDataKey(std::uint32_t id) { return (id & 0x7FFu) << 21; }
+/// Its length on the wire at most, SOF to the end of the interframe space, stuff bits included
+/// (can-utils' CFL_WORSTCASE: 55 + 10 n bits for n data bytes).
+inline constexpr std::int64_t StandardFrameBitsAtMost(std::uint32_t len) { return 55 + 10 * len; }
+
+/// Written by the host while the clock is its own, before a grant; read by the firmware's
+/// library during it. The library's own fields (taken, free_ns, through) change under `lock`.
+struct SendRules {
+  /// 0: every send of the firmware's ends the window (the host wrote no rules).
+  std::atomic<std::uint32_t> enabled{0};
+  std::atomic<std::uint32_t> lock{0};  ///< A spin lock of the firmware's sending threads.
+  std::uint32_t foreseen_count = 0;
+  std::atomic<std::uint32_t> foreseen_taken{0};  ///< Library: foreseen sends made so far.
+  /// Unforeseen sends: the grid instant of gaps[0] (gaps follow every runahead_step_ns), the
+  /// bus's bit time (0: none runs through).
+  std::uint32_t gap_count = 0;
+  std::int64_t gap_first_ns = 0;
+  std::int64_t bit_ns = 0;
+  /// Library: when its unforeseen sends leave the bus at the latest (their own queue).
+  std::atomic<std::int64_t> free_ns{0};
+  std::atomic<std::uint64_t> through{0};  ///< Library: sends that did not end a window.
+  /// Library: the instants of this window's sends that did not end it, in the order they
+  /// entered the socket's ring (the host takes them so, each at its instant).
+  std::atomic<std::uint32_t> sent_count{0};
+  std::int64_t sent_at[kMaxSendsThrough] = {};
+  /// Bit `id`: no device reads standard data frames with this id (they change nothing).
+  std::uint64_t unread_ids[kStandardIds / 64] = {};
+  ForeseenSend foreseen[kMaxForeseenSends];
+  SendGap gaps[kMaxSendGaps];
+};
+
 struct Page {
   std::uint32_t magic = kMagic;
   std::uint32_t size = 0;  ///< sizeof(Page), checked by the library.
@@ -209,8 +271,9 @@ struct Page {
   /// due (a sleep's or an fd wait's deadline, a timer), ends those waits and fires those timers
   /// as the host would (WakeDue), as long as that instant is at most `runahead_until_ns`, lies
   /// on the step grid (`runahead_step_ns` > 0: phase + k * step), every thread is in a wait
-  /// only the clock can end, the firmware is one process and it sent no frame since the grant
-  /// (`bus_sends` still `runahead_sends`). Otherwise that thread gives the clock back
+  /// only the clock can end, the firmware is one process, it sent no frame since the grant
+  /// but those `sends` lets through (`bus_sends` still `runahead_sends`) and it made every
+  /// foreseen send before that instant (SendRules). Otherwise that thread gives the clock back
   /// (kHostClock) and wakes the host. The host takes it back itself (compare-and-swap from
   /// kGranted) when it finds every thread blocked while granted (a thread asleep outside the
   /// library's waits never calls it; RunaheadStateOf). kLocalAdvance excludes the two; a thread
@@ -225,7 +288,8 @@ struct Page {
   /// not by the host; cleared when that thread is out of its wait. The host takes such a thread
   /// for running even while the kernel still has it asleep (it was not scheduled yet).
   std::atomic<std::uint64_t> locally_woken[kMaxThreads / 64] = {};
-  /// Bumped by the firmware's bus library on every frame it sends.
+  /// Bumped by the firmware's bus library on every frame it sends, but those `sends` lets
+  /// run through a window.
   std::atomic<std::uint32_t> bus_sends{0};
   /// Instants the firmware's library moved the clock to itself (for the run's report).
   std::atomic<std::uint64_t> local_advances{0};
@@ -235,6 +299,7 @@ struct Page {
   ProcessSlot processes[kMaxProcesses];
   ThreadSlot threads[kMaxThreads];
   TimerSlot timers[kMaxTimers];
+  SendRules sends;
 };
 
 inline void MarkLocallyWoken(Page& page, int slot, bool woken) {

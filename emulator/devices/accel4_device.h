@@ -31,6 +31,7 @@ class Accel4Device final : public Device {
   std::string fault_name() const override { return "accel4"; }
   std::int64_t NextEventNs() const override { return node_.next_sample_ns(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
+  bool ReadsFrame(std::uint32_t) const override { return false; }  // it only sends
   std::vector<std::string> sensor_channels() const override;
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;

@@ -161,6 +161,11 @@ std::vector<NodeFrame> CanopenEncoderNode::OnFrame(const bus::CanFrame& frame, s
   return out;
 }
 
+bool CanopenEncoderNode::ReadsFrame(std::uint32_t id) const {
+  return id == canopen::kNmtCobId || id == canopen::kSyncCobId ||
+         id == canopen::CobId(canopen::Function::kSdoRequest, config_.node_id);
+}
+
 void CanopenEncoderNode::HandleNmt(std::uint8_t command, std::int64_t t_ns) {
   if (state_ == NmtState::kOff) return;  // still initialising
   switch (command) {

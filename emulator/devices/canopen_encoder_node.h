@@ -103,6 +103,8 @@ class CanopenEncoderNode {
   /// or before t_ns happen first (call Poll(t_ns) before OnFrame to collect them in order;
   /// otherwise the next Poll returns them). Never throws.
   std::vector<NodeFrame> OnFrame(const bus::CanFrame& frame, std::int64_t t_ns);
+  /// OnFrame acts on standard frames with this id: NMT, SYNC, its own SDO requests.
+  bool ReadsFrame(std::uint32_t id) const;
 
   /// Returns every timed frame (boot-up, heartbeat, cyclic TPDO, pending EMCY) due at or before
   /// t_ns, in due order, each with its own due instant. t_ns must not go backwards.

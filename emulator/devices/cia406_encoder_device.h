@@ -39,6 +39,7 @@ class Cia406EncoderDevice final : public Device {
   std::int64_t NextEventNs() const override { return node_->NextEventNs(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
   void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) override;
+  bool ReadsFrame(std::uint32_t id) const override { return node_->ReadsFrame(id); }
   bool Ready() const override {
     return node_->state() == CanopenEncoderNode::NmtState::kOperational;
   }

@@ -366,6 +366,11 @@ void DbcDevice::BindReceived(const DbcSignalBinding& b) {
                                   b.message, b.signal));
 }
 
+bool DbcDevice::ReadsFrame(std::uint32_t id) const {
+  return std::any_of(received_.begin(), received_.end(),
+                     [id](const Received& r) { return !r.msg->extended && r.msg->id == id; });
+}
+
 void DbcDevice::OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) {
   for (Received& r : received_) {
     if (frame.id != r.msg->id || frame.extended != r.msg->extended || frame.rtr) continue;

@@ -148,6 +148,7 @@ class DbcDevice final : public Device {
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;
   void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) override;
+  bool ReadsFrame(std::uint32_t id) const override;
   void EndStep(std::int64_t t_ns) override;
   std::vector<WheelDrive> wheel_drives() const override;
   /// Motor controller: set-point frames taken, and refused (wrong length).

@@ -45,6 +45,7 @@ class DbcImuDevice final : public Device {
   const std::string& name() const override { return name_; }
   std::int64_t NextEventNs() const override { return node_.NextEventNs(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
+  bool ReadsFrame(std::uint32_t) const override { return false; }  // it only sends
   std::vector<std::string> sensor_channels() const override;
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;

@@ -100,6 +100,13 @@ class Device {
   virtual void OnFrame(const bus::CanFrame& frame, std::int64_t t_ns, DevicePort& port) {
     (void)frame, (void)t_ns, (void)port;
   }
+  /// False when OnFrame leaves the device as it was for every classic standard data frame with
+  /// this 11-bit id (it reads none): the firmware may then run ahead through its sends of such
+  /// frames (docs/virtual-time.md). Conservative by default.
+  virtual bool ReadsFrame(std::uint32_t id) const {
+    (void)id;
+    return true;
+  }
   /// After every device was polled at t_ns and the frame faults released what was due: the
   /// device faults' windows advance (their start/end events).
   virtual void EndStep(std::int64_t t_ns);

@@ -26,6 +26,7 @@ class Mm5GyroDevice final : public Device {
   std::string fault_name() const override { return "gyro"; }
   std::int64_t NextEventNs() const override { return node_.next_sample_ns(); }
   void Poll(std::int64_t t_ns, const DeviceWorld& world, DevicePort& port) override;
+  bool ReadsFrame(std::uint32_t) const override { return false; }  // it only sends
   std::vector<std::string> sensor_channels() const override { return {"gyro"}; }
   double channel_noise_std(const std::string& channel) const override;
   void ArmFaults(DeviceFaults faults) override;

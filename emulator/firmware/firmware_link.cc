@@ -207,9 +207,11 @@ void FirmwareLink::KeepAlive(VirtualClock& clock) {
   clock.WaitForChange(1000);
 }
 
-bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet) {
+bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet, std::size_t first_sent) {
   const std::uint64_t before = broker_->client_progress();
-  const bool ok = quiet ? broker_->PumpQuiet() : broker_->Pump(timeout_ms);
+  const bool ok = first_sent != SIZE_MAX ? broker_->PumpFirstSent(first_sent)
+                  : quiet                ? broker_->PumpQuiet()
+                                         : broker_->Pump(timeout_ms);
   if (broker_->client_progress() != before) {
     broker_->TakeWokenClients(&woken_);
     if (clock_ != nullptr) {
@@ -361,6 +363,17 @@ bool FirmwareLink::StillWaiting(VirtualClock& clock, double wall_s, double timeo
                   "with timing.spin_cost_s: docs/virtual-time.md)",
                   timeout_s, who.empty() ? "no thread seen running" : who));
   return false;
+}
+
+void FirmwareLink::TakeSent(std::size_t frames, const FrameFn& on_frame) {
+  if (broker_ == nullptr || !pumped_ || frames == 0) return;
+  (void)PumpBroker(0, true, frames);
+  bus::CanFrame f;
+  while (broker_->ReceiveLocal(local_port_, &f)) on_frame(f);
+}
+
+bool FirmwareLink::SendsReachOnlyTheRun() const {
+  return broker_ != nullptr && pumped_ && broker_->FramesReachOnlyPorts();
 }
 
 bool FirmwareLink::Prepare(const bus::CanFrame& frame, std::int64_t instant_ns) {

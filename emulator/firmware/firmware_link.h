@@ -74,6 +74,12 @@ class FirmwareLink {
   /// drops the rest (bus::UcanBroker::SettlePrepared). A turn of the firmware's. False (the
   /// reason in the RunContext) as Settle.
   bool RunAhead(VirtualClock& clock, double timeout_s, FirmwareProcess& process);
+  /// Runahead, while the run catches up with a firmware ahead of it: hands `on_frame` the next
+  /// `frames` frames the firmware sent (its sends that did not end the window, in order).
+  void TakeSent(std::size_t frames, const FrameFn& on_frame);
+  /// Runahead: what the firmware sends reaches the run alone (one socket, not taking its own
+  /// frames), so a send of its changes nothing it is handed but through the bus.
+  bool SendsReachOnlyTheRun() const;
   /// Runahead not begun after all: the frames put ahead go.
   std::uint64_t RunAheadDropPrepared() { return broker_ ? broker_->SettlePrepared() : 0; }
   /// Virtual time, after the run: ends the waits due, routes the bus (the firmware's frames are
@@ -97,8 +103,9 @@ class FirmwareLink {
  private:
   // quiet: UcanBroker::PumpQuiet (no look at the clients' sockets).
   void Pump(int timeout_ms, bool quiet = false);
-  // One broker pass, told to the virtual clock when it wrote to a client.
-  bool PumpBroker(int timeout_ms, bool quiet = false);
+  // One broker pass, told to the virtual clock when it wrote to a client (first_sent:
+  // UcanBroker::PumpFirstSent).
+  bool PumpBroker(int timeout_ms, bool quiet = false, std::size_t first_sent = SIZE_MAX);
   // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
   void CheckBrokerLimits();
   // Waiting wall_s for the firmware to block: after min(1 s, timeout/2) its exit is looked for

@@ -2,6 +2,7 @@
 
 #include <elf.h>
 #include <fcntl.h>
+#include <linux/can.h>
 #include <linux/futex.h>
 #include <sched.h>
 #include <signal.h>
@@ -372,8 +373,8 @@ void VirtualClock::FreeDeadThread(int slot) {
   s.state.store(vt::kFree);
 }
 
-void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
-                                 std::int64_t phase_ns) {
+void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns, std::int64_t phase_ns,
+                                 const SendPlan* sends) {
   CountFdWakes();
   // A vouched fd wait that a write of the host's came after (the host counts its writes after
   // making them, when the thread may have begun its next wait already) is no longer vouched
@@ -397,9 +398,56 @@ void VirtualClock::GrantRunahead(std::int64_t until_ns, std::int64_t step_ns,
   page_->runahead_step_ns.store(step_ns);
   page_->runahead_phase_ns.store(kMonotonicAtStartNs + phase_ns);
   page_->runahead_sends.store(page_->bus_sends.load());
+  WriteSendRules(sends);
   page_->runahead.store(vt::NextRunaheadWord(page_->runahead.load(), vt::kGranted));
   // A thread that published its wait before the grant does not look again: a wake-up makes
   // the last thread to block look (its wait ends, it waits again).
+}
+
+void VirtualClock::WriteSendRules(const SendPlan* plan) {
+  vt::SendRules& r = page_->sends;
+  r.enabled.store(0);
+  r.foreseen_taken.store(0);
+  r.free_ns.store(0);
+  r.sent_count.store(0);
+  if (plan == nullptr) return;
+  r.foreseen_count = 0;
+  for (const auto& [t_ns, f] : plan->foreseen) {
+    if (r.foreseen_count == vt::kMaxForeseenSends) break;
+    vt::ForeseenSend& e = r.foreseen[r.foreseen_count++];
+    e.instant_ns = kMonotonicAtStartNs + t_ns;
+    e.can_id = f.id | (f.extended ? CAN_EFF_FLAG : 0u) | (f.rtr ? CAN_RTR_FLAG : 0u);
+    e.len = f.len;
+    std::memset(e.data, 0, sizeof(e.data));
+    std::memcpy(e.data, f.data.data(), std::min<std::size_t>(f.len, sizeof(e.data)));
+  }
+  r.gap_count =
+      static_cast<std::uint32_t>(std::min<std::size_t>(plan->gaps.size(), vt::kMaxSendGaps));
+  r.gap_first_ns = kMonotonicAtStartNs + plan->gaps_first_ns;
+  for (std::uint32_t i = 0; i < r.gap_count; ++i) {
+    r.gaps[i].idle_ns = kMonotonicAtStartNs + plan->gaps[i].idle_ns;
+    r.gaps[i].busy_ns = kMonotonicAtStartNs + plan->gaps[i].busy_ns;
+    r.gaps[i].max_key = plan->gaps[i].max_key;
+  }
+  r.bit_ns = plan->bit_ns;
+  for (int w = 0; w < vt::kStandardIds / 64; ++w) {
+    std::uint64_t bits = 0;
+    for (int b = 0; b < 64; ++b) {
+      if (plan->unread_ids.test(static_cast<std::size_t>(w * 64 + b)))
+        bits |= std::uint64_t{1} << b;
+    }
+    r.unread_ids[w] = bits;
+  }
+  r.enabled.store(1);
+}
+
+std::uint64_t VirtualClock::sends_through() const { return page_->sends.through.load(); }
+
+void VirtualClock::TakeSendsThroughAt(std::vector<std::int64_t>& instants_ns) const {
+  const vt::SendRules& r = page_->sends;
+  const std::uint32_t n = std::min<std::uint32_t>(r.sent_count.load(), vt::kMaxSendsThrough);
+  instants_ns.clear();
+  for (std::uint32_t i = 0; i < n; ++i) instants_ns.push_back(r.sent_at[i] - kMonotonicAtStartNs);
 }
 
 bool VirtualClock::KickRunahead() {

@@ -15,10 +15,13 @@
 
 #include <sys/types.h>
 
+#include <bitset>
 #include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "bus/can_frame.h"
 
 namespace wheelhil::bus::vtime {
 struct Page;
@@ -26,6 +29,24 @@ struct TimerSlot;
 }
 
 namespace wheelhil::emulator::firmware {
+
+/// What of the firmware's sends may run through a runahead window (bus/vtime_protocol.h,
+/// SendRules; docs/virtual-time.md "Sends in a window"). Instants in run ns.
+struct RunaheadSendPlan {
+  /// The frames the firmware is expected to send, in the order it is to send them; the window's
+  /// forecast holds them.
+  std::vector<std::pair<std::int64_t, bus::CanFrame>> foreseen;
+  /// Unforeseen sends (bit_ns 0: none): the forecast bus from the grid instants
+  /// gaps_first_ns + k * step (k < gaps.size()); standard ids no device reads.
+  struct Gap {
+    std::int64_t idle_ns = 0, busy_ns = 0;
+    std::uint32_t max_key = 0;
+  };
+  std::int64_t gaps_first_ns = 0;
+  std::vector<Gap> gaps;
+  std::int64_t bit_ns = 0;
+  std::bitset<2048> unread_ids;
+};
 
 class VirtualClock {
  public:
@@ -78,7 +99,11 @@ class VirtualClock {
   /// blocked and everything due now woken (WakeDue). While it holds the clock Blocked() is
   /// false; Blocked() takes the clock back when it finds every thread blocked (a thread asleep
   /// outside the library's waits). now_ns() then says where the firmware got to.
-  void GrantRunahead(std::int64_t until_ns, std::int64_t step_ns, std::int64_t phase_ns);
+  /// `sends` (nullptr: none) lets sends of the firmware's run through the window: those the
+  /// host foresaw and forecast, and unforeseen ones that change nothing (SendPlan).
+  using SendPlan = RunaheadSendPlan;
+  void GrantRunahead(std::int64_t until_ns, std::int64_t step_ns, std::int64_t phase_ns,
+                     const SendPlan* sends = nullptr);
   /// Runahead, right after GrantRunahead: wakes the first process's agent thread, which finds
   /// nothing of its own to do and, waiting again, moves the clock on. False when it has none
   /// (nothing would take the grant up: take it back).
@@ -92,6 +117,11 @@ class VirtualClock {
   void WaitWhileGranted(int timeout_us);
   /// Instants the firmware moved its clock to itself so far.
   std::uint64_t local_advances() const;
+  /// Sends of the firmware's that did not end a window, so far.
+  std::uint64_t sends_through() const;
+  /// After a window (the firmware gave the clock back): the run instants of its sends that did
+  /// not end it, in the order they entered its socket's ring.
+  void TakeSendsThroughAt(std::vector<std::int64_t>& instants_ns) const;
   /// The last Blocked() found a thread stopped or traced (a debugger has it): the firmware
   /// does not move until it is let go, however long that takes.
   bool FirmwareStopped() const { return stopped_seen_; }
@@ -162,6 +192,8 @@ class VirtualClock {
   // Counts the writes NoteFdWakes was told of (Page::fd_wakes), once for all of them: before
   // any look at the firmware's waits and before the host waits or grants the clock.
   void CountFdWakes();
+  // GrantRunahead: the page's SendRules from `plan` (nullptr: every send ends the window).
+  void WriteSendRules(const SendPlan* plan);
   std::uint32_t unnoted_channels_ = 0;  // NoteFdWakes since the last CountFdWakes
   Kernel KernelState(int slot, pid_t pid, pid_t tid, std::uint64_t* runs);
   // A thread the library sees running is asleep in the kernel: reports it when that sleep is a

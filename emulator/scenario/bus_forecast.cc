@@ -1,5 +1,6 @@
 #include "emulator/scenario/bus_forecast.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace wheelhil::emulator::scenario {
@@ -17,15 +18,19 @@ BusForecast::BusForecast(const sim::BusHub& hub,
     completed_.push_back(f);
     return true;
   });
+  hub_->SetWireTap([this](const WireFrame& w) { wire_.push_back(w); });
 }
 
 BusForecast::~BusForecast() = default;
 
 bool BusForecast::RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults,
-                        std::size_t max_frames) {
+                        std::size_t max_frames,
+                        const std::vector<std::pair<std::int64_t, bus::CanFrame>>& foreseen) {
   FaultEventLog& log = faults.log();
   const std::size_t logged = log.size();
   bool whole = true;
+  auto next_foreseen = foreseen.begin();
+  while (next_foreseen != foreseen.end() && next_foreseen->first <= run_.now_ns) ++next_foreseen;
   while (run_.now_ns + step_ns_ <= until_ns && frames_.size() < max_frames) {
     const std::int64_t t = run_.now_ns + step_ns_;
     const auto step = t > real_run_.now_ns
@@ -47,9 +52,47 @@ bool BusForecast::RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan&
     hub_->AdvanceTo(t);
     for (const bus::CanFrame& f : completed_) frames_.push_back({t, f});
     completed_.clear();
+    for (; next_foreseen != foreseen.end() && next_foreseen->first <= t; ++next_foreseen) {
+      if (next_foreseen->first == t) hub_->EnqueueFromFirmware(next_foreseen->second);
+    }
   }
   log.Truncate(logged);
   return whole;
+}
+
+}  // namespace wheelhil::emulator::scenario
+
+namespace wheelhil::emulator::scenario {
+
+std::vector<firmware::RunaheadSendPlan::Gap> BusForecast::SendGaps(std::int64_t first_ns,
+                                                                   std::int64_t step_ns) const {
+  std::vector<firmware::RunaheadSendPlan::Gap> gaps;
+  const std::int64_t bit_ns = hub_->bit_time_ns();
+  // A frame that started before reached_ns() but had not completed is not in wire_: every
+  // classic frame lasts at most 160 bits, so one that started before `known` completed.
+  const std::int64_t known = reached_ns() - 160 * bit_ns;
+  auto free_of = [bit_ns](const WireFrame& w) {
+    return w.start_ns + static_cast<std::int64_t>(w.bits) * bit_ns;
+  };
+  for (std::int64_t t = first_ns; step_ns > 0 && t <= reached_ns(); t += step_ns) {
+    firmware::RunaheadSendPlan::Gap g;
+    // The first frame still on the bus at t, or starting at or after it.
+    std::size_t i = static_cast<std::size_t>(
+        std::partition_point(wire_.begin(), wire_.end(),
+                             [&](const WireFrame& w) { return free_of(w) <= t; }) -
+        wire_.begin());
+    std::int64_t x = t;
+    for (; i < wire_.size() && wire_[i].start_ns <= x; ++i) {
+      // One that started before x holds the bus; one starting at x won an arbitration that a
+      // frame queued at t would have taken part in.
+      if (wire_[i].start_ns == x) g.max_key = std::max(g.max_key, ArbitrationKey(wire_[i].frame));
+      x = std::max(x, free_of(wire_[i]));
+    }
+    g.idle_ns = x;
+    g.busy_ns = std::max(x, std::min(known, i < wire_.size() ? wire_[i].start_ns : known));
+    gaps.push_back(g);
+  }
+  return gaps;
 }
 
 }  // namespace wheelhil::emulator::scenario

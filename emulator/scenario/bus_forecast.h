@@ -15,10 +15,12 @@
 
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "bus/can_frame.h"
 #include "emulator/devices/device.h"
+#include "emulator/firmware/virtual_clock.h"
 #include "emulator/scenario/fault_plan.h"
 #include "emulator/scenario/physics_stage.h"
 #include "emulator/sim/bus_hub.h"
@@ -65,9 +67,20 @@ class BusForecast {
   /// Runs the copies' motion steps up to the one ending at or before until_ns, or the first
   /// whose frames make `max_frames` or more. False when it stopped earlier: the physics worker
   /// has no such step (none running, past its last step, beyond its ring) or a copy failed;
-  /// the frames up to there stand.
+  /// the frames up to there stand. `foreseen` (instant, frame; in order): frames the firmware
+  /// is expected to send, each taken at its instant after that step's frames, as the run takes
+  /// a frame of the firmware's.
   bool RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan& faults,
-             std::size_t max_frames = SIZE_MAX);
+             std::size_t max_frames = SIZE_MAX,
+             const std::vector<std::pair<std::int64_t, bus::CanFrame>>& foreseen = {});
+
+  /// For a frame the firmware might send at each grid instant first_ns + k * step_ns up to
+  /// reached_ns() that nobody foresaw: the arbitrations it would first take part in and the
+  /// idle stretch of the forecast bus it would find after them (firmware::RunaheadSendPlan).
+  /// Only what the forecast scheduled for sure counts: a stretch ends where a frame may
+  /// have started that had not completed by reached_ns().
+  std::vector<firmware::RunaheadSendPlan::Gap> SendGaps(std::int64_t first_ns,
+                                                        std::int64_t step_ns) const;
 
   /// What the firmware gets, in order, from the first forecast step to reached_ns().
   const std::vector<ForecastFrame>& frames() const { return frames_; }
@@ -82,6 +95,7 @@ class BusForecast {
   std::unique_ptr<sim::BusHub> hub_;
   std::vector<bus::CanFrame> completed_;  // for the firmware, in the step being forecast
   std::vector<ForecastFrame> frames_;
+  std::vector<WireFrame> wire_;  // every frame that completed on the copies' bus, in order
 };
 
 }  // namespace wheelhil::emulator::scenario

@@ -4,12 +4,15 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
+#include <bitset>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 
 #include <fmt/format.h>
@@ -18,6 +21,7 @@
 #include "bus/dbc.h"
 #include "bus/ucan_protocol.h"
 #include "bus/vector_logs.h"
+#include "bus/vtime_protocol.h"
 #include "emulator/devices/device.h"
 #include "emulator/firmware/firmware_link.h"
 #include "emulator/firmware/firmware_process.h"
@@ -28,6 +32,7 @@
 #include "emulator/scenario/device_registry.h"
 #include "emulator/scenario/fault_plan.h"
 #include "emulator/scenario/physics_stage.h"
+#include "emulator/scenario/runahead_sends.h"
 #include "emulator/scoring/artefacts.h"
 #include "emulator/scoring/estimate_decoder.h"
 #include "emulator/scoring/expectations.h"
@@ -221,12 +226,31 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
     std::uint32_t skip = 0;     // turns to let pass before the next try
     std::uint32_t backoff = 0;  // what `skip` becomes after another window that did not pay
     std::int64_t ran_ns = -1;  // how far the firmware ran last time (-1: unknown)
-    // auto: wall s a window took beyond what the turns it saved would have (moving average:
-    // one window slowed by the machine does not stop the next).
-    double excess_s = 0;
-    bool measured = false;
+    // auto: wall s the last windows took beyond what the turns they saved would have; they
+    // pay when the median is below 0, so one window slowed by the machine (preempted, a page
+    // fault) does not stop the next.
+    std::array<double, 5> excess_s{};
+    std::size_t windows = 0;
+    double MedianExcess() const {
+      const std::size_t n = std::min(windows, excess_s.size());
+      std::array<double, 5> sorted = excess_s;
+      std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n));
+      return n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
+    }
   };
   std::map<std::uint32_t, RunaheadHistory> runahead_history_;
+  // --runahead: the firmware's periodic sends (foreseen in a window), the ids no device reads
+  // (taken at the first window: the devices' configuration fixes them).
+  SendPatterns send_patterns_;
+  firmware::RunaheadSendPlan send_plan_;  // the current window's (kept: its vectors' room)
+  // The instants of the sends the firmware made on its way through the current window, and
+  // how many of them the run took so far.
+  std::vector<std::int64_t> sent_through_at_;
+  std::size_t sent_taken_ = 0;
+  std::optional<std::bitset<2048>> unread_ids_;
+  // The end of the last window, when it ran to its horizon (-1: it did not), and its key.
+  std::int64_t horizon_end_ns_ = -1;
+  std::uint32_t horizon_key_ = 0;
   std::uint32_t last_sent_id_ = kNoFrameSent;  // the firmware's latest frame, and its instant
   std::int64_t last_sent_at_ns_ = -1;
   const sim::SyncSource* sync_ = nullptr;  // the emulator's SYNCs (motion phase), if it makes them
@@ -297,6 +321,7 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   ++firmware_frames_seen_;
   last_sent_id_ = f.id;
   last_sent_at_ns_ = hub_->now_ns();
+  if (o_.runahead != RunOptions::Runahead::kOff) send_patterns_.Note(f, hub_->now_ns());
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
   if (firmware_sync_ && f.id == bus::canopen::kSyncCobId && !f.rtr) {
@@ -333,7 +358,16 @@ void Run::SettleFirmware() {
     const bool ok = MatchForecast(now, &to_firmware_);
     to_firmware_.clear();
     if (!ok) return;
-    if (now < firmware_ahead_ns_) return;  // it is past this turn
+    if (now < firmware_ahead_ns_) {
+      // It is past this turn: what it sent here on its way is taken at this instant.
+      std::size_t sent_here = 0;
+      while (sent_taken_ < sent_through_at_.size() && sent_through_at_[sent_taken_] <= now) {
+        ++sent_taken_;
+        ++sent_here;
+      }
+      link_->TakeSent(sent_here, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
+      return;
+    }
     // Its own turn: what it sent at its instant is taken here, as the turn goes on.
     firmware_ahead_ns_ = -1;
     forecast_.reset();
@@ -349,9 +383,11 @@ void Run::SettleFirmware() {
   const bool turn = link_->handovers() != handovers_before;
   if (o_.check_runahead) {
     CheckRunahead(now, deadline_turn, firmware_frames_seen_ != sent_before, turn, to_firmware_);
-  } else if (o_.runahead != RunOptions::Runahead::kOff && turn) {
-    const double turn_s = wall_.handover_s - handover_s_before;  // the link times its turns
-    turn_wall_s_ = turn_wall_s_ == 0 ? turn_s : 0.9 * turn_wall_s_ + 0.1 * turn_s;
+  } else if (o_.runahead != RunOptions::Runahead::kOff && (turn || now == horizon_end_ns_)) {
+    if (turn) {
+      const double turn_s = wall_.handover_s - handover_s_before;  // the link times its turns
+      turn_wall_s_ = turn_wall_s_ == 0 ? turn_s : 0.9 * turn_wall_s_ + 0.1 * turn_s;
+    }
     // After a turn: a settle that found the firmware blocked with nothing for it (most steps)
     // leaves it where it is, and the next turn's window starts from there as well.
     RunAhead(now);
@@ -464,15 +500,21 @@ void Run::RunAhead(std::int64_t now_ns) {
   // last turn included, than the turns it saved (the instants the firmware moved its clock to
   // itself: frames and its own deadlines) and that last turn would have taken; with --runahead
   // on, when it ran through frames of kRunaheadMinTurnsSaved instants.
-  const std::uint32_t key = last_sent_at_ns_ == now_ns ? last_sent_id_ : kNoFrameSent;
+  // A window that ran to its horizon goes on with the next, as one window would.
+  const bool goes_on = now_ns == horizon_end_ns_;
+  const std::uint32_t key = goes_on                      ? horizon_key_
+                            : last_sent_at_ns_ == now_ns ? last_sent_id_
+                                                         : kNoFrameSent;
+  horizon_end_ns_ = -1;
   RunaheadHistory& history = runahead_history_[key];
-  if (history.skip > 0) {
+  if (history.skip > 0 && !goes_on) {
     --history.skip;
     return;
   }
   const auto window_start = Clock::now();
   const std::uint64_t advances_before = clock_->local_advances();
   std::int64_t until = 0;
+  bool sends_through = false;
   {
     sim::WallTimer timer(wall_.forecast_s);
     forecast_ = std::make_unique<BusForecast>(*hub_, devices_, run_, physics_->step_ns());
@@ -484,7 +526,26 @@ void Run::RunAhead(std::int64_t now_ns) {
         history.ran_ns < 0
             ? kRunaheadMaxNs
             : std::min(kRunaheadMaxNs, history.ran_ns + history.ran_ns / 4 + 8 * step);
-    (void)forecast_->RunTo(now_ns + span, *physics_, *faults_, kRunaheadMaxFrames);
+    // The sends of its own it may make on its way (runahead_sends.h): what reaches the run
+    // alone, through the bus.
+    sends_through = link_->SendsReachOnlyTheRun();
+    if (sends_through) {
+      send_plan_.foreseen =
+          send_patterns_.Foresee(now_ns, now_ns + span, step, bus::vtime::kMaxForeseenSends);
+    } else {
+      send_plan_.foreseen.clear();
+    }
+    (void)forecast_->RunTo(now_ns + span, *physics_, *faults_, kRunaheadMaxFrames,
+                           send_plan_.foreseen);
+    send_plan_.gaps.clear();
+    send_plan_.bit_ns = 0;
+    if (sends_through && hub_->faulty_bus() == nullptr) {
+      if (!unread_ids_) unread_ids_ = UnreadStandardIds(devices_);
+      send_plan_.unread_ids = *unread_ids_;
+      send_plan_.gaps_first_ns = now_ns;
+      send_plan_.gaps = forecast_->SendGaps(now_ns, step);
+      send_plan_.bit_ns = hub_->bit_time_ns();
+    }
     // Its frames into the firmware's rings, up to the first that cannot go there (then none
     // of its instant: the firmware stops before it).
     until = forecast_->reached_ns();
@@ -502,7 +563,8 @@ void Run::RunAhead(std::int64_t now_ns) {
     forecast_.reset();
     return;
   }
-  clock_->GrantRunahead(until, physics_->step_ns(), run_.now_ns);
+  clock_->GrantRunahead(until, physics_->step_ns(), run_.now_ns,
+                        sends_through ? &send_plan_ : nullptr);
   if (!clock_->KickRunahead()) {
     clock_->RevokeRunahead();
     (void)link_->RunAheadDropPrepared();
@@ -512,6 +574,8 @@ void Run::RunAhead(std::int64_t now_ns) {
   if (!link_->RunAhead(*clock_, s_.timing.timeout_s, firmware_)) return;
   ++runahead_.windows;
   firmware_ahead_ns_ = clock_->now_ns();
+  clock_->TakeSendsThroughAt(sent_through_at_);
+  sent_taken_ = 0;
   // The turns it saved: the instants of frames it ran through before the one it stopped at
   // (there the run takes its turn as ever).
   std::size_t turns_saved = 0;
@@ -525,10 +589,9 @@ void Run::RunAhead(std::int64_t now_ns) {
   const double excess_s =
       WallSeconds(window_start) -
       static_cast<double>(clock_->local_advances() - advances_before + 1) * turn_wall_s_;
-  after.excess_s = after.measured ? 0.75 * after.excess_s + 0.25 * excess_s : excess_s;
-  after.measured = true;
+  after.excess_s[after.windows++ % after.excess_s.size()] = excess_s;
   const bool paid = o_.runahead == RunOptions::Runahead::kOn ? turns_saved >= kRunaheadMinTurnsSaved
-                                                             : after.excess_s < 0;
+                                                             : after.MedianExcess() < 0;
   if (!paid) {
     after.backoff = std::min<std::uint32_t>(1024, after.backoff == 0 ? 16 : 2 * after.backoff);
     after.skip = after.backoff;
@@ -536,6 +599,10 @@ void Run::RunAhead(std::int64_t now_ns) {
     after.backoff = 0;
   }
   runahead_history_[key].ran_ns = firmware_ahead_ns_ - now_ns;
+  if (firmware_ahead_ns_ == until && paid) {
+    horizon_end_ns_ = until;
+    horizon_key_ = key;
+  }
   if (firmware_ahead_ns_ <= now_ns) {
     firmware_ahead_ns_ = -1;
     forecast_.reset();
@@ -891,7 +958,8 @@ json Run::Report(double wall_s) {
     r["wall"]["runahead"] = json{{"mode", o_.runahead == RunOptions::Runahead::kOn ? "on" : "auto"},
                                  {"windows", runahead_.windows},
                                  {"frames_run_through", runahead_.frames},
-                                 {"local_advances", clock_->local_advances()}};
+                                 {"local_advances", clock_->local_advances()},
+                                 {"sends_through", clock_->sends_through()}};
   }
   if (o_.check_runahead) {
     // Hand-overs with runahead: every one of the run's but those of the turns a window ran

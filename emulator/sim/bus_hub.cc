@@ -146,6 +146,7 @@ void BusHub::EnqueueFromFirmware(const bus::CanFrame& f) {
 }
 
 void BusHub::OnWire(const WireFrame& w) {
+  if (wire_tap_) wire_tap_(w);
   const bool injected = faulty_bus_ && (w.node == faulty_bus_->flood_node() ||
                                         w.node == faulty_bus_->error_node() || w.frame.error);
   if (!injected) ++completed_;

@@ -65,6 +65,8 @@ class BusHub {
   void StopBackgroundLog();
   void SetFirmwareSend(FirmwareSend send) { firmware_send_ = std::move(send); }
   void SetObserver(BusObserver* observer) { observer_ = observer; }
+  /// Every frame that completes on the wire, first (a forecast's record of the bus).
+  void SetWireTap(std::function<void(const WireFrame&)> tap) { wire_tap_ = std::move(tap); }
 
   /// Fault wiring at the motion start: frame faults on a device's output, bus faults.
   void SetFrameFaults(std::size_t device, std::unique_ptr<FrameFaultFilter> filter);
@@ -85,6 +87,7 @@ class BusHub {
   void CloseLog();
 
   std::int64_t now_ns() const { return bus_.now_ns(); }
+  std::int64_t bit_time_ns() const { return bus_.bit_time_ns(); }
   DevicePort& port(std::size_t device);
   int bus_node(std::size_t device) const { return first_device_node_ + static_cast<int>(device); }
   const FaultyCanBus* faulty_bus() const { return faulty_bus_.get(); }
@@ -114,6 +117,7 @@ class BusHub {
   std::map<int, std::unique_ptr<FrameFaultFilter>> frame_filters_;  // by bus node
   FirmwareSend firmware_send_;
   BusObserver* observer_ = nullptr;
+  std::function<void(const WireFrame&)> wire_tap_;
   std::string iface_;
   std::unique_ptr<bus::CandumpWriter> log_;
   // Declared after log_: stopped, its queue written, before log_ goes.

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "bus/ucan_runtime_dir.h"
+#include "bus/vtime_protocol.h"
 #include "emulator/firmware/virtual_clock.h"
 
 namespace wheelhil::emulator::firmware {
@@ -48,6 +49,7 @@ struct ProbeRun {
   std::string out;
   std::uint64_t host_moves = 0;      // instants the host moved the clock to
   std::uint64_t local_advances = 0;  // ... and the probe itself (runahead)
+  std::uint64_t sends_through = 0;   // its sends that did not give the clock back
   double give_back_wait_s = -1;      // Grant::host_sleeps: how long the host slept
   bool granted_after_wait = false;
 };
@@ -63,8 +65,10 @@ struct Grant {
 };
 
 // Runs the probe on a fresh clock: whenever it is blocked, the clock moves to its next deadline.
+// `sends`: what of its sends may run through the window (GrantRunahead's plan).
 ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
-                  std::optional<Grant> grant = std::nullopt) {
+                  std::optional<Grant> grant = std::nullopt,
+                  const RunaheadSendPlan* sends = nullptr) {
   const std::string dir = bus::CreateTempUcanRuntimeDir("wheelhil-vtime-test-");
   ProbeRun r;
   {
@@ -132,7 +136,7 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
       if (grant && registered) {
         // What is due now is the host's to end; from there the firmware moves the clock.
         clock.WakeDue();
-        clock.GrantRunahead(grant->until_ns, grant->step_ns, 0);
+        clock.GrantRunahead(grant->until_ns, grant->step_ns, 0, sends);
         // As a run does: the waits published before the grant (all of them, perhaps, if the
         // firmware ran before the grant) are not looked at again unless something wakes.
         EXPECT_TRUE(clock.KickRunahead());
@@ -150,6 +154,7 @@ ProbeRun RunProbe(const std::string& what, double wall_limit_s = 20,
       }
     }
     r.local_advances = clock.local_advances();
+    r.sends_through = clock.sends_through();
     r.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
     r.virtual_ns = clock.now_ns();
     std::ifstream in(out_path);
@@ -338,6 +343,75 @@ TEST(VirtualClock, RunaheadWakesTheSleepingHostWhenItGivesTheClockBack) {
   EXPECT_FALSE(r.granted_after_wait);
   EXPECT_LT(r.give_back_wait_s, 20.0) << "the host slept out its 30 s: no wake-up came";
   EXPECT_EQ(r.local_advances, 2u);
+}
+
+// Runahead through the firmware's sends (the probe tells the library of a send as the bus
+// library does): at 3 and 5 ms it sends 080#, at 4 ms 680# (8 bytes), at 7 ms 181#; it wakes
+// at 2, 3, 4, 5, 7 and 8 ms. Granted at 2 ms; a send that runs through leaves the clock with
+// the probe, any other gives it back at that instant.
+TEST(VirtualClock, RunaheadGoesOnThroughForeseenSendsAndThoseThatChangeNothing) {
+  auto frame = [](std::uint32_t id) {
+    bus::CanFrame f;
+    f.id = id;
+    return f;
+  };
+  // Every instant of the window has the bus idle for 1 ms; 0x080 and 0x680 are read by no
+  // device, 0x181 is.
+  RunaheadSendPlan open;
+  open.bit_ns = 1000;  // 1 Mbit/s
+  for (int ms = 0; ms <= 10; ++ms) open.gaps.push_back({ms * kMs, (ms + 1) * kMs, 0});
+  open.unread_ids.set(0x680);
+  auto run = [](const RunaheadSendPlan& plan) {
+    const ProbeRun r = RunProbe("ahead_sends", 20, Grant{1000 * kMs, kMs}, &plan);
+    for (int ms : {2, 3, 4, 5, 7, 8}) {
+      EXPECT_EQ(r.waits.at("at" + std::to_string(ms)), std::make_pair(ms * kMs, 1L)) << r.out;
+    }
+    return r;
+  };
+
+  // No plan: the send at 3 ms ends the window there.
+  const ProbeRun none = run(RunaheadSendPlan{});
+  EXPECT_EQ(none.local_advances, 1u);
+  EXPECT_EQ(none.sends_through, 0u);
+
+  // 080# foreseen at 3 and 5 ms, 680# unforeseen but unread, in a gap: on to 7 ms, where 181#
+  // (read by a device) ends the window.
+  RunaheadSendPlan all = open;
+  all.foreseen = {{3 * kMs, frame(0x080)}, {5 * kMs, frame(0x080)}};
+  const ProbeRun through = run(all);
+  EXPECT_EQ(through.local_advances, 4u);  // 3, 4, 5, 7 ms
+  EXPECT_EQ(through.sends_through, 3u);
+
+  // Foreseen at 6 ms too, where the probe sends nothing: the forecast after it does not hold,
+  // so the clock goes back at 5 ms, before it would pass 6.
+  RunaheadSendPlan missed = all;
+  missed.foreseen.push_back({6 * kMs, frame(0x080)});
+  const ProbeRun m = run(missed);
+  EXPECT_EQ(m.local_advances, 3u);  // 3, 4, 5 ms
+  EXPECT_EQ(m.sends_through, 3u);
+
+  // 080# foreseen at 4 ms only: the one at 3 ms is unforeseen (unread: it runs through); at
+  // 4 ms 680# comes before the foreseen frame and ends the window.
+  RunaheadSendPlan other = open;
+  other.unread_ids.set(0x080);
+  other.foreseen = {{4 * kMs, frame(0x080)}};
+  const ProbeRun o = run(other);
+  EXPECT_EQ(o.local_advances, 2u);
+  EXPECT_EQ(o.sends_through, 1u);
+
+  // The bus idle for only 50 us after 4 ms: 680# with 8 bytes (up to 135 bits) does not fit.
+  RunaheadSendPlan narrow = all;
+  narrow.gaps[4].busy_ns = 4 * kMs + 50'000;
+  const ProbeRun n = run(narrow);
+  EXPECT_EQ(n.local_advances, 2u);
+  EXPECT_EQ(n.sends_through, 1u);
+
+  // 680# would win an arbitration at 4 ms (against 0x700): it must lose every one.
+  RunaheadSendPlan wins = all;
+  wins.gaps[4].max_key = bus::vtime::StandardDataKey(0x700);
+  const ProbeRun w = run(wins);
+  EXPECT_EQ(w.local_advances, 2u);
+  EXPECT_EQ(w.sends_through, 1u);
 }
 
 // A thread asleep in the kernel where the library does not see it (a read on a pipe) may be

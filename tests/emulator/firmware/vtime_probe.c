@@ -249,10 +249,51 @@ static void* ahead_outside(void* arg) {
   return NULL;
 }
 
+/* Runahead through sends: sleeps to 2, 3, 4, 5, 7 and 8 ms and, at 3 and 5 ms, "sends" 080#, at
+ * 4 ms 680#0102030405060708 and at 7 ms 181#, as the bus library tells the clock's library of
+ * a frame it put in a socket's ring (wheelhil_vtime_note_frame_sent; the frames go nowhere). */
+static void ahead_sends(void) {
+  void (*note)(const void*, size_t) =
+      (void (*)(const void*, size_t))dlsym(RTLD_DEFAULT, "wheelhil_vtime_note_frame_sent");
+  static const struct {
+    int ms;
+    uint32_t id;
+    uint8_t len;
+  } kSteps[] = {{2, 0, 255},   {3, 0x080, 0}, {4, 0x680, 8},
+                {5, 0x080, 0}, {7, 0x181, 0}, {8, 0, 255}};
+  /* A timer armed once starts the library's agent thread, which a grant wakes (as a firmware's
+   * fd waits do). */
+  const int timer = timerfd_create(CLOCK_MONOTONIC, 0);
+  struct itimerspec never = {{0, 0}, {0, 0}};
+  timerfd_settime(timer, 0, &never, NULL);
+  char label[16];
+  for (size_t i = 0; i < sizeof(kSteps) / sizeof(kSteps[0]); ++i) {
+    struct timespec at = {0, 0};
+    const int64_t t = g_start + (int64_t)kSteps[i].ms * 1000000;
+    at.tv_sec = t / 1000000000;
+    at.tv_nsec = t % 1000000000;
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, NULL);
+    if (kSteps[i].len != 255 && note != NULL) {
+      uint8_t frame[16] = {0};
+      memcpy(frame, &kSteps[i].id, 4);
+      frame[4] = kSteps[i].len;
+      for (int b = 0; b < kSteps[i].len; ++b) frame[8 + b] = (uint8_t)(b + 1);
+      note(frame, sizeof(frame));
+    }
+    snprintf(label, sizeof(label), "at%d", kSteps[i].ms);
+    report_later(label, note != NULL);
+  }
+  fputs(g_lines, stdout);
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   g_start = mono();
   const char* what = argv[1];
+  if (strcmp(what, "ahead_sends") == 0) {
+    ahead_sends();
+    return 0;
+  }
   if (strcmp(what, "ahead") == 0 || strcmp(what, "ahead_outside") == 0) {
     /* Sleeps of the main thread (3, 6, 9, 12 ms) and a timerfd's ticks (2 .. 10 ms) in one
      * order; with a thread blocked in the kernel outside the library's waits. */

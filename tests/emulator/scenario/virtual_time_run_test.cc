@@ -215,6 +215,21 @@ TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughTheForecastAndNothingChanges) 
   }
 }
 
+// Runahead through the firmware's own sends (emulator/scenario/runahead_sends.h): paper 002's
+// firmware sends its SYNC every 2 ms (foreseen: same bytes, same spacing) and its five output
+// frames 1 ms after each (no device reads them; the bus has room for them). Its window goes on
+// through both, where one that ended at every send would give ~1000 hand-overs a simulated
+// second, and every artefact is what it is one frame at a time.
+TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughItsOwnSendsAndNothingChanges) {
+  const auto [plain, ahead] =
+      RunPlainAndWith(dir_ / "paper002", "paper002_velocity",
+                      [](RunOptions& o) { o.runahead = RunOptions::Runahead::kOn; });
+  const auto& wall = ahead.report["wall"];
+  EXPECT_GE(wall["runahead"]["sends_through"].get<int>(), 20000) << wall.dump();
+  EXPECT_LE(wall["handovers_per_sim_s"].get<double>(), 100.0) << wall.dump();
+  EXPECT_GE(plain.report["wall"]["handovers_per_sim_s"].get<double>(), 900.0);
+}
+
 TEST_F(VirtualTimeRun, CustomerCFirmwareIsTheMasterAndItsRunsAreByteIdentical) {
   const std::string log = ExpectCustomerRun(dir_, "c_epoll_odometry.yaml", "3A0");
   // Its own CANopen start-up: TPDO1 made synchronous by SDO, NMT start, then SYNC every 10 ms.
