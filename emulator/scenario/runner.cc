@@ -234,7 +234,11 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
     double MedianExcess() const {
       const std::size_t n = std::min(windows, excess_s.size());
       std::array<double, 5> sorted = excess_s;
-      std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n));
+      for (std::size_t i = 1; i < n; ++i) {  // insertion sort: five at most
+        for (std::size_t j = i; j > 0 && sorted[j] < sorted[j - 1]; --j) {
+          std::swap(sorted[j], sorted[j - 1]);
+        }
+      }
       return n % 2 == 1 ? sorted[n / 2] : 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]);
     }
   };

@@ -226,7 +226,8 @@ TEST_F(VirtualTimeRun, TheFirmwareRunsAheadThroughItsOwnSendsAndNothingChanges) 
                       [](RunOptions& o) { o.runahead = RunOptions::Runahead::kOn; });
   const auto& wall = ahead.report["wall"];
   EXPECT_GE(wall["runahead"]["sends_through"].get<int>(), 20000) << wall.dump();
-  EXPECT_LE(wall["handovers_per_sim_s"].get<double>(), 100.0) << wall.dump();
+  // ~50 on an idle machine; windows end sooner under load (141 seen with ASan at -j2).
+  EXPECT_LE(wall["handovers_per_sim_s"].get<double>(), 300.0) << wall.dump();
   EXPECT_GE(plain.report["wall"]["handovers_per_sim_s"].get<double>(), 900.0);
 }
 
