@@ -159,13 +159,6 @@ std::optional<int> RunCommand::Run() {
     sc.timing.firmware_produces_sync = sync_producer_ == "firmware";
     sc.timing.sync_producer_named = true;
   }
-  if (sc.timing.firmware_produces_sync && sc.timing.lockstep && !realtime_ &&
-      !sc.timing.virtual_clock) {
-    fmt::print(stderr,
-               "wheelhil run: a firmware that produces SYNC runs in lockstep only on the "
-               "virtual clock (--clock virtual, or --realtime)\n");
-    return 2;
-  }
   scenario::RunOptions o;
   o.out_dir = out_;
   o.seed = seed_;

@@ -33,6 +33,7 @@
 #include "emulator/scenario/fault_plan.h"
 #include "emulator/scenario/physics_stage.h"
 #include "emulator/scenario/runahead_sends.h"
+#include "emulator/scenario/timing_plan.h"
 #include "emulator/scoring/artefacts.h"
 #include "emulator/scoring/estimate_decoder.h"
 #include "emulator/scoring/expectations.h"
@@ -114,9 +115,9 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
 
   // sim::FirmwareGate. On the virtual clock the firmware is not waited for by handshake:
   // wherever real time would take what it sent, the run lets it run until it blocks.
-  bool lockstep() const override { return lockstep_ && !virtual_time_; }
+  bool lockstep() const override { return timing_.handshake(); }
   void Drain() override {
-    if (virtual_time_) {
+    if (timing_.virtual_clock()) {
       SettleFirmware();
     } else {
       sim::WallTimer timer(wall_.handover_s);
@@ -130,9 +131,6 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   void WaitLastStatus(int cycle, std::int64_t k) override;
 
  private:
-  // Which clock and which SYNC producer this run has (TimingSpec: unnamed, the virtual clock
-  // wherever there can be one). Throws std::invalid_argument for a combination that cannot run.
-  void ResolveClock();
   void Build();
   // Closed loop: the drives' power stages onto their wheels, before each physics step.
   void CommandDrives();
@@ -172,9 +170,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   const Scenario& s_;
   const RunOptions& o_;
   std::uint64_t seed_ = 1;
-  bool lockstep_ = true;
-  bool virtual_time_ = false;
-  bool firmware_sync_ = false;  // the firmware produces SYNC (ResolveClock)
+  TimingPlan timing_;  // which clock, who produces SYNC, which bus (ResolveTiming)
   // SYNCs before the motion phase (a SYNC-producing firmware's boot): not counted as cycles.
   std::uint64_t syncs_before_motion_ = 0;
   bool motion_started_ = false;
@@ -297,7 +293,7 @@ void Run::WaitBootAnswers() {
 }
 
 void Run::WaitLastStatus(int cycle, std::int64_t k) {
-  if (virtual_time_) {
+  if (timing_.virtual_clock()) {
     // No answer is awaited: the firmware gets the last cycle's frames (at most one period of
     // bus) and runs until it blocks.
     const std::int64_t until = hub_->now_ns() + std::llround(s_.timing.sync_period_s * 1e9);
@@ -328,7 +324,7 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   if (o_.runahead != RunOptions::Runahead::kOff) send_patterns_.Note(f, hub_->now_ns());
   // Into the bus model at the current virtual instant (it is logged when it completes).
   hub_->EnqueueFromFirmware(f);
-  if (firmware_sync_ && f.id == bus::canopen::kSyncCobId && !f.rtr) {
+  if (timing_.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
     // The firmware is the SYNC producer: its SYNCs number the cycles.
     estimates_->OnSync(ScoredSeconds(hub_->now_ns()));
     handshake_->OnSyncSent();
@@ -649,33 +645,6 @@ void Run::StartFirmwareOnVirtualClock() {
   }
 }
 
-void Run::ResolveClock() {
-  const auto& t = s_.timing;
-  const bool kernel_bus = !o_.can_iface.empty();
-  const bool wanted = lockstep_ && t.virtual_clock;
-  if (wanted && t.clock_named && kernel_bus) {
-    throw std::invalid_argument(fmt::format(
-        "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
-        "({}) the firmware's time is the host's (use --realtime, --clock cooperative, or no "
-        "--can)",
-        s_.source_path, o_.can_iface));
-  }
-  // No virtual clock on a kernel interface, nor without a firmware process to put on it (an
-  // attached firmware keeps its own clock).
-  virtual_time_ = wanted && !kernel_bus && !s_.firmware.command.empty();
-  firmware_sync_ = t.sync_producer_named ? t.firmware_produces_sync : virtual_time_;
-  if (firmware_sync_ && lockstep_ && !virtual_time_) {
-    const std::string why = !t.virtual_clock        ? std::string("timing.clock: cooperative")
-                            : kernel_bus            ? "kernel interface " + o_.can_iface
-                                                    : std::string("no firmware.command");
-    throw std::invalid_argument(fmt::format(
-        "{}: timing.sync_producer: firmware: a firmware that produces SYNC runs in lockstep only "
-        "on the virtual clock, which this run does not have ({}; use --realtime, or "
-        "sync_producer: emulator)",
-        s_.source_path, why));
-  }
-}
-
 void Run::Build() {
   physics_ = std::make_unique<PhysicsStage>(s_, seed_, run_);
   devices_ = BuildScenarioDevices(
@@ -685,12 +654,8 @@ void Run::Build() {
   CanBusConfig bc;
   bc.bitrate_bps = s_.sensors.bitrate_bps;
   hub_ = std::make_unique<sim::BusHub>(bc, devices_, run_);
-  using Pacing = firmware::FirmwareLink::Pacing;
-  link_ = std::make_unique<firmware::FirmwareLink>(
-      o_.can_iface,
-      virtual_time_ ? Pacing::kVirtualClock : lockstep_ ? Pacing::kLockstep : Pacing::kRealTime,
-      run_);
-  if (virtual_time_) {
+  link_ = std::make_unique<firmware::FirmwareLink>(o_.can_iface, timing_.pacing(), run_);
+  if (timing_.virtual_clock()) {
     clock_ = std::make_unique<firmware::VirtualClock>(link_->runtime_dir());
     clock_->SetSpinCost(std::llround(s_.timing.spin_cost_s * 1e9));
     clock_->SetSharesCpu(cpus_.cpu() >= 0);
@@ -733,10 +698,10 @@ void Run::StartFirmware() {
   if (!s_.firmware.config.empty()) {
     // A firmware config is wheelhil-fw's convention: it gets the run's SYNC settings.
     const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
-    scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(
-                                     s_.firmware.config, s_.firmware.overrides_yaml,
-                                     {s_.timing.sync_period_s, lockstep_ && !virtual_time_,
-                                      !firmware_sync_}));
+    scoring::WriteText(
+        cfg_path, firmware::DerivedWheelhilFwConfig(s_.firmware.config, s_.firmware.overrides_yaml,
+                                                    {s_.timing.sync_period_s, timing_.handshake(),
+                                                     !timing_.firmware_produces_sync}));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",
@@ -747,9 +712,9 @@ void Run::StartFirmware() {
   if (link_->private_bus() && o_.ucan_child_env) env = o_.ucan_child_env(link_->runtime_dir());
   env.emplace_back("WHEELHIL_DBC_DIR", o_.dbc_dir);
   // Runahead: the firmware's sockets get their own doorbell (bus/ucan_protocol.h).
-  if (virtual_time_ && o_.runahead != RunOptions::Runahead::kOff)
+  if (timing_.virtual_clock() && o_.runahead != RunOptions::Runahead::kOff)
     env.emplace_back(bus::ucan::kOwnBellEnv, "1");
-  if (virtual_time_) {
+  if (timing_.virtual_clock()) {
     // The clock's library goes first: the bus library's own waits are then virtual too.
     const std::string lib = VtimeLibrary(env);
     if (!fs::exists(lib)) {
@@ -769,7 +734,7 @@ void Run::StartFirmware() {
   link_->BeforeFirmwareStarts();
   children_cpu_before_s_ = ChildrenCpuSeconds();
   firmware_.Start(cmd, env, out_ + "/firmware.log");
-  if (virtual_time_) {
+  if (timing_.virtual_clock()) {
     clock_->SetFirstProcessPid(firmware_.pid());
     StartFirmwareOnVirtualClock();
     return;
@@ -793,14 +758,14 @@ void Run::StartWorker(std::int64_t steps) {
 void Run::RunPhases() {
   sim::LockstepWait lockstep_wait;
   sim::RealtimeWait realtime_wait;
-  sim::EventLoop loop(run_, lockstep_ ? static_cast<sim::WaitPolicy&>(lockstep_wait)
-                                      : static_cast<sim::WaitPolicy&>(realtime_wait));
+  sim::EventLoop loop(run_, timing_.lockstep() ? static_cast<sim::WaitPolicy&>(lockstep_wait)
+                                               : static_cast<sim::WaitPolicy&>(realtime_wait));
   sim::StepSource tick(*this, *this, run_);
   // On the virtual clock the firmware's own deadlines are instants of every phase.
   sim::FirmwareDeadlineSource firmware_deadlines(
       *this, *this, [this] { return clock_ ? clock_->NextDeadlineNs() : sim::kNever; });
   auto sources = [&](std::vector<sim::EventSource*> v) {
-    if (virtual_time_) v.push_back(&firmware_deadlines);
+    if (timing_.virtual_clock()) v.push_back(&firmware_deadlines);
     return v;
   };
   auto steps_done = [&] { return tick.NextEventNs() == sim::kNever; };
@@ -859,14 +824,15 @@ void Run::RunPhases() {
   }
   handshake_->ExpectSyncAnswers(std::move(answers));
   // Closed loop: the physics depends on the bus, so it cannot run ahead.
-  if (lockstep_ && !run_.failed() && !s_.firmware_motion) StartWorker(cycles * steps_per_cycle);
+  if (timing_.lockstep() && !run_.failed() && !s_.firmware_motion)
+    StartWorker(cycles * steps_per_cycle);
   tick.Start({.motion = true,
               .record_truth = true,
               .wait_boot_answers = false,
               .steps = cycles * steps_per_cycle});
   sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns, period_ns,
                        cycles);
-  if (firmware_sync_) {
+  if (timing_.firmware_produces_sync) {
     loop.Run({"motion", sources({&tick}), steps_done});
   } else {
     sync_ = &sync;
@@ -994,26 +960,26 @@ RunResult Run::Execute() {
     throw std::invalid_argument(
         fmt::format("no DBC files in '{}' (set WHEELHIL_DBC_DIR)", o_.dbc_dir));
   }
-  lockstep_ = s_.timing.lockstep && !o_.realtime;
-  ResolveClock();
-  if (o_.stop_firmware_at_ns >= 0 && !virtual_time_) {
+  timing_ = ResolveTiming(TimingChoice{s_.timing, s_.source_path, o_.realtime, o_.can_iface,
+                                       !s_.firmware.command.empty()});
+  if (o_.stop_firmware_at_ns >= 0 && !timing_.virtual_clock()) {
     throw std::invalid_argument(fmt::format(
         "{}: --stop-at stops the firmware on the virtual clock, which this run does not have "
         "(it needs lockstep, the private bus and a firmware.command)",
         s_.source_path));
   }
-  if (lockstep_) cpus_.ConfineToOneCpu(o_.cpu);
+  if (timing_.lockstep()) cpus_.ConfineToOneCpu(o_.cpu);
   wall0_ = Clock::now();
   last_progress_ = wall0_;
   Build();
-  run_.events.push_back(json{{"t_s", 0.0},
-                             {"event", "run_start"},
-                             {"seed", seed_},
-                             {"lockstep", lockstep_},
-                             {"clock", virtual_time_ ? "virtual" : lockstep_ ? "cooperative"
-                                                                             : "wall"},
-                             {"sync_producer", firmware_sync_ ? "firmware" : "emulator"},
-                             {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
+  run_.events.push_back(
+      json{{"t_s", 0.0},
+           {"event", "run_start"},
+           {"seed", seed_},
+           {"lockstep", timing_.lockstep()},
+           {"clock", timing_.clock_name()},
+           {"sync_producer", timing_.firmware_produces_sync ? "firmware" : "emulator"},
+           {"bus", o_.can_iface.empty() ? "ucan" : "socketcan"}});
   StartFirmware();
   RunPhases();
 
@@ -1023,7 +989,7 @@ RunResult Run::Execute() {
   hub_->DrainToLog();
   const double wall_s = WallSeconds(wall0_);
   faults_->FlushEvents(run_);
-  if (virtual_time_) {
+  if (timing_.virtual_clock()) {
     // The run is recorded; the firmware's clock goes on (deadline to deadline) until it exits.
     firmware_.Stop([this] {
       if (const std::int64_t next = clock_->NextDeadlineNs(); next != sim::kNever) {
