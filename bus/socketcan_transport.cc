@@ -402,6 +402,7 @@ std::error_code SocketCanTransport::Receive(ReceivedFrame& out, int timeout_ms) 
       }
     }
     if (!out.kernel_timestamp) out.timestamp_ns = RealtimeNowNs();
+    out.own = (msg.msg_flags & MSG_CONFIRM) != 0;
     out.ifindex = msg.msg_namelen >= offsetof(sockaddr_can, can_ifindex) + sizeof(int)
                       ? addr.can_ifindex
                       : ifindex_;

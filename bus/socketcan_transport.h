@@ -59,6 +59,10 @@ struct ReceivedFrame {
   bool kernel_timestamp = false;
   /// Interface the frame arrived on (from recvmsg's sockaddr_can); see InterfaceName().
   int ifindex = 0;
+  /// One of this socket's own frames (receive_own: the kernel flags it MSG_CONFIRM). The
+  /// kernel hands a frame to every socket of the interface in one pass: when its sender has it
+  /// back, every other socket has it too.
+  bool own = false;
 };
 
 struct TransportStats {

@@ -28,6 +28,7 @@
 #include <sys/eventfd.h>
 #include <sys/mman.h>
 #include <sys/select.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
 #include <sys/time.h>
@@ -111,6 +112,14 @@ REAL_FN(pthread_mutex_timedlock, int, (pthread_mutex_t*, const timespec*))
 REAL_FN(pthread_mutex_clocklock, int, (pthread_mutex_t*, clockid_t, const timespec*))
 REAL_FN(kill, int, (pid_t, int))
 REAL_FN(pthread_kill, int, (pthread_t, int))
+REAL_FN(socket, int, (int, int, int))
+REAL_FN(write, ssize_t, (int, const void*, size_t))
+REAL_FN(send, ssize_t, (int, const void*, size_t, int))
+REAL_FN(sendto, ssize_t, (int, const void*, size_t, int, const sockaddr*, socklen_t))
+REAL_FN(sendmsg, ssize_t, (int, const msghdr*, int))
+REAL_FN(sendmmsg, int, (int, mmsghdr*, unsigned int, int))
+REAL_FN(recvmsg, ssize_t, (int, msghdr*, int))
+REAL_FN(recvmmsg, int, (int, mmsghdr*, unsigned int, int, timespec*))
 REAL_FN(sigqueue, int, (pid_t, int, const union sigval))
 
 // ---- the page and this process's slots ----
@@ -167,6 +176,36 @@ bool IsRealtimeClock(clockid_t c) {
 
 std::int64_t RealtimeOffset() { return g_page->realtime_offset_ns.load(std::memory_order_relaxed); }
 std::int64_t NowOn(clockid_t c) { return Now() + (IsRealtimeClock(c) ? RealtimeOffset() : 0); }
+
+/// A socket of the kernel's CAN stack (the firmware on a kernel interface such as vcan0). Asked
+/// of the kernel itself: the bus library's sockets, whose stamps are already the virtual
+/// clock's, are unix sockets underneath.
+bool KernelCanSocket(int fd) {
+  int domain = 0;
+  socklen_t len = sizeof(domain);
+  return ::syscall(SYS_getsockopt, fd, SOL_SOCKET, SO_DOMAIN, &domain, &len) == 0 &&
+         domain == AF_CAN;
+}
+
+/// The firmware's kernel CAN sockets (a kernel interface such as vcan0), by descriptor, marked
+/// when it opens one and cleared when it closes it: the frames written to them are counted
+/// (Page::kernel_can_sends), so the host knows when it has received all of them.
+constexpr int kMaxCanFds = 4096;
+std::atomic<std::uint64_t> g_kernel_can_fds[kMaxCanFds / 64];
+
+bool MarkedKernelCan(int fd) {
+  return fd >= 0 && fd < kMaxCanFds &&
+         (g_kernel_can_fds[fd / 64].load(std::memory_order_relaxed) >> (fd % 64) & 1u) != 0;
+}
+void MarkKernelCan(int fd, bool can) {
+  if (fd < 0 || fd >= kMaxCanFds) return;
+  const std::uint64_t bit = std::uint64_t{1} << (fd % 64);
+  if (can) {
+    g_kernel_can_fds[fd / 64].fetch_or(bit);
+  } else if (g_kernel_can_fds[fd / 64].load(std::memory_order_relaxed) & bit) {
+    g_kernel_can_fds[fd / 64].fetch_and(~bit);
+  }
+}
 /// An absolute time on clock c as a virtual monotonic deadline (saturated: a time beyond the
 /// range of ns is no deadline).
 std::int64_t DeadlineFromAbs(clockid_t c, const timespec& ts) {
@@ -1726,6 +1765,7 @@ VTIME_EXPORT int close(int fd) {
     if (i >= 0) FreeTimerSlot(i);
     ForgetEpoll(fd);
   }
+  MarkKernelCan(fd, false);
   return real_close()(fd);
 }
 
@@ -1756,6 +1796,9 @@ VTIME_EXPORT int close_range(unsigned first, unsigned last, int flags) {
   for (unsigned fd = first; fd <= last && fd < static_cast<unsigned>(kMaxEpollFds); ++fd) {
     ForgetEpoll(static_cast<int>(fd));
   }
+  for (unsigned fd = first; fd <= last && fd < static_cast<unsigned>(kMaxCanFds); ++fd) {
+    MarkKernelCan(static_cast<int>(fd), false);
+  }
   return 0;
 }
 
@@ -1785,12 +1828,16 @@ int KeepLibraryFd(int fd, int fd2) {
 
 VTIME_EXPORT int dup2(int fd, int fd2) {
   if (KeepLibraryFd(fd, fd2) != 0) return -1;
-  return real_dup2()(fd, fd2);
+  const int r = real_dup2()(fd, fd2);
+  if (r >= 0 && fd != fd2) MarkKernelCan(fd2, MarkedKernelCan(fd));
+  return r;
 }
 
 VTIME_EXPORT int dup3(int fd, int fd2, int flags) {
   if (KeepLibraryFd(fd, fd2) != 0) return -1;
-  return real_dup3()(fd, fd2, flags);
+  const int r = real_dup3()(fd, fd2, flags);
+  if (r >= 0) MarkKernelCan(fd2, MarkedKernelCan(fd));
+  return r;
 }
 
 // ---- threads, condition variables, processes ----
@@ -2184,6 +2231,97 @@ bool SendRunsThrough(const void* frame, std::size_t frame_len) {
 /// the instant it was sent. Called before the sending thread can wait again.
 VTIME_EXPORT void wheelhil_vtime_note_frame_sent(const void* frame, std::size_t frame_len) {
   if (g_page != nullptr && !SendRunsThrough(frame, frame_len)) g_page->bus_sends.fetch_add(1);
+}
+
+// ---- kernel CAN sockets: the frames the firmware sends, and their receive timestamps ----
+
+void CountKernelCanSends(int fd, long frames) {
+  if (g_page != nullptr && frames > 0 && MarkedKernelCan(fd)) {
+    g_page->kernel_can_sends.fetch_add(static_cast<std::uint64_t>(frames));
+  }
+}
+
+/// The kernel stamps a received frame with the host's CLOCK_REALTIME (SO_TIMESTAMP,
+/// SO_TIMESTAMPNS, SO_TIMESTAMPING's software stamp): each becomes the virtual CLOCK_REALTIME
+/// now. The run hands a frame over at the instant it is due and the firmware reads it before the
+/// clock moves on (a firmware that leaves it in its socket longer sees it stamped later).
+void VirtualReceiveStamps(int fd, msghdr* msg) {
+  if (msg == nullptr || msg->msg_control == nullptr || msg->msg_controllen == 0) return;
+  bool checked = false;
+  const std::int64_t now = Now() + RealtimeOffset();
+  for (cmsghdr* c = CMSG_FIRSTHDR(msg); c != nullptr; c = CMSG_NXTHDR(msg, c)) {
+    if (c->cmsg_level != SOL_SOCKET) continue;
+    const int type = c->cmsg_type;
+    const bool tv = type == SO_TIMESTAMP_OLD || type == SO_TIMESTAMP_NEW;
+    const bool ts = type == SO_TIMESTAMPNS_OLD || type == SO_TIMESTAMPNS_NEW ||
+                    type == SO_TIMESTAMPING_OLD || type == SO_TIMESTAMPING_NEW;
+    if (!tv && !ts) continue;
+    if (!checked) {
+      // (Marked when opened: no system call per frame.)
+      if (!MarkedKernelCan(fd)) return;
+      checked = true;
+    }
+    const std::size_t room = c->cmsg_len - CMSG_LEN(0);
+    if (tv && room >= sizeof(timeval)) {
+      const timeval v{now / 1000000000, (now % 1000000000) / 1000};
+      std::memcpy(CMSG_DATA(c), &v, sizeof(v));
+    } else if (ts && room >= sizeof(timespec)) {
+      const timespec v{now / 1000000000, now % 1000000000};
+      std::memcpy(CMSG_DATA(c), &v, sizeof(v));  // SO_TIMESTAMPING: [0] is the software stamp
+    }
+  }
+}
+
+VTIME_EXPORT int socket(int domain, int type, int protocol) {
+  const int fd = real_socket()(domain, type, protocol);
+  // The bus library's CAN sockets are unix sockets underneath: only the kernel's are marked.
+  if (fd >= 0) MarkKernelCan(fd, domain == PF_CAN && KernelCanSocket(fd));
+  return fd;
+}
+
+VTIME_EXPORT ssize_t write(int fd, const void* buf, size_t n) {
+  const ssize_t r = real_write()(fd, buf, n);
+  if (r > 0) CountKernelCanSends(fd, 1);
+  return r;
+}
+
+VTIME_EXPORT ssize_t send(int fd, const void* buf, size_t n, int flags) {
+  const ssize_t r = real_send()(fd, buf, n, flags);
+  if (r > 0) CountKernelCanSends(fd, 1);
+  return r;
+}
+
+VTIME_EXPORT ssize_t sendto(int fd, const void* buf, size_t n, int flags, const sockaddr* to,
+                            socklen_t to_len) {
+  const ssize_t r = real_sendto()(fd, buf, n, flags, to, to_len);
+  if (r > 0) CountKernelCanSends(fd, 1);
+  return r;
+}
+
+VTIME_EXPORT ssize_t sendmsg(int fd, const msghdr* msg, int flags) {
+  const ssize_t r = real_sendmsg()(fd, msg, flags);
+  if (r > 0) CountKernelCanSends(fd, 1);
+  return r;
+}
+
+VTIME_EXPORT int sendmmsg(int fd, mmsghdr* msgs, unsigned int vlen, int flags) {
+  const int r = real_sendmmsg()(fd, msgs, vlen, flags);
+  CountKernelCanSends(fd, r);
+  return r;
+}
+
+VTIME_EXPORT ssize_t recvmsg(int fd, msghdr* msg, int flags) {
+  const ssize_t n = real_recvmsg()(fd, msg, flags);
+  if (n >= 0 && g_page != nullptr) VirtualReceiveStamps(fd, msg);
+  return n;
+}
+
+VTIME_EXPORT int recvmmsg(int fd, mmsghdr* msgs, unsigned int vlen, int flags, timespec* timeout) {
+  const int n = real_recvmmsg()(fd, msgs, vlen, flags, timeout);
+  if (g_page != nullptr) {
+    for (int i = 0; i < n; ++i) VirtualReceiveStamps(fd, &msgs[i].msg_hdr);
+  }
+  return n;
 }
 
 // ---- signals between the firmware's threads: they may end a wait the host takes for vouched ----

@@ -291,6 +291,9 @@ struct Page {
   /// Bumped by the firmware's bus library on every frame it sends, but those `sends` lets
   /// run through a window.
   std::atomic<std::uint32_t> bus_sends{0};
+  /// Frames the firmware wrote to kernel CAN sockets it opened (a kernel interface such as
+  /// vcan0): the host waits until it received as many before it takes the firmware for blocked.
+  std::atomic<std::uint64_t> kernel_can_sends{0};
   /// Instants the firmware's library moved the clock to itself (for the run's report).
   std::atomic<std::uint64_t> local_advances{0};
   /// One past the highest thread / timer slot ever claimed (bounds the host's scans).

@@ -320,13 +320,16 @@ nlohmann::json LockstepOnKernelBus(const BenchOptions& o, const std::string& sel
       if (also_ucan) SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s), Unavailable(why));
       continue;
     }
-    // A kernel interface has no virtual clock: both rows on the handshake.
-    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, CooperativeClock());
+    // Both rows on the firmware's virtual clock, the firmware the SYNC producer (the default:
+    // named, as the virtual_time rows are).
+    const std::vector<campaign::Override> virtual_clock = {{"timing.clock", "virtual", 0},
+                                                           {"timing.sync_producer", "firmware", 0}};
+    const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, virtual_clock);
     SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), k.rtf);
     if (k.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.vcan_sim_s", s), k.sim_s);
     if (also_ucan) {
       SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s),
-              RunLockstepScenario(o, self_exe, file, "", CooperativeClock()).rtf);
+              RunLockstepScenario(o, self_exe, file, "", virtual_clock).rtf);
     }
   }
   return report;

@@ -1,5 +1,7 @@
 #include "emulator/firmware/firmware_link.h"
 
+#include <poll.h>
+
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
@@ -49,7 +51,10 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, Pacing pacing, sim::Run
     : run_(run) {
   const bool lockstep = pacing != Pacing::kRealTime;
   bus::CanTransportOptions opt;
-  opt.receive_own = false;
+  // On the virtual clock over a kernel bus the run takes its own frames back: each one back
+  // says the firmware's sockets have it (ReceivedFrame::own).
+  opt.receive_own = !can_iface.empty() && pacing == Pacing::kVirtualClock;
+  kernel_confirms_ = opt.receive_own;
   if (can_iface.empty()) {
     RemoveStaleRunDirs(kRunDirPrefix);
     runtime_dir_ = bus::CreateTempUcanRuntimeDir(kRunDirPrefix);
@@ -64,6 +69,11 @@ FirmwareLink::FirmwareLink(const std::string& can_iface, Pacing pacing, sim::Run
     ::setenv("WHEELHIL_UCAN_DIR", runtime_dir_.c_str(), 1);
   } else {
     iface_ = can_iface;
+    if (pacing == Pacing::kVirtualClock) {
+      // No bus of its own, but a private directory for the clock's page.
+      RemoveStaleRunDirs(kRunDirPrefix);
+      runtime_dir_ = bus::CreateTempUcanRuntimeDir(kRunDirPrefix);
+    }
   }
   if (broker_ && lockstep) {
     broker_->UseCallerThread();
@@ -157,7 +167,10 @@ bool FirmwareLink::Send(const bus::CanFrame& frame) {
     if (++unpumped_frames_ >= kMaxUnpumpedFrames) Pump(0);
     return ok;
   }
-  return !can_->Send(frame);
+  sent_since_settle_ = true;
+  const bool ok = !can_->Send(frame);
+  if (ok && kernel_confirms_) ++unconfirmed_;
+  return ok;
 }
 
 void FirmwareLink::Pump(int timeout_ms, bool quiet) {
@@ -185,7 +198,11 @@ void FirmwareLink::Drain(int timeout_ms, const FrameFn& on_frame) {
 }
 
 bool FirmwareLink::FirmwareConnected() {
-  if (!broker_) return true;
+  if (!broker_) {
+    // A kernel bus: a receiver more than before the firmware started (else: no way to tell).
+    return kernel_receivers_before_ < 0 ||
+           CountKernelCanReceivers(iface_) > kernel_receivers_before_;
+  }
   bool connected = false;
   for (const auto& st : broker_->Stats()) {
     if (st.name != iface_) continue;
@@ -199,9 +216,15 @@ bool FirmwareLink::FirmwareConnected() {
 
 void FirmwareLink::KeepAlive(VirtualClock& clock) {
   clock.WakeDue();
-  if (!PumpBroker(0)) return;
-  bus::CanFrame f;
-  while (broker_->ReceiveLocal(local_port_, &f)) {
+  if (broker_ == nullptr) {
+    bus::ReceivedFrame rx;
+    while (!can_->Receive(rx, 0)) {
+    }
+  } else {
+    if (!PumpBroker(0)) return;
+    bus::CanFrame f;
+    while (broker_->ReceiveLocal(local_port_, &f)) {
+    }
   }
   clock.Blocked();  // the reference point of the wait below
   clock.WaitForChange(1000);
@@ -262,6 +285,10 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   // at least every kSocketLookEveryNs of virtual time (programs off the clock on the bus: a
   // candump the user attached).
   auto pass = [&] {
+    if (broker_ == nullptr) {
+      TakeKernelFrames(on_frame);
+      return false;
+    }
     const std::uint64_t before = broker_->client_progress();
     const std::uint64_t activity = clock.socket_activity();
     const bool quiet = activity == activity_at_look_ &&
@@ -279,7 +306,7 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   // What the run sent since the last settle; if that reached the firmware, it runs now (and
   // cannot be blocked yet).
   // Waits it just ended run now as well: no look at the firmware can find it blocked yet.
-  bool woke = pass() || ended_waits;
+  bool woke = pass() || ended_waits || std::exchange(sent_since_settle_, false);
   for (;;) {
     if (run_.failed()) return false;
     if (!woke && clock.Blocked()) {
@@ -323,6 +350,38 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
     if (!StillWaiting(clock, WallSeconds(t0), timeout_s, process, checked_exit)) return false;
     clock.WaitForChange(200);
     woke = false;
+  }
+}
+
+void FirmwareLink::TakeKernelFrames(const FrameFn& on_frame) {
+  // The run's frames went out in Send; the kernel may hand them over after its send returned
+  // (its softirq, or ksoftirqd under load). The firmware has them once the run has its own
+  // back, and may not be taken for blocked before. The firmware's frames, counted by its clock
+  // library as it sends them, are waited for the same way.
+  const auto t0 = Clock::now();
+  bus::ReceivedFrame rx;
+  for (;;) {
+    while (!can_->Receive(rx, 0)) {
+      if (rx.own) {
+        if (unconfirmed_ > 0) --unconfirmed_;
+      } else {
+        ++kernel_frames_in_;
+        on_frame(rx.frame);
+      }
+    }
+    const bool theirs_in = clock_ == nullptr || clock_->KernelCanSends() <= kernel_frames_in_;
+    if (unconfirmed_ == 0 && theirs_in) return;
+    if (WallSeconds(t0) > kKernelDeliverySeconds) {
+      run_.Fail(
+          fmt::format("the kernel did not deliver {} frame(s) on {} within {} s ({} of the "
+                      "run's own not back, {} of the firmware's sends not received)",
+                      unconfirmed_ + (theirs_in ? 0 : 1), iface_, kKernelDeliverySeconds,
+                      unconfirmed_, theirs_in ? 0 : clock_->KernelCanSends() - kernel_frames_in_));
+      unconfirmed_ = 0;
+      return;
+    }
+    pollfd p{can_->fd(), POLLIN, 0};
+    (void)::poll(&p, 1, 1);
   }
 }
 

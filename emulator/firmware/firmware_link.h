@@ -106,6 +106,10 @@ class FirmwareLink {
   // One broker pass, told to the virtual clock when it wrote to a client (first_sent:
   // UcanBroker::PumpFirstSent).
   bool PumpBroker(int timeout_ms, bool quiet = false, std::size_t first_sent = SIZE_MAX);
+  // Virtual clock on a kernel bus: hands `on_frame` the firmware's frames, after the kernel
+  // delivered every frame the run sent and every frame the firmware sent (as its clock library
+  // counted them); fails the run when that takes kKernelDeliverySeconds.
+  void TakeKernelFrames(const FrameFn& on_frame);
   // Fails the run when the private bus refused a connection (the firmware hit a broker limit).
   void CheckBrokerLimits();
   // Waiting wall_s for the firmware to block: after min(1 s, timeout/2) its exit is looked for
@@ -135,6 +139,13 @@ class FirmwareLink {
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
   bool after_runahead_ = false;    // RunAhead: the next Settle picks up what it sent
+  bool sent_since_settle_ = false;  // a kernel bus: Send wrote to the firmware since Settle
+  // Virtual clock on a kernel bus: the run's frames not back yet (ReceivedFrame::own), the
+  // frames taken from others, and how long the kernel may take to deliver them.
+  bool kernel_confirms_ = false;
+  std::uint64_t unconfirmed_ = 0;
+  std::uint64_t kernel_frames_in_ = 0;
+  static constexpr double kKernelDeliverySeconds = 10;
   // Virtual time, Settle: VirtualClock::socket_activity and the clock's time at the last pass
   // that looked at the broker's sockets.
   static constexpr std::int64_t kSocketLookEveryNs = 10'000'000;

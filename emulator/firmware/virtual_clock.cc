@@ -441,6 +441,8 @@ void VirtualClock::WriteSendRules(const SendPlan* plan) {
   r.enabled.store(1);
 }
 
+std::uint64_t VirtualClock::KernelCanSends() const { return page_->kernel_can_sends.load(); }
+
 std::uint64_t VirtualClock::sends_through() const { return page_->sends.through.load(); }
 
 void VirtualClock::TakeSendsThroughAt(std::vector<std::int64_t>& instants_ns) const {

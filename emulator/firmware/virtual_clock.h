@@ -117,6 +117,8 @@ class VirtualClock {
   void WaitWhileGranted(int timeout_us);
   /// Instants the firmware moved its clock to itself so far.
   std::uint64_t local_advances() const;
+  /// Frames the firmware wrote to kernel CAN sockets so far (bus/vtime_protocol.h).
+  std::uint64_t KernelCanSends() const;
   /// Sends of the firmware's that did not end a window, so far.
   std::uint64_t sends_through() const;
   /// After a window (the firmware gave the clock back): the run instants of its sends that did

@@ -488,8 +488,10 @@ void Run::CheckRunahead(std::int64_t now_ns, bool deadline_turn, bool firmware_s
 }
 
 void Run::RunAhead(std::int64_t now_ns) {
+  // A kernel bus has no rings to put frames ahead in, and the firmware's waits on its sockets
+  // are the kernel's: it could move its clock through nothing.
   if (run_.failed() || !motion_started_ || !physics_->worker_used() || sync_ != nullptr ||
-      !firmware_.running() || firmware_stopped_) {
+      !link_->private_bus() || !firmware_.running() || firmware_stopped_) {
     return;
   }
   // What the firmware sent in this turn says how long its next run through frames will be: a
@@ -715,15 +717,22 @@ void Run::StartFirmware() {
   if (timing_.virtual_clock() && o_.runahead != RunOptions::Runahead::kOff)
     env.emplace_back(bus::ucan::kOwnBellEnv, "1");
   if (timing_.virtual_clock()) {
-    // The clock's library goes first: the bus library's own waits are then virtual too.
-    const std::string lib = VtimeLibrary(env);
+    // The clock's library goes first: the bus library's own waits are then virtual too. On a
+    // kernel bus it is the only one, found where the bus library would be.
+    const std::string lib = link_->private_bus() || !o_.ucan_child_env
+                                ? VtimeLibrary(env)
+                                : VtimeLibrary(o_.ucan_child_env(link_->runtime_dir()));
     if (!fs::exists(lib)) {
       throw std::invalid_argument(
           fmt::format("timing.clock: virtual: {} not found (build target wheelhil_vtime)", lib));
     }
+    bool preloaded = false;
     for (auto& [key, value] : env) {
-      if (key == "LD_PRELOAD") value = lib + ":" + value;
+      if (key != "LD_PRELOAD") continue;
+      value = lib + ":" + value;
+      preloaded = true;
     }
+    if (!preloaded) env.emplace_back("LD_PRELOAD", lib);
     for (auto& kv : clock_->ChildEnvironment(lib)) env.push_back(kv);
     if (const std::string why_not = firmware::WhyNotVirtualClock(cmd); !why_not.empty()) {
       throw std::invalid_argument(

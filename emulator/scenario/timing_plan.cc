@@ -36,17 +36,10 @@ TimingPlan ResolveTiming(const TimingChoice& c) {
   TimingPlan plan;
   plan.kernel_bus = !c.can_iface.empty();
   const bool lockstep = t.lockstep && !c.realtime;
-  const bool wanted = lockstep && t.virtual_clock;
-  if (wanted && t.clock_named && plan.kernel_bus) {
-    throw std::invalid_argument(fmt::format(
-        "{}: timing.clock: virtual needs the private userspace bus: on a kernel interface "
-        "({}) the firmware's time is the host's (use --realtime, --clock cooperative, or no "
-        "--can)",
-        c.source_path, c.can_iface));
-  }
-  // No virtual clock on a kernel interface, nor without a firmware process to put on it (an
-  // attached firmware keeps its own clock).
-  const bool virtual_time = wanted && !plan.kernel_bus && c.firmware_command;
+  // No virtual clock without a firmware process to put on it (an attached firmware keeps its
+  // own clock). On a kernel interface the firmware's clock is virtual as on the private bus;
+  // only its bus is the kernel's.
+  const bool virtual_time = lockstep && t.virtual_clock && c.firmware_command;
   plan.clock = !lockstep      ? TimingPlan::Clock::kWall
                : virtual_time ? TimingPlan::Clock::kVirtual
                               : TimingPlan::Clock::kCooperative;

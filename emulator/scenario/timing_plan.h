@@ -42,8 +42,8 @@ struct TimingChoice {
 };
 
 /// Throws std::invalid_argument, naming the scenario file and what to change, for a
-/// combination that cannot run: the virtual clock named on a kernel interface; a firmware that
-/// produces SYNC in lockstep without the virtual clock.
+/// combination that cannot run: a firmware that produces SYNC in lockstep without the virtual
+/// clock (the cooperative clock named, or a firmware attached from outside).
 TimingPlan ResolveTiming(const TimingChoice& choice);
 
 }  // namespace wheelhil::emulator::scenario

@@ -16,6 +16,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -412,6 +413,22 @@ TEST(VirtualClock, RunaheadGoesOnThroughForeseenSendsAndThoseThatChangeNothing) 
   const ProbeRun w = run(wins);
   EXPECT_EQ(w.local_advances, 2u);
   EXPECT_EQ(w.sends_through, 1u);
+}
+
+// On a kernel CAN interface the kernel stamps a received frame with the host's realtime clock
+// (SO_TIMESTAMPNS); the firmware sees the virtual one, as on the private bus. Needs a kernel
+// vcan (WHEELHIL_VCAN): ctest runs it in the user-mode-linux guest (Vcan.VirtualClock).
+TEST(VirtualClock, KernelCanReceiveStampsAreTheVirtualClocks) {
+  if (std::getenv("WHEELHIL_VCAN") == nullptr) {
+    GTEST_SKIP() << "no kernel vcan (WHEELHIL_VCAN unset): ctest -L vcan runs this in a guest";
+  }
+  const ProbeRun r = RunProbe("can_stamps");
+  ASSERT_TRUE(r.finished);
+  ASSERT_EQ(r.exit_status, 0) << r.out;
+  // The virtual realtime clock starts at 2026-01-01T00:00:00Z and nothing moved it.
+  const std::int64_t start = VirtualClock::kRealtimeAtStartNs;
+  EXPECT_EQ(r.waits.at("stamp").first, start) << r.out;
+  EXPECT_EQ(r.waits.at("realtime").first, start) << r.out;
 }
 
 // A thread asleep in the kernel where the library does not see it (a read on a pipe) may be

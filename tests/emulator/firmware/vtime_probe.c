@@ -4,24 +4,28 @@
  * Run by tests/emulator/firmware/virtual_clock_test.cc with libwheelhil_vtime.so preloaded and
  * the test as the clock's host. argv[1] picks the case. */
 #define _GNU_SOURCE
+#include <dirent.h>
+#include <dlfcn.h>
 #include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
 #include <linux/futex.h>
-#include <signal.h>
-#include <sys/syscall.h>
+#include <net/if.h>
 #include <poll.h>
 #include <pthread.h>
 #include <semaphore.h>
+#include <signal.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <dirent.h>
-#include <dlfcn.h>
-#include <fcntl.h>
-#include <limits.h>
 #include <sys/epoll.h>
 #include <sys/resource.h>
 #include <sys/select.h>
+#include <sys/socket.h>
+#include <sys/syscall.h>
 #include <sys/time.h>
 #include <sys/timerfd.h>
 #include <sys/timex.h>
@@ -286,10 +290,53 @@ static void ahead_sends(void) {
   fputs(g_lines, stdout);
 }
 
+/* A kernel CAN socket on $WHEELHIL_VCAN (vcan0 in the user-mode-linux guest) that takes its
+ * own frames with SO_TIMESTAMPNS: one frame sent and read back with recvmsg. Prints the receive
+ * stamp and CLOCK_REALTIME, both in ns (the clock's library makes the stamp the virtual one). */
+static int can_stamps(void) {
+  const char* iface = getenv("WHEELHIL_VCAN");
+  if (iface == NULL) return 3;
+  const int s = socket(PF_CAN, SOCK_RAW, CAN_RAW);
+  if (s < 0) return 4;
+  const int on = 1;
+  setsockopt(s, SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS, &on, sizeof(on));
+  setsockopt(s, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
+  struct sockaddr_can addr = {0};
+  addr.can_family = AF_CAN;
+  addr.can_ifindex = (int)if_nametoindex(iface);
+  if (bind(s, (struct sockaddr*)&addr, sizeof(addr)) != 0) return 5;
+  struct can_frame f = {0};
+  f.can_id = 0x123;
+  f.len = 1;
+  if (write(s, &f, sizeof(f)) != (ssize_t)sizeof(f)) return 6;
+  char control[CMSG_SPACE(sizeof(struct timespec))];
+  struct iovec io = {&f, sizeof(f)};
+  struct msghdr m = {0};
+  m.msg_iov = &io;
+  m.msg_iovlen = 1;
+  m.msg_control = control;
+  m.msg_controllen = sizeof(control);
+  if (recvmsg(s, &m, 0) != (ssize_t)sizeof(f)) return 7;
+  long long stamp = -1;
+  for (struct cmsghdr* c = CMSG_FIRSTHDR(&m); c != NULL; c = CMSG_NXTHDR(&m, c)) {
+    if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+      struct timespec ts;
+      memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+      stamp = (long long)ts.tv_sec * 1000000000 + ts.tv_nsec;
+    }
+  }
+  struct timespec now;
+  clock_gettime(CLOCK_REALTIME, &now);
+  printf("stamp %lld 0\nrealtime %lld 0\n", stamp,
+         (long long)now.tv_sec * 1000000000 + now.tv_nsec);
+  return 0;
+}
+
 int main(int argc, char** argv) {
   if (argc < 2) return 2;
   g_start = mono();
   const char* what = argv[1];
+  if (strcmp(what, "can_stamps") == 0) return can_stamps();
   if (strcmp(what, "ahead_sends") == 0) {
     ahead_sends();
     return 0;

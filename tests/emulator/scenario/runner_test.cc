@@ -82,9 +82,8 @@ TEST_F(ScenarioRun, SameSeedGivesIdenticalLogAndReport) {
 }
 
 // Lockstep is on the virtual clock (the firmware producing SYNC) unless the scenario names the
-// handshake. A kernel interface has no virtual clock: a named `clock: virtual` or a
-// SYNC-producing firmware is refused there before anything starts (an unnamed clock falls back
-// to the handshake: the vcan tests run so).
+// handshake, with which a SYNC-producing firmware is refused before anything starts (every
+// combination with the bus and the command line: timing_plan_test.cc).
 TEST_F(ScenarioRun, TheClockIsVirtualByDefaultAndRefusedWhereThereIsNone) {
   Scenario s = ShortPaper000();
   s.timing.duration_s = 0.5;
@@ -98,19 +97,6 @@ TEST_F(ScenarioRun, TheClockIsVirtualByDefaultAndRefusedWhereThereIsNone) {
   const std::string c_events = Slurp(dir_ / "c" / "events.jsonl");
   EXPECT_THAT(c_events, HasSubstr("\"clock\":\"cooperative\""));
   EXPECT_THAT(c_events, HasSubstr("\"sync_producer\":\"emulator\""));
-  RunOptions kernel = Options(dir_ / "k");
-  kernel.can_iface = "vcan0";
-  Scenario named = s;
-  named.timing.clock_named = true;
-  EXPECT_THAT([&] { (void)RunScenario(named, kernel); },
-              ::testing::ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("timing.clock: virtual needs the private userspace bus")));
-  Scenario producer = s;
-  producer.timing.sync_producer_named = true;
-  EXPECT_THAT([&] { (void)RunScenario(producer, kernel); },
-              ::testing::ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("runs in lockstep only on the virtual clock, which this run does not "
-                            "have (kernel interface vcan0")));
   Scenario cooperative_producer = cooperative;  // as a program may put them together
   cooperative_producer.timing.firmware_produces_sync = true;
   EXPECT_THAT([&] { (void)RunScenario(cooperative_producer, Options(dir_ / "cp")); },
