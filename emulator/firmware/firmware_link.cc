@@ -167,10 +167,25 @@ bool FirmwareLink::Send(const bus::CanFrame& frame) {
     if (++unpumped_frames_ >= kMaxUnpumpedFrames) Pump(0);
     return ok;
   }
-  sent_since_settle_ = true;
-  const bool ok = !can_->Send(frame);
-  if (ok && kernel_confirms_) ++unconfirmed_;
-  return ok;
+  if (kernel_confirms_) {
+    // The kernel would hand it over at once: before the clock is at its instant, the firmware
+    // could read it at the instant before. It goes out with the settle of its instant.
+    to_kernel_.push_back(frame);
+    return true;
+  }
+  return !can_->Send(frame);
+}
+
+void FirmwareLink::SendToKernel() {
+  for (const bus::CanFrame& f : to_kernel_) {
+    if (const std::error_code ec = can_->Send(f)) {
+      run_.Fail(fmt::format("cannot send {:03X}#... to the firmware on {}: {}", f.id, iface_,
+                            ec.message()));
+      break;
+    }
+    ++unconfirmed_;
+  }
+  to_kernel_.clear();
 }
 
 void FirmwareLink::Pump(int timeout_ms, bool quiet) {
@@ -247,9 +262,8 @@ bool FirmwareLink::PumpBroker(int timeout_ms, bool quiet, std::size_t first_sent
 }
 
 void FirmwareLink::UseVirtualClock(VirtualClock& clock) {
-  if (!broker_) return;
   clock_ = &clock;
-  broker_->SetReceiveClock([&clock] { return clock.RealtimeNs(); });
+  if (broker_) broker_->SetReceiveClock([&clock] { return clock.RealtimeNs(); });
 }
 
 bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess& process,
@@ -306,7 +320,9 @@ bool FirmwareLink::Settle(VirtualClock& clock, double timeout_s, FirmwareProcess
   // What the run sent since the last settle; if that reached the firmware, it runs now (and
   // cannot be blocked yet).
   // Waits it just ended run now as well: no look at the firmware can find it blocked yet.
-  bool woke = pass() || ended_waits || std::exchange(sent_since_settle_, false);
+  const bool sent = !to_kernel_.empty();
+  if (sent) SendToKernel();
+  bool woke = pass() || ended_waits || sent;
   for (;;) {
     if (run_.failed()) return false;
     if (!woke && clock.Blocked()) {

@@ -106,6 +106,8 @@ class FirmwareLink {
   // One broker pass, told to the virtual clock when it wrote to a client (first_sent:
   // UcanBroker::PumpFirstSent).
   bool PumpBroker(int timeout_ms, bool quiet = false, std::size_t first_sent = SIZE_MAX);
+  // Virtual clock on a kernel bus: writes the frames Send kept for the settle.
+  void SendToKernel();
   // Virtual clock on a kernel bus: hands `on_frame` the firmware's frames, after the kernel
   // delivered every frame the run sent and every frame the firmware sent (as its clock library
   // counted them); fails the run when that takes kKernelDeliverySeconds.
@@ -139,10 +141,10 @@ class FirmwareLink {
   int kernel_receivers_before_ = -1;
   bool firmware_blocked_ = false;  // virtual time: at the end of the last Settle
   bool after_runahead_ = false;    // RunAhead: the next Settle picks up what it sent
-  bool sent_since_settle_ = false;  // a kernel bus: Send wrote to the firmware since Settle
   // Virtual clock on a kernel bus: the run's frames not back yet (ReceivedFrame::own), the
   // frames taken from others, and how long the kernel may take to deliver them.
   bool kernel_confirms_ = false;
+  std::vector<bus::CanFrame> to_kernel_;  // Send's frames, written at the next Settle
   std::uint64_t unconfirmed_ = 0;
   std::uint64_t kernel_frames_in_ = 0;
   static constexpr double kKernelDeliverySeconds = 10;
