@@ -157,7 +157,6 @@ std::vector<std::string> DocumentedMetricKeys() {
   std::vector<std::string> virtual_rows = VirtualTimeBenchScenarios();
   virtual_rows.insert(virtual_rows.end(), {"customer_c", "customer_python"});
   for (const auto& s : VirtualTimeBenchScenarios()) {
-    keys.push_back(fmt::format("virtual_time.{}.vs_cooperative", s));
     keys.push_back(fmt::format("virtual_time.{}.vs_physics_alone", s));
   }
   for (const auto& s : virtual_rows) {

@@ -19,8 +19,8 @@ struct CommandWords {
   bool positionals = false;          // takes operands (files)
 };
 
-// "TEXT:{virtual,cooperative}" (CLI::IsMember's description in the type name) -> "virtual
-// cooperative"; empty when the option has no fixed set of values.
+// "TEXT:{auto,on,off}" (CLI::IsMember's description in the type name) -> "auto on off"; empty
+// when the option has no fixed set of values.
 std::string ValueList(const CLI::Option& opt) {
   const std::string type = opt.get_type_name();
   const auto open = type.find('{');

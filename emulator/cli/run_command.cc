@@ -108,11 +108,15 @@ RunCommand::RunCommand(CLI::App& app) {
                    "CPU (auto: when the run may use more than one CPU; results are identical)")
       ->check(CLI::IsMember({"auto", "on", "off"}));
   run_->add_option("--clock", clock_,
-                   "Lockstep: virtual (the default: the firmware on the emulator's clock, any "
-                   "firmware, docs/virtual-time.md) or cooperative (the reference firmware's "
-                   "FW_Status handshake); overrides timing.clock. virtual makes the firmware the "
-                   "SYNC producer unless --sync-producer emulator")
-      ->check(CLI::IsMember({"virtual", "cooperative"}));
+                   "Lockstep: virtual, the only clock (the firmware on the emulator's clock, "
+                   "any firmware, docs/virtual-time.md); cooperative, the retired FW_Status "
+                   "handshake, is refused with what replaced it")
+      ->check(CLI::Validator(
+          [](std::string& v) {
+            return v == "virtual" || v == "cooperative" ? std::string()
+                                                        : "'" + v + "' is not virtual";
+          },
+          "{virtual}"));
   run_->add_option("--stop-at", stop_at_s_,
                    "Virtual clock: stop the firmware when virtual time (can.log's clock) reaches "
                    "T seconds, for a debugger (it prints how to attach; virtual time waits for "
@@ -148,11 +152,10 @@ std::optional<int> RunCommand::Run() {
     fmt::print(stderr, "wheelhil run: {}\n", e.what());
     return 2;
   }
-  if (!clock_.empty()) {
-    sc.timing.virtual_clock = clock_ == "virtual";
-    sc.timing.clock_named = true;
-    sc.timing.firmware_produces_sync = sc.timing.virtual_clock;
-    sc.timing.sync_producer_named = false;
+  if (clock_ == "cooperative") {
+    fmt::print(stderr, "wheelhil run: --clock cooperative: {}\n",
+               scenario::kCooperativeClockRetired);
+    return 2;
   }
   if (!logs_.empty()) sc.log_formats = logs_;
   if (!sync_producer_.empty()) {

@@ -115,7 +115,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
 
   // sim::FirmwareGate. On the virtual clock the firmware is not waited for by handshake:
   // wherever real time would take what it sent, the run lets it run until it blocks.
-  bool lockstep() const override { return timing_.handshake(); }
+  bool lockstep() const override { return false; }
   void Drain() override {
     if (timing_.virtual_clock()) {
       SettleFirmware();
@@ -700,10 +700,10 @@ void Run::StartFirmware() {
   if (!s_.firmware.config.empty()) {
     // A firmware config is wheelhil-fw's convention: it gets the run's SYNC settings.
     const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
-    scoring::WriteText(
-        cfg_path, firmware::DerivedWheelhilFwConfig(s_.firmware.config, s_.firmware.overrides_yaml,
-                                                    {s_.timing.sync_period_s, timing_.handshake(),
-                                                     !timing_.firmware_produces_sync}));
+    scoring::WriteText(cfg_path,
+                       firmware::DerivedWheelhilFwConfig(
+                           s_.firmware.config, s_.firmware.overrides_yaml,
+                           {s_.timing.sync_period_s, false, !timing_.firmware_produces_sync}));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",

@@ -384,26 +384,22 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
               "must be a whole number of physics steps");
   }
   t.timeout_s = r.Number(n, "timeout_s", "timing", 1e-3, 3600, 5.0);
-  t.clock_named = n["clock"].IsDefined();
+  // Lockstep is on the firmware's virtual clock (docs/virtual-time.md), the only one.
   const std::string clock = r.String(n, "clock", "timing", std::string("virtual"));
   if (clock == "cooperative") {
-    t.virtual_clock = false;
+    r.Fail(n["clock"], "timing.clock",
+           fmt::format("{} (remove the key)", kCooperativeClockRetired));
   } else if (clock != "virtual") {
-    r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual or cooperative", clock));
+    r.Fail(n["clock"], "timing.clock", fmt::format("'{}' is not virtual", clock));
   }
   t.sync_producer_named = n["sync_producer"].IsDefined();
   t.spin_cost_s = r.Number(n, "spin_cost_s", "timing", 0, 0.01, 0.0);
-  const std::string producer = r.String(n, "sync_producer", "timing",
-                                        std::string(t.virtual_clock ? "firmware" : "emulator"));
+  const std::string producer =
+      r.String(n, "sync_producer", "timing", std::string(t.lockstep ? "firmware" : "emulator"));
   t.firmware_produces_sync = producer == "firmware";
   if (producer != "firmware" && producer != "emulator") {
     r.Fail(n["sync_producer"], "timing.sync_producer",
            fmt::format("'{}' is not firmware or emulator", producer));
-  }
-  if (t.firmware_produces_sync && t.lockstep && !t.virtual_clock) {
-    r.FailKey(n, "sync_producer", "timing.sync_producer",
-              "a firmware that produces SYNC runs in lockstep only on the virtual clock "
-              "(timing.clock: virtual)");
   }
   return t;
 }

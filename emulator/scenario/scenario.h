@@ -227,20 +227,20 @@ struct FirmwareSpec {
   std::optional<scoring::OutputsSpec> outputs;
 };
 
+/// What a scenario or command line that names the cooperative clock is told.
+inline constexpr char kCooperativeClockRetired[] =
+    "the cooperative FW_Status handshake was retired: lockstep runs any firmware on its own "
+    "virtual clock (timing.clock: virtual, the default; docs/virtual-time.md); the reference "
+    "firmware still sends FW_Status, which nothing waits for";
+
 struct TimingSpec {
   bool lockstep = true;
   double duration_s = 10;  ///< Virtual time of the motion phase.
   double physics_rate_hz = 1000;
   double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
-  /// Lockstep on the firmware's virtual clock (libwheelhil_vtime.so: docs/virtual-time.md),
-  /// the default, instead of the cooperative FW_Status handshake (timing.clock: cooperative).
-  /// A run without a firmware command or on a kernel CAN interface has no virtual clock: unless
-  /// the clock was named, it is then cooperative (RunScenario decides).
-  bool virtual_clock = true;
-  bool clock_named = false;  ///< timing.clock (or --clock) was given.
   /// The firmware is the SYNC producer (the CANopen master's role); else the emulator is.
-  /// Unless named, the firmware exactly when the run is on the virtual clock.
+  /// Unless named, the firmware exactly when the run is in lockstep (on the virtual clock).
   bool firmware_produces_sync = true;
   bool sync_producer_named = false;
   /// Virtual clock: what each call that does not block (a clock read, a zero-timeout poll)

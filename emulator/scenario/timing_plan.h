@@ -1,9 +1,9 @@
 #pragma once
 /// How a run keeps time with its firmware, decided once: which clock (the firmware's virtual
-/// clock in lockstep, the cooperative FW_Status handshake in lockstep, or the wall clock), who
-/// produces SYNC, and which bus. ResolveTiming is a pure function of the scenario's timing
-/// block, the command line and the bus; the runner, the firmware link and the scheduler read
-/// the plan it returns and decide nothing of it themselves (docs/virtual-time.md).
+/// clock in lockstep, or the wall clock), who produces SYNC, and which bus. ResolveTiming is a
+/// pure function of the scenario's timing block, the command line and the bus; the runner, the
+/// firmware link and the scheduler read the plan it returns and decide nothing of it themselves
+/// (docs/virtual-time.md).
 /// Thread-compatible value type.
 
 #include <string>
@@ -15,20 +15,17 @@ namespace wheelhil::emulator::scenario {
 
 struct TimingPlan {
   enum class Clock {
-    kVirtual,      ///< Lockstep: the firmware's processes on the emulator's clock.
-    kCooperative,  ///< Lockstep by the reference firmware's FW_Status handshake.
-    kWall,         ///< Real time: virtual time paced to the wall clock, nothing waited for.
+    kVirtual,  ///< Lockstep: the firmware's processes on the emulator's clock.
+    kWall,     ///< Real time: virtual time paced to the wall clock, nothing waited for.
   };
   Clock clock = Clock::kVirtual;
   bool firmware_produces_sync = true;  ///< Else the emulator produces SYNC.
   bool kernel_bus = false;             ///< A kernel CAN interface (--can), not the private bus.
 
-  bool lockstep() const { return clock != Clock::kWall; }
+  bool lockstep() const { return clock == Clock::kVirtual; }
   bool virtual_clock() const { return clock == Clock::kVirtual; }
-  /// The cycle scheduler waits for the firmware's answers (boot, FW_Status).
-  bool handshake() const { return clock == Clock::kCooperative; }
   firmware::FirmwareLink::Pacing pacing() const;
-  /// "virtual", "cooperative", "wall" (events.jsonl's run_start).
+  /// "virtual", "wall" (events.jsonl's run_start).
   const char* clock_name() const;
 };
 
@@ -42,8 +39,8 @@ struct TimingChoice {
 };
 
 /// Throws std::invalid_argument, naming the scenario file and what to change, for a
-/// combination that cannot run: a firmware that produces SYNC in lockstep without the virtual
-/// clock (the cooperative clock named, or a firmware attached from outside).
+/// combination that cannot run: a firmware attached from outside (no firmware.command) in
+/// lockstep.
 TimingPlan ResolveTiming(const TimingChoice& choice);
 
 }  // namespace wheelhil::emulator::scenario

@@ -69,7 +69,7 @@ complete_words() {  # the words typed so far, the last one being completed
   fail "completing 'bus ': $(complete_words wheelhil bus "")"
 [ "$(complete_words wheelhil run x.yaml --clo)" = "--clock " ] ||
   fail "completing 'run --clo': $(complete_words wheelhil run x.yaml --clo)"
-[ "$(complete_words wheelhil run x.yaml --clock "")" = "cooperative virtual " ] ||
+[ "$(complete_words wheelhil run x.yaml --clock "")" = "virtual " ] ||
   fail "completing 'run --clock ': $(complete_words wheelhil run x.yaml --clock "")"
 [ "$(complete_words wheelhil exec --runtime-d)" = "--runtime-dir " ] ||
   fail "completing 'exec --runtime-d': $(complete_words wheelhil exec --runtime-d)"

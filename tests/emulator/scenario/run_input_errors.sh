@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# `wheelhil run` options that contradict the scenario exit 2 naming the fix: a SYNC-producing
-# firmware asked for in cooperative lockstep; a --runahead that is neither on nor off. (Malformed
+# `wheelhil run` options that cannot be exit 2 naming the fix: the retired cooperative clock
+# (what replaced it); a --runahead that is neither on nor off. (Malformed
 # files: malformed_inputs.sh.)
 # Usage: run_input_errors.sh WHEELHIL_BIN SOURCE_DIR
 set -uo pipefail
@@ -9,13 +9,13 @@ src=$2
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
-# A SYNC-producing firmware in cooperative lockstep cannot be: exit 2 with the fix named.
+# The cooperative clock was retired: exit 2 saying what replaced it.
 "$wheelhil" run "$src/scenarios/smoke/paper000_slip_short.yaml" --clock cooperative \
-  --sync-producer firmware --out "$work/out2" >"$work/log2" 2>&1
+  --out "$work/out2" >"$work/log2" 2>&1
 rc=$?
-want="runs in lockstep only on the virtual clock, which this run does not have"
+want="--clock cooperative: the cooperative FW_Status handshake was retired: lockstep runs any firmware on its own virtual clock"
 if [ "$rc" -ne 2 ] || ! grep -qF -- "$want" "$work/log2"; then
-  echo "FAIL: --sync-producer firmware: rc $rc (want 2 and '$want'); output:"
+  echo "FAIL: --clock cooperative: rc $rc (want 2 and '$want'); output:"
   cat "$work/log2"
   exit 1
 fi

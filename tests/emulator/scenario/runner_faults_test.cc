@@ -232,13 +232,13 @@ class ScenarioFaultsRun : public ::testing::Test {
 };
 
 TEST_F(ScenarioFaultsRun, FrameDropRemovesExactlyTheFramesDueInItsWindow) {
-  // The emulator's SYNCs mark the motion start here (cooperative clock).
+  // The emulator's SYNCs mark the motion start here.
   Scenario plain = Short("");
-  testing::UseCooperativeClock(plain);
+  testing::UseEmulatorSync(plain);
   (void)Run(plain, "base");
   Scenario with_drop =
       Short("  - {type: frame, kind: drop, id: 0x174, probability: 1, start_s: 1.0, end_s: 1.5}\n");
-  testing::UseCooperativeClock(with_drop);
+  testing::UseEmulatorSync(with_drop);
   const nlohmann::json r = Run(with_drop, "drop");
   const auto base = ReadLog(dir_ / "base" / "can.log");
   const auto drop = ReadLog(dir_ / "drop" / "can.log");
@@ -517,7 +517,7 @@ TEST_F(ScenarioFaultsRun, HeartbeatTimeoutDoesNotDependOnTheHostSpeed) {
   ASSERT_NE(text.find(window), std::string::npos);
   text.replace(text.find(window), window.size(), "node_id: 2, start_s: 1.0, end_s: 2.5}");
   Scenario s = ParseScenario(text, path);
-  testing::UseCooperativeClock(s);  // on the virtual clock the host's speed cannot show
+  testing::UseEmulatorSync(s);  // SYNC at the emulator's instants, whatever the firmware's clock
   s.expectations.clear();
   s.timing.duration_s = 3.25;
   const double period_s = s.timing.sync_period_s;

@@ -81,27 +81,27 @@ TEST_F(ScenarioRun, SameSeedGivesIdenticalLogAndReport) {
   EXPECT_THAT(Slurp(dir_ / "a" / "report.html"), HasSubstr("<svg"));
 }
 
-// Lockstep is on the virtual clock (the firmware producing SYNC) unless the scenario names the
-// handshake, with which a SYNC-producing firmware is refused before anything starts (every
-// combination with the bus and the command line: timing_plan_test.cc).
-TEST_F(ScenarioRun, TheClockIsVirtualByDefaultAndRefusedWhereThereIsNone) {
+// Lockstep is on the virtual clock, the firmware producing SYNC unless the scenario makes the
+// emulator the SYNC producer (an emulated master); a firmware attached from outside cannot be
+// in lockstep (every combination with the bus and the command line: timing_plan_test.cc).
+TEST_F(ScenarioRun, TheClockIsVirtualAndAnAttachedFirmwareIsSentToRealTime) {
   Scenario s = ShortPaper000();
   s.timing.duration_s = 0.5;
   ASSERT_EQ(RunScenario(s, Options(dir_ / "v")).failure, "");
   const std::string events = Slurp(dir_ / "v" / "events.jsonl");
   EXPECT_THAT(events, HasSubstr("\"clock\":\"virtual\""));
   EXPECT_THAT(events, HasSubstr("\"sync_producer\":\"firmware\""));
-  Scenario cooperative = s;
-  testing::UseCooperativeClock(cooperative);
-  ASSERT_EQ(RunScenario(cooperative, Options(dir_ / "c")).failure, "");
-  const std::string c_events = Slurp(dir_ / "c" / "events.jsonl");
-  EXPECT_THAT(c_events, HasSubstr("\"clock\":\"cooperative\""));
-  EXPECT_THAT(c_events, HasSubstr("\"sync_producer\":\"emulator\""));
-  Scenario cooperative_producer = cooperative;  // as a program may put them together
-  cooperative_producer.timing.firmware_produces_sync = true;
-  EXPECT_THAT([&] { (void)RunScenario(cooperative_producer, Options(dir_ / "cp")); },
+  Scenario emulated_master = s;
+  testing::UseEmulatorSync(emulated_master);
+  ASSERT_EQ(RunScenario(emulated_master, Options(dir_ / "e")).failure, "");
+  const std::string e_events = Slurp(dir_ / "e" / "events.jsonl");
+  EXPECT_THAT(e_events, HasSubstr("\"clock\":\"virtual\""));
+  EXPECT_THAT(e_events, HasSubstr("\"sync_producer\":\"emulator\""));
+  Scenario attached = s;
+  attached.firmware.command.clear();
+  EXPECT_THAT([&] { (void)RunScenario(attached, Options(dir_ / "a")); },
               ::testing::ThrowsMessage<std::invalid_argument>(
-                  HasSubstr("which this run does not have (timing.clock: cooperative;")));
+                  HasSubstr("cannot run in lockstep: run it with --realtime")));
 }
 
 // Lockstep confines the run and its firmware to one CPU (RunOptions::cpu, `wheelhil run --cpu`):
@@ -266,15 +266,14 @@ TEST_F(ScenarioRun, Paper002SameSeedGivesIdenticalLogAndReport) {
   EXPECT_EQ(Slurp(dir_ / "a" / "estimate.csv"), Slurp(dir_ / "b" / "estimate.csv"));
 }
 
-// A cycle the bus leaves incomplete (encoder 3 silent for 30 ms, encoder 2 silent for the last
-// 30 ms, so the last SYNC's cycle never completes; both far below the firmware's heartbeat timeout,
-// which still runs on the host clock): lockstep waits for that cycle's FW_Status
-// after the next SYNC instead of on a firmware deadline, so the runs stay byte-identical, no
-// cycle times out, and the firmware reports the gaps (Degraded).
+// Cycles the bus leaves incomplete (encoder 3 silent for 30 ms, encoder 2 silent for the last
+// 30 ms, so the last SYNC's cycle never completes; both far below the firmware's heartbeat
+// timeout), the emulator producing SYNC: the runs stay byte-identical and the firmware reports
+// the gaps (Degraded).
 TEST_F(ScenarioRun, Paper002SilentEncoderStaysDeterministic) {
   Scenario s =
       LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) + "/scenarios/paper002_velocity.yaml");
-  testing::UseCooperativeClock(s);  // the handshake's incomplete cycle
+  testing::UseEmulatorSync(s);
   s.timing.duration_s = 1.0;
   s.expectations.clear();
   FaultSpec gap;
@@ -299,7 +298,6 @@ TEST_F(ScenarioRun, Paper002SilentEncoderStaysDeterministic) {
   EXPECT_EQ(ra.dump(1), rb.dump(1));
   const std::string events = Slurp(dir_ / "a" / "events.jsonl");
   EXPECT_EQ(events, Slurp(dir_ / "b" / "events.jsonl"));
-  EXPECT_THAT(events, HasSubstr("\"event\":\"last_cycle_incomplete\""));
   EXPECT_THAT(events, HasSubstr("\"event\":\"firmware_state\",\"state\":4"));
 }
 

@@ -29,11 +29,10 @@ inline nlohmann::json ReportWithoutWall(const std::filesystem::path& run_dir) {
   return r;
 }
 
-/// Puts a scenario on the cooperative FW_Status handshake with the emulator producing SYNC
-/// (timing.clock: cooperative), for tests of that mode and of what only it has.
-inline void UseCooperativeClock(Scenario& s) {
-  s.timing.virtual_clock = false;
-  s.timing.clock_named = true;
+/// The emulator produces SYNC (timing.sync_producer: emulator, an emulated CANopen master), the
+/// firmware runs on the virtual clock as ever: for tests that need the SYNCs at the emulator's
+/// instants.
+inline void UseEmulatorSync(Scenario& s) {
   s.timing.firmware_produces_sync = false;
   s.timing.sync_producer_named = true;
 }

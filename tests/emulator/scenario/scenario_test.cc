@@ -193,37 +193,31 @@ TEST(ScenarioLoader, ColumnPointsAtTheValue) {
 }
 
 TEST(ScenarioLoader, ClockAndSyncProducer) {
-  // The virtual clock with the firmware producing SYNC unless asked otherwise (the runner falls
-  // back to the handshake where there can be no virtual clock: ScenarioRun tests).
+  // The virtual clock, the only one, with the firmware producing SYNC unless asked otherwise.
   const Scenario plain = ParseScenario(Minimal(), kFile);
-  EXPECT_TRUE(plain.timing.virtual_clock);
-  EXPECT_FALSE(plain.timing.clock_named);
   EXPECT_TRUE(plain.timing.firmware_produces_sync);
   EXPECT_FALSE(plain.timing.sync_producer_named);
-  const Scenario c = ParseScenario(Minimal("timing: {clock: cooperative}\n"), kFile);
-  EXPECT_FALSE(c.timing.virtual_clock);
-  EXPECT_TRUE(c.timing.clock_named);
-  EXPECT_FALSE(c.timing.firmware_produces_sync);
-  // On the virtual clock the firmware produces SYNC unless the scenario says the emulator does.
   const Scenario v = ParseScenario(Minimal("timing: {clock: virtual}\n"), kFile);
-  EXPECT_TRUE(v.timing.virtual_clock);
   EXPECT_TRUE(v.timing.firmware_produces_sync);
   const Scenario ve =
       ParseScenario(Minimal("timing: {clock: virtual, sync_producer: emulator}\n"), kFile);
   EXPECT_FALSE(ve.timing.firmware_produces_sync);
+  EXPECT_TRUE(ve.timing.sync_producer_named);
+  // The retired handshake is named, with what replaced it and the fix.
+  EXPECT_THAT(
+      [] { (void)ParseScenario(Minimal("timing: {clock: cooperative}\n"), kFile); },
+      ThrowsMessage<std::invalid_argument>(
+          AllOf(HasSubstr(":10:17: timing.clock: the cooperative FW_Status handshake was retired"),
+                HasSubstr("virtual clock"), HasSubstr("(remove the key)"))));
   EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {clock: fast}\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(
-                  HasSubstr(":10:17: timing.clock: 'fast' is not virtual or cooperative")));
+                  HasSubstr(":10:17: timing.clock: 'fast' is not virtual")));
   EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {sync_producer: master}\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
-  // The handshake needs the emulator's SYNC; real time does not.
-  EXPECT_THAT(
-      [] {
-        (void)ParseScenario(Minimal("timing: {clock: cooperative, sync_producer: firmware}\n"),
-                            kFile);
-      },
-      ThrowsMessage<std::invalid_argument>(HasSubstr("only on the virtual clock")));
+  // Real time: the emulator produces SYNC unless the scenario says the firmware does.
+  EXPECT_FALSE(
+      ParseScenario(Minimal("timing: {mode: realtime}\n"), kFile).timing.firmware_produces_sync);
   EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
                   .timing.firmware_produces_sync);
   // The spin cost: off unless given, at most 10 ms.

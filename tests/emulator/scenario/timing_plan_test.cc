@@ -1,5 +1,5 @@
 // ResolveTiming: the run's one timing decision, as a table of cases (scenario timing block,
-// command line, bus) -> (clock, SYNC producer), and the combinations refused with their fix.
+// command line, bus) -> (clock, SYNC producer), and the combination refused with its fix.
 #include "emulator/scenario/timing_plan.h"
 
 #include <gmock/gmock.h>
@@ -18,10 +18,9 @@ using ::testing::HasSubstr;
 
 struct Case {
   const char* what;
-  // The scenario's timing block: timing.mode lockstep, timing.clock (nullopt: not named),
-  // timing.sync_producer (nullopt: not named).
+  // The scenario's timing block: timing.mode lockstep, timing.sync_producer (nullopt: not
+  // named).
   bool lockstep_mode;
-  std::optional<bool> virtual_clock;
   std::optional<bool> firmware_sync;
   // The command line and the bus.
   bool realtime;
@@ -36,10 +35,8 @@ struct Case {
 TimingChoice ChoiceOf(const Case& c) {
   TimingChoice choice;
   choice.spec.lockstep = c.lockstep_mode;
-  choice.spec.clock_named = c.virtual_clock.has_value();
-  choice.spec.virtual_clock = c.virtual_clock.value_or(true);
   choice.spec.sync_producer_named = c.firmware_sync.has_value();
-  choice.spec.firmware_produces_sync = c.firmware_sync.value_or(choice.spec.virtual_clock);
+  choice.spec.firmware_produces_sync = c.firmware_sync.value_or(c.lockstep_mode);
   choice.source_path = "robot.yaml";
   choice.realtime = c.realtime;
   choice.can_iface = c.can_iface;
@@ -50,25 +47,21 @@ TimingChoice ChoiceOf(const Case& c) {
 constexpr const char* kOk = nullptr;
 // clang-format off
 const Case kCases[] = {
-    {"the defaults", true, {}, {}, false, "", true, Clock::kVirtual, true, kOk},
-    {"the virtual clock named", true, true, {}, false, "", true, Clock::kVirtual, true, kOk},
-    {"virtual, the emulator's SYNC", true, {}, false, false, "", true, Clock::kVirtual, false, kOk},
-    {"--realtime", true, {}, {}, true, "", true, Clock::kWall, false, kOk},
-    {"timing.mode: realtime", false, {}, {}, false, "", true, Clock::kWall, false, kOk},
-    {"--realtime, the firmware's SYNC", true, {}, true, true, "", true, Clock::kWall, true, kOk},
-    {"a kernel interface", true, {}, {}, false, "vcan0", true, Clock::kVirtual, true, kOk},
-    {"virtual named on a kernel interface", true, true, {}, false, "vcan0", true, Clock::kVirtual,
-     true, kOk},
-    {"a kernel interface, cooperative", true, false, {}, false, "vcan0", true, Clock::kCooperative,
-     false, kOk},
-    {"a kernel interface, real time", true, {}, {}, true, "vcan0", true, Clock::kWall, false, kOk},
-    {"an attached firmware", true, {}, {}, false, "", false, Clock::kCooperative, false, kOk},
-    {"cooperative named", true, false, {}, false, "", true, Clock::kCooperative, false, kOk},
-    {"cooperative with the firmware's SYNC", true, false, true, false, "", true, Clock::kWall,
-     false, "runs in lockstep only on the virtual clock, which this run does not have "
-            "(timing.clock: cooperative"},
-    {"the firmware's SYNC, attached", true, {}, true, false, "", false, Clock::kWall, false,
-     "(no firmware.command;"},
+    {"the defaults", true, {}, false, "", true, Clock::kVirtual, true, kOk},
+    {"the emulator's SYNC", true, false, false, "", true, Clock::kVirtual, false, kOk},
+    {"--realtime", true, {}, true, "", true, Clock::kWall, false, kOk},
+    {"timing.mode: realtime", false, {}, false, "", true, Clock::kWall, false, kOk},
+    {"--realtime, the firmware's SYNC", true, true, true, "", true, Clock::kWall, true, kOk},
+    {"a kernel interface", true, {}, false, "vcan0", true, Clock::kVirtual, true, kOk},
+    {"a kernel interface, the emulator's SYNC", true, false, false, "vcan0", true,
+     Clock::kVirtual, false, kOk},
+    {"a kernel interface, real time", true, {}, true, "vcan0", true, Clock::kWall, false, kOk},
+    {"an attached firmware, real time", true, {}, true, "", false, Clock::kWall, false, kOk},
+    {"an attached firmware in lockstep", true, {}, false, "", false, Clock::kWall, false,
+     "a firmware attached from outside (no firmware.command) keeps its own clock, so it cannot "
+     "run in lockstep: run it with --realtime"},
+    {"an attached firmware on a kernel interface", true, {}, false, "vcan0", false, Clock::kWall,
+     false, "cannot run in lockstep"},
 };
 // clang-format on
 
@@ -92,22 +85,15 @@ TEST(TimingPlan, EveryCombinationOfScenarioCommandLineAndBusHasOnePlanOrARefusal
   }
 }
 
-TEST(TimingPlan, TheLinkTheSchedulerAndTheEventsReadTheClockFromThePlan) {
+TEST(TimingPlan, TheLinkAndTheEventsReadTheClockFromThePlan) {
   TimingPlan p;
   p.clock = Clock::kVirtual;
   EXPECT_EQ(p.pacing(), Pacing::kVirtualClock);
   EXPECT_TRUE(p.lockstep());
-  EXPECT_FALSE(p.handshake());
   EXPECT_STREQ(p.clock_name(), "virtual");
-  p.clock = Clock::kCooperative;
-  EXPECT_EQ(p.pacing(), Pacing::kLockstep);
-  EXPECT_TRUE(p.lockstep());
-  EXPECT_TRUE(p.handshake());
-  EXPECT_STREQ(p.clock_name(), "cooperative");
   p.clock = Clock::kWall;
   EXPECT_EQ(p.pacing(), Pacing::kRealTime);
   EXPECT_FALSE(p.lockstep());
-  EXPECT_FALSE(p.handshake());
   EXPECT_STREQ(p.clock_name(), "wall");
 }
 

@@ -524,11 +524,11 @@ TEST_F(VirtualTimeRun, AFirmwareStoppedForADebuggerIsWaitedForAndChangesNothing)
               HasSubstr("\"event\":\"firmware_stopped\""));
 }
 
-// --stop-at needs the virtual clock: on the cooperative handshake the run is refused with why.
+// --stop-at needs the virtual clock: in real time the run is refused with why.
 TEST_F(VirtualTimeRun, StopAtOffTheVirtualClockIsRefused) {
   Scenario s = LoadScenarioFile(kCustomerC);
-  testing::UseCooperativeClock(s);
-  RunOptions o = testing::BuildTreeRunOptions(dir_ / "coop");
+  RunOptions o = testing::BuildTreeRunOptions(dir_ / "wall");
+  o.realtime = true;
   o.stop_firmware_at_ns = 1'000'000'000;
   EXPECT_THAT([&] { (void)RunScenario(s, o); },
               ThrowsMessage<std::invalid_argument>(
@@ -588,7 +588,6 @@ TEST_F(VirtualTimeRun, CustomerCFirmwareRunsUnchangedInRealTime) {
 TEST_F(VirtualTimeRun, ReferenceFirmwareProducesSyncWithItsShippedConfig) {
   Scenario s = LoadScenarioFile(std::string(WHEELHIL_SOURCE_DIR) +
                                 "/scenarios/smoke/paper000_slip_short.yaml");
-  s.timing.virtual_clock = true;
   s.timing.firmware_produces_sync = true;
   const auto [a, log] = RunTwiceSameBytes(s, dir_);
   ASSERT_EQ(a.failure, "");
@@ -616,7 +615,6 @@ TEST_F(VirtualTimeRun, ShippedScenariosMeetTheirExpectationsWithTheFirmwareProdu
   ASSERT_GE(files.size(), 15u);
   for (const auto& f : files) {
     Scenario s = LoadScenarioFile(f.string());
-    s.timing.virtual_clock = true;
     s.timing.firmware_produces_sync = true;
     const RunResult r = RunScenario(s, testing::BuildTreeRunOptions(dir_ / f.stem()));
     EXPECT_EQ(r.failure, "") << f.filename();
