@@ -28,17 +28,6 @@ Cia402DriveDevice::Cia402DriveDevice(const Cia402DriveDeviceConfig& config)
 
 Cia402DriveDevice::~Cia402DriveDevice() = default;
 
-std::optional<Device::SyncAnswer> Cia402DriveDevice::sync_answer() const {
-  const auto& t = config_.node.tpdo[0];
-  if (!t.valid || t.type == 0 || t.type > 240) return std::nullopt;
-  unsigned bits = 0;
-  for (std::uint32_t e : t.map) bits += e & 0xFF;
-  const std::uint32_t id =
-      t.cob_id != 0 ? t.cob_id
-                    : bus::canopen::CobId(bus::canopen::Function::kTpdo1, config_.node.node_id);
-  return SyncAnswer{id, static_cast<std::uint8_t>((bits + 7) / 8)};
-}
-
 std::int64_t Cia402DriveDevice::NextEventNs() const {
   std::int64_t next = node_.NextEventNs();
   for (std::size_t i = 0; i < drive_faults_.size(); ++i) {

@@ -49,7 +49,6 @@ class Cia402DriveDevice final : public Device {
   }
   void ArmFaults(DeviceFaults faults) override;
   std::uint8_t canopen_node_id() const override { return config_.node.node_id; }
-  std::optional<SyncAnswer> sync_answer() const override;
 
   const Cia402DriveNode& node() const { return node_; }
 

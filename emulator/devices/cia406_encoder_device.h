@@ -24,8 +24,6 @@ struct Cia406EncoderDeviceConfig {
   EncoderParams encoder;         ///< The encoder itself (its direction set from `direction`).
   Cia406NodeConfig node;         ///< The CANopen node.
   double initial_angle_rad = 0;  ///< The wheel's angle when the encoder powers on.
-  /// TPDO1's length in the node's DBC (the SYNC answer the firmware accepts); 0: none.
-  std::uint8_t tpdo1_len = 0;
 };
 
 class Cia406EncoderDevice final : public Device {
@@ -54,10 +52,6 @@ class Cia406EncoderDevice final : public Device {
   std::int64_t missed_counts() const override;
 
   std::uint8_t canopen_node_id() const override { return config_.node.node_id; }
-  std::optional<SyncAnswer> sync_answer() const override {
-    return SyncAnswer{bus::canopen::CobId(bus::canopen::Function::kTpdo1, config_.node.node_id),
-                      config_.tpdo1_len};
-  }
   std::string channel_label(const std::string&) const override {
     return "encoder " + config_.wheel_name;
   }

@@ -114,13 +114,6 @@ class Device {
   virtual std::string fault_name() const { return name(); }
   /// Its CANopen node id (1..127); 0: not a CANopen node.
   virtual std::uint8_t canopen_node_id() const { return 0; }
-  /// The frame it sends in answer to every SYNC once started (a CANopen TPDO), if any: the
-  /// firmware's cycle is complete on the bus when every such frame went out.
-  struct SyncAnswer {
-    std::uint32_t id = 0;
-    std::uint8_t len = 0;  ///< The length the firmware accepts (its DBC's).
-  };
-  virtual std::optional<SyncAnswer> sync_answer() const { return std::nullopt; }
   /// Ready for the motion phase (a CANopen node: started by the master).
   virtual bool Ready() const { return true; }
   /// A drive: the wheels it powers (a CiA 402 drive one, a DBC motor controller maybe several)

@@ -494,47 +494,4 @@ bool FirmwareLink::RunAhead(VirtualClock& clock, double timeout_s, FirmwareProce
   return ok;
 }
 
-bool FirmwareLink::WaitFor(const std::function<bool()>& done, double timeout_s,
-                           FirmwareProcess& process, const FrameFn& on_frame) {
-  const auto t0 = Clock::now();
-  ++handovers_;
-  while (!done()) {
-    const double left = timeout_s - WallSeconds(t0);
-    if (left <= 0) return false;
-    bus::ReceivedFrame rx;
-    const int wait_ms = std::max(1, std::min(50, static_cast<int>(left * 1000)));
-    if (pumped_) {
-      // Frames already routed to us first; else one broker pass, which hands the firmware what
-      // the emulator sent since the last one and then sleeps until the firmware writes.
-      if (broker_->ReceiveLocal(local_port_, &rx.frame)) {
-        on_frame(rx.frame);
-        continue;
-      }
-      Pump(wait_ms);
-      if (run_.failed()) return false;
-      // waitpid costs a system call: look at most every 20 ms (a pass ends on any traffic).
-      if (process.running() && WallSeconds(last_exit_check_) > 0.02) {
-        last_exit_check_ = Clock::now();
-        if (process.Exited()) {
-          FailExited(process);
-          return false;
-        }
-      }
-      continue;
-    }
-    const auto ec = can_->Receive(rx, wait_ms);
-    if (broker_) {
-      CheckBrokerLimits();
-      if (run_.failed()) return false;
-    }
-    if (!ec) {
-      on_frame(rx.frame);
-    } else if (process.running() && process.Exited()) {
-      FailExited(process);
-      return false;
-    }
-  }
-  return true;
-}
-
 }  // namespace wheelhil::emulator::firmware

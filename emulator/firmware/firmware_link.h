@@ -2,11 +2,12 @@
 /// The run's connection to the firmware's CAN interface. By default a private userspace bus:
 /// a UcanBroker on "ucan0" in a fresh runtime directory (exported as WHEELHIL_UCAN_DIR; the
 /// firmware reaches it through the SocketCAN interposition library). In lockstep the run's own
-/// thread routes that bus (UcanBroker::Pump) through an in-process port, so a cycle costs two
+/// thread routes that bus (UcanBroker::Pump) through an in-process port, so a turn costs two
 /// context switches (to the firmware and back) rather than one per hop through a broker thread;
 /// otherwise, and on a kernel interface (--can vcan0), a SocketCAN socket.
 /// Frames to the firmware go out with Send; the firmware's frames come in only while the run
-/// waits for it (WaitFor) or drains it (Drain, real time), handed to the frame callback.
+/// settles it (Settle, virtual clock) or drains it (Drain, real time), handed to the frame
+/// callback.
 /// Run-time failures (the bus stopped, the firmware exited) go to the RunContext.
 /// Thread-compatible (one run per process: it sets WHEELHIL_UCAN_DIR in this process).
 
@@ -32,10 +33,10 @@ class FirmwareLink {
  public:
   using FrameFn = std::function<void(const bus::CanFrame&)>;
 
-  /// How the run waits for the firmware: at wall-clock instants, in lockstep by handshake, or
-  /// in lockstep on the firmware's virtual clock (Settle; the private bus then tells its ring
-  /// clients that every pass drains their frames, so they send no doorbells).
-  enum class Pacing { kRealTime, kLockstep, kVirtualClock };
+  /// How the run meets the firmware: at wall-clock instants, or in lockstep on the firmware's
+  /// virtual clock (Settle; the private bus then tells its ring clients that every pass drains
+  /// their frames, so they send no doorbells).
+  enum class Pacing { kRealTime, kVirtualClock };
 
   /// `can_iface` empty: the private userspace bus. Throws what the transport throws for a
   /// kernel interface that cannot be opened.
@@ -54,10 +55,6 @@ class FirmwareLink {
 
   /// A frame for the firmware; false when it could not be handed over.
   bool Send(const bus::CanFrame& frame);
-  /// Hands the firmware's frames to `on_frame` until `done()` or timeout_s of wall time; false
-  /// on timeout or a failure (in the RunContext).
-  bool WaitFor(const std::function<bool()>& done, double timeout_s, FirmwareProcess& process,
-               const FrameFn& on_frame);
   /// Real time: hands over what the firmware sent so far, waiting at most timeout_ms for it.
   void Drain(int timeout_ms, const FrameFn& on_frame);
   /// Virtual time (pumped bus): ends the firmware's waits due at the clock's time, then routes
@@ -95,7 +92,7 @@ class FirmwareLink {
   /// ever had one).
   bool FirmwareConnected();
   /// The firmware's turns so far: settles that did not find it still blocked with nothing
-  /// new for it, and waits for its answer (WaitFor).
+  /// new for it, and runahead windows.
   std::uint64_t handovers() const { return handovers_; }
   /// Closes the transport and the private bus (its runtime directory goes with it).
   void Close();

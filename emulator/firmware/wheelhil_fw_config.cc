@@ -49,11 +49,9 @@ std::string DerivedWheelhilFwConfig(const std::string& config_path,
   }
   cfg["sync"]["produce"] = false;
   cfg["sync"]["period_s"] = run.sync_period_s;
-  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames. In
-  // lockstep there is none: the firmware would apply it on its own clock, which is not the
-  // virtual time of the frames, so whether a frame counts as in time would depend on how the
-  // host scheduled the run. The next SYNC closes an incomplete cycle instead (docs/firmware.md).
-  cfg["sync"]["deadline_s"] = run.lockstep ? 0.0 : run.sync_period_s;
+  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames (on
+  // the virtual clock it is judged on the frames' own time).
+  cfg["sync"]["deadline_s"] = run.sync_period_s;
   YAML::Emitter e;
   e << cfg;
   return std::string("# Derived by wheelhil run from ") + config_path + "\n" + e.c_str() + "\n";

@@ -14,7 +14,6 @@ namespace wheelhil::emulator::firmware {
 
 struct WheelhilFwRunSettings {
   double sync_period_s = 0.01;
-  bool lockstep = true;
   /// False: the sync.* keys stay as the config has them (a firmware on the virtual clock that
   /// produces SYNC itself runs with its own settings).
   bool set_sync = true;

@@ -59,10 +59,6 @@ std::unique_ptr<Device> MakeEncoder(const DeviceBuildContext& c,
       dc.node.heartbeat_ms = static_cast<std::uint16_t>(sensors.heartbeat_ms);
     }
     dc.node.node_id = static_cast<std::uint8_t>(e.node_id);
-    const bus::DbcMessage* tpdo1 =
-        codec->database().FindMessage(
-            bus::canopen::CobId(bus::canopen::Function::kTpdo1, dc.node.node_id), false);
-    dc.tpdo1_len = tpdo1 != nullptr ? static_cast<std::uint8_t>(tpdo1->length) : 0;
     return std::make_unique<Cia406EncoderDevice>(dc, codec);
   }
 }

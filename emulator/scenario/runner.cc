@@ -23,9 +23,9 @@
 #include "bus/vector_logs.h"
 #include "bus/vtime_protocol.h"
 #include "emulator/devices/device.h"
+#include "emulator/firmware/firmware_bus_watch.h"
 #include "emulator/firmware/firmware_link.h"
 #include "emulator/firmware/firmware_process.h"
-#include "emulator/firmware/lockstep_handshake.h"
 #include "emulator/firmware/virtual_clock.h"
 #include "emulator/firmware/wheelhil_fw_config.h"
 #include "emulator/scenario/bus_forecast.h"
@@ -110,12 +110,11 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
     hub_->AdvanceTo(t_ns);
   }
   std::int64_t bus_now_ns() const override { return hub_->now_ns(); }
-  int SendSync(std::int64_t t_ns) override;
+  void SendSync(std::int64_t t_ns) override;
   void AfterMotionStep() override { Progress(false); }
 
-  // sim::FirmwareGate. On the virtual clock the firmware is not waited for by handshake:
-  // wherever real time would take what it sent, the run lets it run until it blocks.
-  bool lockstep() const override { return false; }
+  // sim::FirmwareGate: on the virtual clock the firmware runs until it blocks wherever real
+  // time takes what it sent.
   void Drain() override {
     if (timing_.virtual_clock()) {
       SettleFirmware();
@@ -124,11 +123,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
       link_->Drain(0, [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
     }
   }
-  void WaitBootAnswers() override;
-  bool CycleCompleteOnBus() const override { return handshake_->CycleCompleteOnBus(); }
-  bool LatestSyncOnWire() const override { return handshake_->LatestSyncOnWire(); }
-  void WaitStatus(int cycle, std::int64_t k) override;
-  void WaitLastStatus(int cycle, std::int64_t k) override;
+  void AfterLastCycle() override;
 
  private:
   void Build();
@@ -153,7 +148,6 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // opened the bus.
   void StartFirmwareOnVirtualClock();
   // Lockstep: waits until `done` (wall-clock timeout); false on timeout or failure.
-  bool WaitFirmware(const std::function<bool()>& done);
   void OnFirmwareFrame(const bus::CanFrame& f);
   void StartWorker(std::int64_t steps);
   void RunPhases();
@@ -161,7 +155,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   json Report(double wall_s);
   // can.log again in the scenario's other formats (logs:), beside it.
   void WriteOtherLogs();
-  std::uint64_t MotionCycles() const { return handshake_->syncs_sent() - syncs_before_motion_; }
+  std::uint64_t MotionCycles() const { return bus_watch_->syncs_sent() - syncs_before_motion_; }
   // The time of an estimate: since the motion start, negative before it (not scored).
   double ScoredSeconds(std::int64_t t_ns) const {
     return motion_started_ ? run_.MotionSeconds(t_ns) : -1.0;
@@ -185,7 +179,7 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   std::unique_ptr<firmware::FirmwareLink> link_;
   std::unique_ptr<firmware::VirtualClock> clock_;
   firmware::FirmwareProcess firmware_;
-  std::unique_ptr<firmware::LockstepHandshake> handshake_;
+  std::unique_ptr<firmware::FirmwareBusWatch> bus_watch_;
   std::unique_ptr<scoring::EstimateDecoder> estimates_;
   std::unique_ptr<scoring::TruthRecorder> truth_;
   std::unique_ptr<FaultPlan> faults_;
@@ -272,40 +266,34 @@ void Run::CommandDrives() {
   physics_->SetDrives(drives_);
 }
 
-int Run::SendSync(std::int64_t t_ns) {
+void Run::SendSync(std::int64_t t_ns) {
   bus::CanFrame sync;
   sync.id = bus::canopen::kSyncCobId;
   sync.len = 0;
   hub_->EnqueueSync(sync, t_ns);
-  const int cycle = static_cast<int>(handshake_->syncs_sent() % 256);
   estimates_->OnSync(run_.MotionSeconds(t_ns));
-  handshake_->OnSyncSent();
-  return cycle;
+  bus_watch_->OnSyncSent();
 }
 
-void Run::WaitBootAnswers() {
-  const auto& awaiting = handshake_->awaiting_nodes();
-  if (!awaiting.empty() && !WaitFirmware([&] { return awaiting.empty(); })) {
-    run_.Fail(
-        fmt::format("timeout: the firmware did not answer node {}'s boot-up/SDO within {} s (wall)",
-                    *awaiting.begin(), s_.timing.timeout_s));
-  }
-}
-
-void Run::WaitLastStatus(int cycle, std::int64_t k) {
+void Run::AfterLastCycle() {
+  // No answer is awaited: the firmware gets the last cycle's frames (at most one period of bus)
+  // and runs until it blocks, or in real time has that period of wall time to send.
+  const std::int64_t period_ns = std::llround(s_.timing.sync_period_s * 1e9);
   if (timing_.virtual_clock()) {
-    // No answer is awaited: the firmware gets the last cycle's frames (at most one period of
-    // bus) and runs until it blocks.
-    const std::int64_t until = hub_->now_ns() + std::llround(s_.timing.sync_period_s * 1e9);
+    const std::int64_t until = hub_->now_ns() + period_ns;
     while (!run_.failed() && hub_->now_ns() < until) {
       hub_->AdvanceTo(std::min(until, hub_->now_ns() + physics_->step_ns() / 2));
       SettleFirmware();
     }
     return;
   }
-  if (!WaitFirmware([&] { return handshake_->StatusSeen(cycle); })) {
-    run_.Fail(fmt::format("timeout: no FW_Status for the last cycle {} within {} s", k,
-                          s_.timing.timeout_s));
+  const auto until = Clock::now() + std::chrono::nanoseconds(period_ns);
+  hub_->AdvanceTo(hub_->now_ns() + period_ns);
+  sim::WallTimer timer(wall_.handover_s);
+  for (auto now = Clock::now(); now < until && !run_.failed(); now = Clock::now()) {
+    const auto left_ms = std::chrono::duration_cast<std::chrono::milliseconds>(until - now);
+    link_->Drain(std::max<int>(1, static_cast<int>(left_ms.count())),
+                 [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
   }
 }
 
@@ -327,23 +315,10 @@ void Run::OnFirmwareFrame(const bus::CanFrame& f) {
   if (timing_.firmware_produces_sync && f.id == bus::canopen::kSyncCobId && !f.rtr) {
     // The firmware is the SYNC producer: its SYNCs number the cycles.
     estimates_->OnSync(ScoredSeconds(hub_->now_ns()));
-    handshake_->OnSyncSent();
+    bus_watch_->OnSyncSent();
   }
-  handshake_->OnFirmwareFrame(f);
+  bus_watch_->OnFirmwareFrame(f);
   if (motion_started_) estimates_->OnFrame(f, ScoredSeconds(hub_->now_ns()));
-}
-
-bool Run::WaitFirmware(const std::function<bool()>& done) {
-  sim::WallTimer timer(wall_.handover_s);
-  return link_->WaitFor(done, s_.timing.timeout_s, firmware_,
-                        [this](const bus::CanFrame& f) { OnFirmwareFrame(f); });
-}
-
-void Run::WaitStatus(int cycle, std::int64_t k) {
-  if (!WaitFirmware([&] { return handshake_->StatusSeen(cycle); })) {
-    run_.Fail(fmt::format("timeout: no FW_Status for cycle {} within {} s (wall) at t = {:.3f} s",
-                          k, s_.timing.timeout_s, run_.MotionSeconds(run_.now_ns)));
-  }
 }
 
 void Run::SettleFirmware() {
@@ -674,8 +649,8 @@ void Run::Build() {
     if (firmware_ahead_ns_ >= 0 && run_.now_ns <= firmware_ahead_ns_) return true;
     return link_->Send(f);
   });
-  handshake_ = std::make_unique<firmware::LockstepHandshake>(fw_dbc, *hub_, run_);
-  hub_->SetObserver(handshake_.get());
+  bus_watch_ = std::make_unique<firmware::FirmwareBusWatch>(fw_dbc, *hub_, run_);
+  hub_->SetObserver(bus_watch_.get());
   estimates_ = std::make_unique<scoring::EstimateDecoder>(
       s_.firmware.outputs ? scoring::OutputBinding::Resolve(*s_.firmware.outputs, o_.dbc_dir)
                           : scoring::OutputBinding());
@@ -700,10 +675,9 @@ void Run::StartFirmware() {
   if (!s_.firmware.config.empty()) {
     // A firmware config is wheelhil-fw's convention: it gets the run's SYNC settings.
     const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
-    scoring::WriteText(cfg_path,
-                       firmware::DerivedWheelhilFwConfig(
-                           s_.firmware.config, s_.firmware.overrides_yaml,
-                           {s_.timing.sync_period_s, false, !timing_.firmware_produces_sync}));
+    scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(
+                                     s_.firmware.config, s_.firmware.overrides_yaml,
+                                     {s_.timing.sync_period_s, !timing_.firmware_produces_sync}));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",
@@ -781,7 +755,7 @@ void Run::RunPhases() {
 
   // Boot: the nodes boot, the firmware configures and starts them.
   const std::int64_t boot_limit_ns = std::llround(10e9);
-  tick.Start({.motion = false, .record_truth = true, .wait_boot_answers = true, .steps = -1});
+  tick.Start({.motion = false, .record_truth = true, .steps = -1});
   loop.Run({"boot", sources({&tick}), [&] {
               if (run_.now_ns > boot_limit_ns) {
                 std::string waiting;
@@ -797,13 +771,12 @@ void Run::RunPhases() {
               }
               return std::all_of(devices_.begin(), devices_.end(),
                                  [](const auto& d) { return d->Ready(); }) &&
-                     handshake_->awaiting_nodes().empty();
+                     bus_watch_->awaiting_nodes().empty();
             }});
 
   // Settle: the vehicle at rest on its suspension defines the start.
   tick.Start({.motion = false,
               .record_truth = false,
-              .wait_boot_answers = false,
               .steps = std::llround(0.2e9) / physics_->step_ns() +
                        (std::llround(0.2e9) % physics_->step_ns() != 0 ? 1 : 0)});
   loop.Run({"settle", sources({&tick}), steps_done});
@@ -818,29 +791,18 @@ void Run::RunPhases() {
   run_.motion0_s = static_cast<double>(run_.now_ns) * 1e-9;
   motion_started_ = true;
   before_motion_s_ = WallSeconds(wall0_);
-  syncs_before_motion_ = handshake_->syncs_sent();
+  syncs_before_motion_ = bus_watch_->syncs_sent();
   physics_->StartMotion(run_.now_ns);
   truth_->StartMotion(run_.now_ns, physics_->vehicle().body_truth());
   // Its bus time (can.log's clock) aligns can.log with truth.csv.
   run_.events.push_back(
       json{{"t_s", 0.0}, {"event", "motion_start"}, {"bus_time_s", run_.motion0_s}});
   faults_->Arm(run_.now_ns, devices_, *hub_);
-  std::vector<firmware::SyncAnswer> answers;
-  for (std::size_t d = 0; d < devices_.size(); ++d) {
-    if (const auto a = devices_[d]->sync_answer()) {
-      answers.push_back({static_cast<int>(d), a->id, a->len});
-    }
-  }
-  handshake_->ExpectSyncAnswers(std::move(answers));
   // Closed loop: the physics depends on the bus, so it cannot run ahead.
   if (timing_.lockstep() && !run_.failed() && !s_.firmware_motion)
     StartWorker(cycles * steps_per_cycle);
-  tick.Start({.motion = true,
-              .record_truth = true,
-              .wait_boot_answers = false,
-              .steps = cycles * steps_per_cycle});
-  sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns, period_ns,
-                       cycles);
+  tick.Start({.motion = true, .record_truth = true, .steps = cycles * steps_per_cycle});
+  sim::SyncSource sync(*this, *this, run_, tick, run_.now_ns, steps_per_cycle * step_ns, cycles);
   if (timing_.firmware_produces_sync) {
     loop.Run({"motion", sources({&tick}), steps_done});
   } else {

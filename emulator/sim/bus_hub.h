@@ -2,8 +2,8 @@
 /// The run's CAN bus: the bus timing model (CanBusModel, every frame's completion instant),
 /// the bus-level faults around it (FaultyCanBus: error bursts, bus-off, floods), the frame
 /// faults on each device's output (FrameFaultFilter), can.log, and the distribution of every
-/// frame that completes on the wire: to the firmware (its link), to a BusObserver (the lockstep
-/// handshake) and to every device but its sender. A device's frames take the path
+/// frame that completes on the wire: to the firmware (its link), to a BusObserver (the run's
+/// firmware bus watch) and to every device but its sender. A device's frames take the path
 ///   device -> its device faults (in the device) -> frame faults -> bus-off -> bus model.
 /// The SYNC producer's and the firmware's frames enter the bus model directly.
 /// Inside a step the bus advances in 20 us slices while frames are in flight, so the answers
@@ -30,7 +30,7 @@ namespace wheelhil::emulator::sim {
 
 class BackgroundCandump;
 
-/// Who else sees the wire: the run's lockstep bookkeeping.
+/// Who else sees the wire: the run's watch of what the firmware answers.
 class BusObserver {
  public:
   virtual ~BusObserver() = default;

@@ -5,13 +5,11 @@
 /// for (FirmwareGate), so the order can be tested with fakes.
 ///
 /// A step to t runs, in this order: physics (t - step to t), devices (node faults, the devices
-/// at t, delayed frames, device fault windows), truth, bus (to t), firmware: real time takes
-/// what the firmware sent; lockstep start-up waits for its reaction to every boot-up and SDO
-/// answer; the first step of a cycle waits for the cycle's FW_Status once every sync answer is
-/// on the wire, else the next SYNC closes the cycle. A SYNC at t: truth (forced), the SYNC,
-/// the bus to t + step/2, the status of a pending cycle, and at the last SYNC the last cycle's
-/// status. After a failure the steps of the current cycle still run; the next SYNC ends the
-/// phase. Thread-compatible.
+/// at t, delayed frames, device fault windows), truth, bus (to t), firmware (Drain: on the
+/// virtual clock it runs until all of it is blocked; in real time the run takes what it sent).
+/// A SYNC at t: truth (forced), the SYNC, the bus to t + step/2, and after the last SYNC the
+/// firmware's last cycle (AfterLastCycle). After a failure the steps of the current cycle still
+/// run; the next SYNC ends the phase. Thread-compatible.
 
 #include <cstdint>
 #include <functional>
@@ -35,29 +33,22 @@ class RunStages {
   virtual void RecordTruth(std::int64_t t_ns, bool force) = 0;
   virtual void AdvanceBus(std::int64_t t_ns) = 0;
   virtual std::int64_t bus_now_ns() const = 0;
-  /// Puts a SYNC on the bus at t_ns; returns its cycle number (mod 256).
-  virtual int SendSync(std::int64_t t_ns) = 0;
+  /// Puts a SYNC on the bus at t_ns.
+  virtual void SendSync(std::int64_t t_ns) = 0;
   /// Called after every motion step (a progress line).
   virtual void AfterMotionStep() {}
 };
 
-/// The firmware as the sources wait for it.
+/// The firmware as the sources hand it the bus.
 class FirmwareGate {
  public:
   virtual ~FirmwareGate() = default;
-  virtual bool lockstep() const = 0;
-  /// Real time: hands over what the firmware sent so far.
+  /// The firmware takes what the bus brought it: on the virtual clock it runs until all of it
+  /// is blocked; in real time the run takes what it sent so far.
   virtual void Drain() = 0;
-  /// Lockstep start-up: waits for the reaction to every pending boot-up and SDO answer
-  /// (a timeout is a failure in the run).
-  virtual void WaitBootAnswers() = 0;
-  /// The latest SYNC is on the wire and every device that answers SYNC answered it.
-  virtual bool CycleCompleteOnBus() const = 0;
-  virtual bool LatestSyncOnWire() const = 0;
-  /// Waits for the FW_Status of `cycle` (mod 256), the k-th cycle of the run.
-  virtual void WaitStatus(int cycle, std::int64_t k) = 0;
-  /// The same for the last cycle (its own message).
-  virtual void WaitLastStatus(int cycle, std::int64_t k) = 0;
+  /// After the last SYNC: the firmware gets the last cycle's frames (at most one period of bus)
+  /// and its answers are taken.
+  virtual void AfterLastCycle() = 0;
 };
 
 class StepSource final : public EventSource {
@@ -65,8 +56,7 @@ class StepSource final : public EventSource {
   struct Options {
     bool motion = false;
     bool record_truth = true;
-    bool wait_boot_answers = false;  // lockstep start-up
-    std::int64_t steps = -1;         // steps to run, -1: until the phase is done
+    std::int64_t steps = -1;  // steps to run, -1: until the phase is done
   };
   StepSource(RunStages& stages, FirmwareGate& gate, RunContext& run)
       : stages_(stages), gate_(gate), run_(run) {}
@@ -79,12 +69,8 @@ class StepSource final : public EventSource {
   bool StopsOnFailure() const override { return !o_.motion || physics_failed_; }
   void Fire(std::int64_t t_ns) override;
 
-  /// The next step is the first of cycle `cycle` (mod 256), the k-th of the run.
-  void OpenCycle(int cycle, std::int64_t k);
   /// No further step in this phase.
   void Stop() { o_.steps = fired_; }
-  /// The cycle whose FW_Status the next SYNC awaits (-1: none).
-  int pending_status_cycle = -1;
 
  private:
   RunStages& stages_;
@@ -94,34 +80,31 @@ class StepSource final : public EventSource {
   std::int64_t fired_ = 0;
   std::int64_t next_ns_ = 0;
   bool physics_failed_ = false;
-  bool first_of_cycle_ = false;
-  int cycle_ = -1;
-  std::int64_t cycle_k_ = 0;
 };
 
 class SyncSource final : public EventSource {
  public:
-  /// SYNC k = 0..cycles at t0_ns + k * cycle_ns; `period_ns` bounds the bus waits.
+  /// SYNC k = 0..cycles at t0_ns + k * cycle_ns.
   SyncSource(RunStages& stages, FirmwareGate& gate, RunContext& run, StepSource& steps,
-             std::int64_t t0_ns, std::int64_t cycle_ns, std::int64_t period_ns,
-             std::int64_t cycles)
-      : stages_(stages), gate_(gate), run_(run), steps_(steps), t0_ns_(t0_ns), cycle_ns_(cycle_ns),
-        period_ns_(period_ns), cycles_(cycles) {}
+             std::int64_t t0_ns, std::int64_t cycle_ns, std::int64_t cycles)
+      : stages_(stages),
+        gate_(gate),
+        run_(run),
+        steps_(steps),
+        t0_ns_(t0_ns),
+        cycle_ns_(cycle_ns),
+        cycles_(cycles) {}
   std::int64_t NextEventNs() const override {
     return k_ <= cycles_ ? t0_ns_ + k_ * cycle_ns_ : kNever;
   }
   void Fire(std::int64_t t_ns) override;
 
  private:
-  // Moves the bus on in half steps (at most one period) until `done`.
-  void AdvanceBusUntil(const std::function<bool()>& done);
-  void CloseLastCycle(int cycle);
-
   RunStages& stages_;
   FirmwareGate& gate_;
   RunContext& run_;
   StepSource& steps_;
-  std::int64_t t0_ns_, cycle_ns_, period_ns_, cycles_;
+  std::int64_t t0_ns_, cycle_ns_, cycles_;
   std::int64_t k_ = 0;
 };
 

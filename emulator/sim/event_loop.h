@@ -6,7 +6,7 @@
 /// phase's order. A run is a sequence of phases (boot, settle, motion) of this one loop.
 ///
 /// Lockstep and real time differ only in the wait policy: lockstep never waits for the wall
-/// clock (the firmware link blocks where the firmware's answer is needed instead); real time
+/// clock (the firmware runs on the virtual clock until all of it is blocked instead); real time
 /// waits for each instant's absolute wall-clock deadline (realtime/realtime_pacer.h), anchored
 /// at the start of the phase.
 ///

@@ -1,6 +1,6 @@
 // The run's step and SYNC sources (emulator/sim/cycle_scheduler.h) on fake stages and a fake
-// firmware gate: the order of the stages in a cycle, when lockstep waits for a cycle's status,
-// a cycle closed by the next SYNC, the last cycle, failures and real time.
+// firmware gate: the order of the stages in a cycle, the firmware drained after every step,
+// the last cycle, and a failure.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -35,31 +35,20 @@ class FakeRun final : public RunStages, public FirmwareGate {
     if (t % 10 != 0) Log("bus", t);  // the half-step flushes only
   }
   std::int64_t bus_now_ns() const override { return bus_ns_; }
-  int SendSync(std::int64_t t) override {
-    Log("sync", t);
-    return syncs_++;
+  void SendSync(std::int64_t t) override { Log("sync", t); }
+  void Drain() override {
+    Log("drain", run_.now_ns);
+    if (fail_at_ == run_.now_ns) run_.Fail("the firmware exited");
   }
-  bool lockstep() const override { return lockstep_; }
-  void Drain() override { Log("drain", run_.now_ns); }
-  void WaitBootAnswers() override { Log("boot-wait", run_.now_ns); }
-  bool CycleCompleteOnBus() const override { return complete_; }
-  bool LatestSyncOnWire() const override { return true; }
-  void WaitStatus(int cycle, std::int64_t k) override {
-    log.push_back(fmt::format("status{}/{}@{}", cycle, k, run_.now_ns));
-    if (fail_status_) run_.Fail("timeout");
-  }
-  void WaitLastStatus(int cycle, std::int64_t) override {
-    log.push_back(fmt::format("last{}@{}", cycle, run_.now_ns));
-  }
+  void AfterLastCycle() override { Log("last", run_.now_ns); }
 
   std::vector<std::string> log;
-  bool lockstep_ = true, complete_ = true, fail_status_ = false;
+  std::int64_t fail_at_ = -1;
 
  private:
   void Log(const char* what, std::int64_t t) { log.push_back(fmt::format("{}@{}", what, t)); }
   RunContext& run_;
   std::int64_t bus_ns_ = 0;
-  int syncs_ = 0;
 };
 
 // Two cycles of two steps from t = 0 (SYNCs at 0, 20 and the closing one at 40).
@@ -67,8 +56,8 @@ std::vector<std::string> Motion(FakeRun& fake, RunContext& run) {
   LockstepWait wait;
   EventLoop loop(run, wait);
   StepSource steps(fake, fake, run);
-  steps.Start({.motion = true, .record_truth = true, .wait_boot_answers = false, .steps = 4});
-  SyncSource sync(fake, fake, run, steps, 0, 20, 20, 2);
+  steps.Start({.motion = true, .record_truth = true, .steps = 4});
+  SyncSource sync(fake, fake, run, steps, 0, 20, 2);
   loop.Run({"motion", {&steps, &sync}, nullptr});
   std::vector<std::string> out;
   for (const auto& l : fake.log) {
@@ -77,62 +66,34 @@ std::vector<std::string> Motion(FakeRun& fake, RunContext& run) {
   return out;
 }
 
-TEST(CycleScheduler, LockstepWaitsAfterTheFirstStepOfACompleteCycle) {
+TEST(CycleScheduler, EveryStepDrainsTheFirmwareAndTheLastSyncClosesTheLastCycle) {
   RunContext run;
   FakeRun fake(run);
   EXPECT_THAT(Motion(fake, run),
-              ElementsAre("truth!@0", "sync@0", "bus@5", "devices@10", "status0/0@10",
-                          "devices@20", "truth!@20", "sync@20", "bus@25", "devices@30",
-                          "status1/1@30", "devices@40", "truth!@40", "sync@40", "bus@45",
-                          "last2@40"));
-}
-
-TEST(CycleScheduler, AnIncompleteCycleIsClosedByTheNextSync) {
-  RunContext run;
-  FakeRun fake(run);
-  fake.complete_ = false;
-  const auto log = Motion(fake, run);
-  // Cycle 0 is awaited after SYNC 1 is on the wire; the last cycle, never complete, is not:
-  // the bus gets one more period (half steps) to finish it.
-  EXPECT_THAT(log, ElementsAre("truth!@0", "sync@0", "bus@5", "devices@10", "devices@20",
-                               "truth!@20", "sync@20", "bus@25", "status0/0@20", "devices@30",
-                               "devices@40", "truth!@40", "sync@40", "bus@45", "status1/1@40",
-                               "bus@55"));
-  ASSERT_FALSE(run.events.empty());
-  EXPECT_EQ(run.events.back()["event"], "last_cycle_incomplete");
+              ElementsAre("truth!@0", "sync@0", "bus@5", "devices@10", "drain@10", "devices@20",
+                          "drain@20", "truth!@20", "sync@20", "bus@25", "devices@30", "drain@30",
+                          "devices@40", "drain@40", "truth!@40", "sync@40", "bus@45", "last@40"));
 }
 
 TEST(CycleScheduler, AfterAFailureTheCycleRunsOutAndTheNextSyncEndsThePhase) {
   RunContext run;
   FakeRun fake(run);
-  fake.fail_status_ = true;
+  fake.fail_at_ = 10;
   EXPECT_THAT(Motion(fake, run), ElementsAre("truth!@0", "sync@0", "bus@5", "devices@10",
-                                             "status0/0@10", "devices@20"));
-  EXPECT_EQ(run.failure, "timeout");
+                                             "drain@10", "devices@20", "drain@20"));
+  EXPECT_EQ(run.failure, "the firmware exited");
 }
 
-TEST(CycleScheduler, RealTimeDrainsEveryStepAndWaitsOnlyForTheLastStatus) {
-  RunContext run;
-  FakeRun fake(run);
-  fake.lockstep_ = false;
-  fake.complete_ = false;  // ignored in real time
-  EXPECT_THAT(Motion(fake, run),
-              ElementsAre("truth!@0", "sync@0", "bus@5", "devices@10", "drain@10", "devices@20",
-                          "drain@20", "truth!@20", "sync@20", "bus@25", "devices@30", "drain@30",
-                          "devices@40", "drain@40", "truth!@40", "sync@40", "bus@45",
-                          "last2@40"));
-}
-
-TEST(CycleScheduler, StartUpWaitsForBootAnswersAfterEveryStep) {
+TEST(CycleScheduler, StartUpDrainsTheFirmwareAfterEveryStep) {
   RunContext run;
   FakeRun fake(run);
   LockstepWait wait;
   EventLoop loop(run, wait);
   StepSource steps(fake, fake, run);
-  steps.Start({.motion = false, .record_truth = true, .wait_boot_answers = true, .steps = 2});
+  steps.Start({.motion = false, .record_truth = true, .steps = 2});
   loop.Run({"boot", {&steps}, nullptr});
-  EXPECT_THAT(fake.log, ElementsAre("physics@10", "devices@10", "boot-wait@10", "physics@20",
-                                    "devices@20", "boot-wait@20"));
+  EXPECT_THAT(fake.log, ElementsAre("physics@10", "devices@10", "drain@10", "physics@20",
+                                    "devices@20", "drain@20"));
 }
 
 }  // namespace

@@ -1,4 +1,6 @@
-#include "emulator/firmware/lockstep_handshake.h"
+#include "emulator/firmware/firmware_bus_watch.h"
+
+#include <utility>
 
 #include "bus/canopen.h"
 #include "bus/dbc_codec.h"
@@ -8,7 +10,6 @@ namespace wheelhil::emulator::firmware {
 namespace co = bus::canopen;
 
 namespace {
-
 
 constexpr std::uint32_t kFwStatusId = 0x686;
 
@@ -23,40 +24,24 @@ std::vector<const bus::DbcSignal*> SignalsNamed(const bus::DbcMessage* msg, cons
 
 }  // namespace
 
-LockstepHandshake::LockstepHandshake(std::shared_ptr<const bus::DbcDatabase> firmware_dbc,
-                                     const sim::BusHub& hub, sim::RunContext& run)
+FirmwareBusWatch::FirmwareBusWatch(std::shared_ptr<const bus::DbcDatabase> firmware_dbc,
+                                   const sim::BusHub& hub, sim::RunContext& run)
     : dbc_(std::move(firmware_dbc)), hub_(hub), run_(run) {
   status_msg_ = dbc_->FindMessage(kFwStatusId, false);
-  status_cycle_ = SignalsNamed(status_msg_, "Status_Cycle");
   status_state_ = SignalsNamed(status_msg_, "Status_State");
 }
 
-void LockstepHandshake::ExpectSyncAnswers(std::vector<SyncAnswer> answers) {
-  answers_ = std::move(answers);
-  all_answers_ = answers_.empty() ? 0u : static_cast<std::uint32_t>((1ull << answers_.size()) - 1);
-}
-
-void LockstepHandshake::OnEmulatorFrame(const WireFrame& w, int device) {
+void FirmwareBusWatch::OnEmulatorFrame(const WireFrame& w, int /*device*/) {
   if (w.frame.extended) return;
   const std::uint32_t id = w.frame.id;
-  if (id == co::kSyncCobId && device == -1) {
-    answers_since_sync_ = 0;
-    ++syncs_on_wire_;
-  }
-  for (std::size_t i = 0; i < answers_.size(); ++i) {
-    if (device == answers_[i].device && id == answers_[i].id && w.frame.len == answers_[i].len) {
-      answers_since_sync_ |= 1u << i;
-    }
-  }
   // Boot-ups and SDO answers: the firmware reacts to each.
-  if ((co::IsErrorControl(id) && w.frame.len == 1 &&
-       w.frame.data[0] == co::nmt_state::kBootUp) ||
+  if ((co::IsErrorControl(id) && w.frame.len == 1 && w.frame.data[0] == co::nmt_state::kBootUp) ||
       co::IsSdoResponse(id)) {
     awaiting_nodes_.insert(static_cast<int>(co::NodeOf(id)));
   }
 }
 
-void LockstepHandshake::OnFirmwareFrame(const bus::CanFrame& f) {
+void FirmwareBusWatch::OnFirmwareFrame(const bus::CanFrame& f) {
   if (f.extended) return;
   // Reactions the start-up waits for: SDO requests and NMT commands.
   if (co::IsSdoRequest(f.id)) awaiting_nodes_.erase(static_cast<int>(co::NodeOf(f.id)));
@@ -75,8 +60,6 @@ void LockstepHandshake::OnFirmwareFrame(const bus::CanFrame& f) {
     }
     return 0.0;
   };
-  ++status_frames_;
-  last_status_cycle_ = static_cast<int>(get(status_cycle_));
   const int state = static_cast<int>(get(status_state_));
   if (state != last_state_) {
     last_state_ = state;
