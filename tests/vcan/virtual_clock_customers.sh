@@ -13,9 +13,12 @@ fail=0
 run() {  # name dir args...
   local name=$1 dir=$2
   shift 2
-  if ! "$wheelhil" run "$@" --out "$dir" --quiet >"$dir.txt" 2>&1; then
-    echo "FAIL: $name: wheelhil run $* exited $?:"
-    cat "$dir.txt"
+  "$wheelhil" run "$@" --out "$dir" --quiet >"$dir.txt" 2>&1
+  local rc=$?
+  if [ "$rc" -ne 0 ]; then
+    echo "FAIL: $name: wheelhil run $* exited $rc:" >&2
+    # On stderr: uml_run.sh tells a sanitizer build that cannot run in the guest from there.
+    cat "$dir.txt" >&2
     fail=1
     return 1
   fi
