@@ -28,8 +28,7 @@ void Merge(YAML::Node base, const YAML::Node& over) {
 }  // namespace
 
 std::string DerivedWheelhilFwConfig(const std::string& config_path,
-                                    const std::string& overrides_yaml,
-                                    const WheelhilFwRunSettings& run) {
+                                    const std::string& overrides_yaml) {
   const bus::yaml::FieldReader reader(config_path);
   YAML::Node cfg = reader.Parse(reader.ReadFile());
   if (!overrides_yaml.empty()) {
@@ -42,16 +41,6 @@ std::string DerivedWheelhilFwConfig(const std::string& config_path,
       cfg["dbc_dir"] = (fs::path(config_path).parent_path() / p).lexically_normal().string();
     }
   }
-  if (!run.set_sync) {
-    YAML::Emitter e;
-    e << cfg;
-    return std::string("# Derived by wheelhil run from ") + config_path + "\n" + e.c_str() + "\n";
-  }
-  cfg["sync"]["produce"] = false;
-  cfg["sync"]["period_s"] = run.sync_period_s;
-  // A cycle closes as soon as its frames are in; the deadline only matters for lost frames (on
-  // the virtual clock it is judged on the frames' own time).
-  cfg["sync"]["deadline_s"] = run.sync_period_s;
   YAML::Emitter e;
   e << cfg;
   return std::string("# Derived by wheelhil run from ") + config_path + "\n" + e.c_str() + "\n";

@@ -673,11 +673,10 @@ void Run::StartFirmware() {
   }
   std::string cmd = s_.firmware.command;
   if (!s_.firmware.config.empty()) {
-    // A firmware config is wheelhil-fw's convention: it gets the run's SYNC settings.
+    // The firmware's own config with the scenario's overrides, nothing else.
     const std::string cfg_path = fs::absolute(out_ + "/firmware_config.yaml").string();
-    scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(
-                                     s_.firmware.config, s_.firmware.overrides_yaml,
-                                     {s_.timing.sync_period_s, !timing_.firmware_produces_sync}));
+    scoring::WriteText(cfg_path, firmware::DerivedWheelhilFwConfig(s_.firmware.config,
+                                                                   s_.firmware.overrides_yaml));
     cmd = firmware::Substitute(cmd, "${CONFIG}", cfg_path);
   }
   cmd = firmware::Substitute(firmware::Substitute(cmd, "${CAN}", link_->interface()), "${BIN}",

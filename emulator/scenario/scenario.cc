@@ -394,8 +394,7 @@ TimingSpec ReadTiming(const Reader& r, const YAML::Node& n, double motion_s) {
   }
   t.sync_producer_named = n["sync_producer"].IsDefined();
   t.spin_cost_s = r.Number(n, "spin_cost_s", "timing", 0, 0.01, 0.0);
-  const std::string producer =
-      r.String(n, "sync_producer", "timing", std::string(t.lockstep ? "firmware" : "emulator"));
+  const std::string producer = r.String(n, "sync_producer", "timing", std::string("firmware"));
   t.firmware_produces_sync = producer == "firmware";
   if (producer != "firmware" && producer != "emulator") {
     r.Fail(n["sync_producer"], "timing.sync_producer",

@@ -239,8 +239,8 @@ struct TimingSpec {
   double physics_rate_hz = 1000;
   double sync_period_s = 0.01;  ///< The SYNC / firmware cycle period.
   double timeout_s = 5;         ///< Wall-clock wait for the firmware's answer to a cycle.
-  /// The firmware is the SYNC producer (the CANopen master's role); else the emulator is.
-  /// Unless named, the firmware exactly when the run is in lockstep (on the virtual clock).
+  /// The firmware is the SYNC producer (the CANopen master's role, the default); else the
+  /// emulator is (an emulated master: the firmware's own config must then not produce SYNC).
   bool firmware_produces_sync = true;
   bool sync_producer_named = false;
   /// Virtual clock: what each call that does not block (a clock read, a zero-timeout poll)

@@ -27,7 +27,9 @@ TimingPlan ResolveTiming(const TimingChoice& c) {
         c.source_path));
   }
   plan.clock = lockstep ? TimingPlan::Clock::kVirtual : TimingPlan::Clock::kWall;
-  plan.firmware_produces_sync = t.sync_producer_named ? t.firmware_produces_sync : lockstep;
+  // The firmware is the CANopen master, with its own config, unless the scenario names an
+  // emulated one (the run rewrites no firmware config, in real time neither).
+  plan.firmware_produces_sync = !t.sync_producer_named || t.firmware_produces_sync;
   return plan;
 }
 

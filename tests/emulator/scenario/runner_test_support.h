@@ -7,6 +7,7 @@
 #include <sstream>
 #include <string>
 
+#include <yaml-cpp/yaml.h>
 #include <nlohmann/json.hpp>
 
 #include "bus/ucan_runtime_dir.h"
@@ -31,10 +32,19 @@ inline nlohmann::json ReportWithoutWall(const std::filesystem::path& run_dir) {
 
 /// The emulator produces SYNC (timing.sync_producer: emulator, an emulated CANopen master), the
 /// firmware runs on the virtual clock as ever: for tests that need the SYNCs at the emulator's
-/// instants.
+/// instants. The reference firmware is told so through the scenario's overrides (the run
+/// rewrites no config): it follows SYNC with the scenario's period as its cycle deadline.
 inline void UseEmulatorSync(Scenario& s) {
   s.timing.firmware_produces_sync = false;
   s.timing.sync_producer_named = true;
+  YAML::Node overrides = s.firmware.overrides_yaml.empty() ? YAML::Node(YAML::NodeType::Map)
+                                                           : YAML::Load(s.firmware.overrides_yaml);
+  overrides["sync"]["produce"] = false;
+  overrides["sync"]["period_s"] = s.timing.sync_period_s;
+  overrides["sync"]["deadline_s"] = s.timing.sync_period_s;
+  YAML::Emitter out;
+  out << overrides;
+  s.firmware.overrides_yaml = out.c_str();
 }
 
 /// Options for a run into `out` with this build's programs and a private userspace bus.

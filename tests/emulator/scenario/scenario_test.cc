@@ -215,8 +215,8 @@ TEST(ScenarioLoader, ClockAndSyncProducer) {
   EXPECT_THAT([] { (void)ParseScenario(Minimal("timing: {sync_producer: master}\n"), kFile); },
               ThrowsMessage<std::invalid_argument>(
                   HasSubstr("timing.sync_producer: 'master' is not firmware or emulator")));
-  // Real time: the emulator produces SYNC unless the scenario says the firmware does.
-  EXPECT_FALSE(
+  // Real time as well: the firmware is the master unless the scenario names the emulator.
+  EXPECT_TRUE(
       ParseScenario(Minimal("timing: {mode: realtime}\n"), kFile).timing.firmware_produces_sync);
   EXPECT_TRUE(ParseScenario(Minimal("timing: {mode: realtime, sync_producer: firmware}\n"), kFile)
                   .timing.firmware_produces_sync);

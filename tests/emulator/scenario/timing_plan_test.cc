@@ -36,7 +36,7 @@ TimingChoice ChoiceOf(const Case& c) {
   TimingChoice choice;
   choice.spec.lockstep = c.lockstep_mode;
   choice.spec.sync_producer_named = c.firmware_sync.has_value();
-  choice.spec.firmware_produces_sync = c.firmware_sync.value_or(c.lockstep_mode);
+  choice.spec.firmware_produces_sync = c.firmware_sync.value_or(true);
   choice.source_path = "robot.yaml";
   choice.realtime = c.realtime;
   choice.can_iface = c.can_iface;
@@ -49,14 +49,15 @@ constexpr const char* kOk = nullptr;
 const Case kCases[] = {
     {"the defaults", true, {}, false, "", true, Clock::kVirtual, true, kOk},
     {"the emulator's SYNC", true, false, false, "", true, Clock::kVirtual, false, kOk},
-    {"--realtime", true, {}, true, "", true, Clock::kWall, false, kOk},
-    {"timing.mode: realtime", false, {}, false, "", true, Clock::kWall, false, kOk},
+    {"--realtime", true, {}, true, "", true, Clock::kWall, true, kOk},
+    {"timing.mode: realtime", false, {}, false, "", true, Clock::kWall, true, kOk},
+    {"real time, the emulator's SYNC", false, false, false, "", true, Clock::kWall, false, kOk},
     {"--realtime, the firmware's SYNC", true, true, true, "", true, Clock::kWall, true, kOk},
     {"a kernel interface", true, {}, false, "vcan0", true, Clock::kVirtual, true, kOk},
     {"a kernel interface, the emulator's SYNC", true, false, false, "vcan0", true,
      Clock::kVirtual, false, kOk},
-    {"a kernel interface, real time", true, {}, true, "vcan0", true, Clock::kWall, false, kOk},
-    {"an attached firmware, real time", true, {}, true, "", false, Clock::kWall, false, kOk},
+    {"a kernel interface, real time", true, {}, true, "vcan0", true, Clock::kWall, true, kOk},
+    {"an attached firmware, real time", true, {}, true, "", false, Clock::kWall, true, kOk},
     {"an attached firmware in lockstep", true, {}, false, "", false, Clock::kWall, false,
      "a firmware attached from outside (no firmware.command) keeps its own clock, so it cannot "
      "run in lockstep: run it with --realtime"},
