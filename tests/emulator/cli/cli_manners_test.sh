@@ -48,7 +48,9 @@ if command -v candump >/dev/null; then
 fi
 rc=0; wait "$run_pid" || rc=$?
 run_pid=""
-[ "$rc" -eq 0 ] || fail "the watched run exited $rc: $(tail -5 "$tmp/run.err")"
+# In real time the firmware's SYNC runs on the host's clock, so the verdict (exit 1: an
+# expectation failed) depends on the host's load; anything else is a fault of the run.
+[ "$rc" -eq 0 ] || [ "$rc" -eq 1 ] || fail "the watched run exited $rc: $(tail -5 "$tmp/run.err")"
 # Once the run is over, its bus is gone, and exec says so.
 rc=0; "$wheelhil" exec --runtime-dir "$dir" -- true 2>"$tmp/gone.err" || rc=$?
 [ "$rc" -eq 1 ] || fail "exec --runtime-dir on an ended run exited $rc"
