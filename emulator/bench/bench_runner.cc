@@ -1,6 +1,8 @@
 #include "emulator/bench/bench_runner.h"
 
 #include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
 #include <sys/resource.h>
 #include <sys/types.h>
 #include <sys/wait.h>
@@ -28,6 +30,9 @@
 
 namespace wheelhil::emulator::bench {
 namespace {
+
+// How long a worker may take (RunBench sets it: --quick runs are short); a guest boot more.
+double g_worker_limit_s = 900.0;
 
 std::string WorkerStatus(int status) {
   if (WIFEXITED(status)) return fmt::format("exit code {}", WEXITSTATUS(status));
@@ -460,7 +465,7 @@ std::vector<std::string> DocumentedKeysUnder(const std::string& prefix,
 
 WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
                                const std::vector<std::pair<std::string, std::string>>& extra_env,
-                               bool expect_json) {
+                               bool expect_json, double limit_s) {
   WorkerOutcome out;
   // Everything the child needs is built before fork (no allocation between fork and exec).
   std::vector<std::string> env_strings = firmware::EnvironmentWith(extra_env);
@@ -484,14 +489,30 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
     return out;
   }
   if (pid == 0) {
+    ::setpgid(0, 0);  // its own group: a worker that overstays goes with what it started
     ::dup2(fds[1], STDOUT_FILENO);
     ::execve(args[0], args.data(), envp.data());
     ::_exit(127);
   }
   ::close(fds[1]);
+  // A worker that hangs (a run that never ends) costs its row, not the bench.
+  if (limit_s <= 0) limit_s = argv[0].ends_with("uml_run.sh") ? 900.0 : g_worker_limit_s;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(limit_s);
+  bool overstayed = false;
   std::string text;
   char buf[4096];
   while (true) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
+    pollfd p{fds[0], POLLIN, 0};
+    const int ready = ::poll(&p, 1, static_cast<int>(std::max<std::int64_t>(0, left.count())));
+    if (ready == 0) {
+      overstayed = true;
+      ::kill(-pid, SIGKILL);
+      ::kill(pid, SIGKILL);
+      break;
+    }
+    if (ready < 0 && errno == EINTR) continue;
     const ssize_t n = ::read(fds[0], buf, sizeof(buf));
     if (n > 0) {
       text.append(buf, static_cast<std::size_t>(n));
@@ -503,6 +524,13 @@ WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
   int status = 0;
   rusage usage{};
   while (::wait4(pid, &status, 0, &usage) < 0 && errno == EINTR) {
+  }
+  if (overstayed) {
+    out.problem = fmt::format(
+        "`{}` did not finish within {:g} s of wall time (killed)",
+        fmt::join(std::vector<std::string>(argv.begin() + 1, argv.end()), " "), limit_s);
+    fmt::print(stderr, "wheelhil bench: {}\n", out.problem);
+    return out;
   }
   out.max_rss_mib = static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB
   // The JSON is the last line that starts with '{' (a UML guest prints boot lines first).
@@ -583,6 +611,7 @@ nlohmann::json RunWorker(const std::string& name, const BenchOptions& o) {
 nlohmann::json RunBench(const BenchOptions& o, const std::string& self_exe,
                         const UcanEnvironmentFn& ucan_env,
                         const std::string& lockstep_unavailable) {
+  g_worker_limit_s = o.quick ? 45.0 : 900.0;
   nlohmann::json report = nlohmann::json::object();
   const MachineFacts m = ReadMachineFacts();
   SetPath(report, "machine.cpu_model", m.cpu_model);

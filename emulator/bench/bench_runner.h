@@ -44,10 +44,12 @@ struct WorkerOutcome {
 
 /// Runs argv (argv[0] = program path) with `extra_env` added to this environment, reads the
 /// last line of its stdout that starts with '{' as JSON, and waits for it with wait4.
-/// expect_json = false: a program that prints no JSON (e.g. `wheelhil run`) is fine.
+/// expect_json = false: a program that prints no JSON (e.g. `wheelhil run`) is fine. A worker
+/// still running after limit_s of wall time (0: the bench's own limit, 45 s with --quick, else
+/// 900 s) is killed with its process group, and `problem` says so.
 WorkerOutcome RunWorkerProcess(const std::vector<std::string>& argv,
                                const std::vector<std::pair<std::string, std::string>>& extra_env,
-                               bool expect_json = true);
+                               bool expect_json = true, double limit_s = 0);
 
 /// The full bench. self_exe: path of the wheelhil executable. The lockstep rows run
 /// `<self_exe> run scenarios/<paperNNN>*.yaml` (the paper's reference scenario, else the first

@@ -7,6 +7,7 @@
 #include <sys/prctl.h>
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iterator>
@@ -19,6 +20,7 @@
 #include "bus/dbc.h"
 #include "bus/dbc_codec.h"
 #include "emulator/bench/bench_report.h"
+#include "emulator/bench/bench_runner.h"
 #include "emulator/bench/paper002_device_set.h"
 #include "emulator/realtime/realtime_pacer.h"
 #include "emulator/realtime/spsc_ring.h"
@@ -453,3 +455,22 @@ TEST(BenchReport, DocsPerformanceMdDocumentsEveryKey) {
 
 }  // namespace
 }  // namespace wheelhil::emulator
+
+namespace wheelhil::emulator::bench {
+namespace {
+
+// A bench worker that overstays its limit (a run that never ends) costs its row, not the bench:
+// it is killed with the processes it started, and the row says why.
+TEST(BenchWorker, AWorkerThatOverstaysIsKilledWithWhatItStarted) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const WorkerOutcome w =
+      RunWorkerProcess({"/bin/sh", "-c", "sleep 30 & sleep 30"}, {}, /*expect_json=*/false, 0.5);
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(took_s, 10.0);  // not the sleeps' 30 s: the background one holds the pipe too
+  EXPECT_THAT(w.problem, ::testing::HasSubstr("`-c sleep 30 & sleep 30` did not finish within "
+                                              "0.5 s of wall time (killed)"));
+}
+
+}  // namespace
+}  // namespace wheelhil::emulator::bench
