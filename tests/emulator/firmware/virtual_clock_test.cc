@@ -318,17 +318,23 @@ TEST(VirtualClock, RunaheadMovesTheClockThroughTheFirmwaresOwnWaitsInOrder) {
   EXPECT_EQ(host.local_advances, 0u);
   EXPECT_EQ(host.host_moves, 9u);  // 2, 3, 4, 6, 8, 9, 10, 12, 32 ms
 
+  // Who moved which instant can depend on scheduling: once in a full suite run under load the
+  // probe was granted the clock only after its last instant (the host moved all nine; every
+  // wait still ended at its own instant). So each grant gets up to three runs to show its count;
+  // every run's waits are checked.
+  auto granted = [](Grant g, std::uint64_t local, std::uint64_t host_moves) {
+    for (int attempt = 0; attempt < 3; ++attempt) {
+      const ProbeRun r = RunProbe("ahead", 20, g);
+      ExpectAheadWaits(r);
+      EXPECT_EQ(r.local_advances + r.host_moves, 9u);
+      if (r.local_advances == local && r.host_moves == host_moves) return;
+    }
+    ADD_FAILURE() << "three runs without " << local << " instants moved by the probe";
+  };
   // Granted after the host's first move (2 ms): the other eight are the probe's own.
-  const ProbeRun ahead = RunProbe("ahead", 20, Grant{1000 * kMs, kMs});
-  ExpectAheadWaits(ahead);
-  EXPECT_EQ(ahead.local_advances, 8u);
-  EXPECT_EQ(ahead.host_moves, 1u);
-
+  granted(Grant{1000 * kMs, kMs}, 8u, 1u);
   // Up to 5 ms: 3 and 4 ms, then the clock is the host's again.
-  const ProbeRun until5 = RunProbe("ahead", 20, Grant{5 * kMs, kMs});
-  ExpectAheadWaits(until5);
-  EXPECT_EQ(until5.local_advances, 2u);
-  EXPECT_EQ(until5.host_moves, 7u);
+  granted(Grant{5 * kMs, kMs}, 2u, 7u);
 
   // On a 2 ms grid: 3 ms is off it, so the host takes that instant and everything after.
   const ProbeRun grid = RunProbe("ahead", 20, Grant{1000 * kMs, 2 * kMs});
