@@ -7,12 +7,12 @@
 /// command line, `${CAN}`, `${CONFIG}` and `${BIN}` substituted, LD_PRELOAD +
 /// WHEELHIL_UCAN_DIR set on the userspace bus).
 ///
-/// Lockstep (default): the emulator is the SYNC producer; after each SYNC cycle it waits
-/// (wall-clock timeout) for the firmware's FW_Status of that cycle (wheelhil_fw.dbc, cycle
-/// counter mod 256) before virtual time goes on; during start-up it waits for the firmware's
-/// reaction to every boot-up and SDO response. Frames from the firmware enter the bus model at
-/// the virtual instant they were received, so the same scenario and seed give the same can.log
-/// byte for byte. Realtime: virtual time is paced to the wall clock, nothing is waited for.
+/// Lockstep (default): the firmware's processes run on the run's virtual clock
+/// (libwheelhil_vtime.so, docs/virtual-time.md) and virtual time goes on only when all of them
+/// are blocked; the firmware is the SYNC producer unless the scenario names the emulator
+/// (timing_plan.h decides). Frames from the firmware enter the bus model at the virtual instant
+/// they were sent, so the same scenario and seed give the same can.log byte for byte. Realtime:
+/// virtual time is paced to the wall clock, nothing is waited for.
 /// The run is scored by the metric components the scenario selects (emulator/scoring).
 ///
 /// Leaves in out_dir: can.log, truth.csv, estimate.csv, truth.tum, estimate.tum (pose stream),
