@@ -2246,8 +2246,10 @@ void CountKernelCanSends(int fd, long frames) {
 /// now. The run hands a frame over at the instant it is due and the firmware reads it before the
 /// clock moves on (a firmware that leaves it in its socket longer sees it stamped later).
 void VirtualReceiveStamps(int fd, msghdr* msg) {
-  if (msg == nullptr || msg->msg_control == nullptr || msg->msg_controllen == 0) return;
-  bool checked = false;
+  if (msg == nullptr || msg->msg_control == nullptr || msg->msg_controllen == 0 ||
+      !MarkedKernelCan(fd)) {
+    return;
+  }
   const std::int64_t now = Now() + RealtimeOffset();
   for (cmsghdr* c = CMSG_FIRSTHDR(msg); c != nullptr; c = CMSG_NXTHDR(msg, c)) {
     if (c->cmsg_level != SOL_SOCKET) continue;
@@ -2256,11 +2258,6 @@ void VirtualReceiveStamps(int fd, msghdr* msg) {
     const bool ts = type == SO_TIMESTAMPNS_OLD || type == SO_TIMESTAMPNS_NEW ||
                     type == SO_TIMESTAMPING_OLD || type == SO_TIMESTAMPING_NEW;
     if (!tv && !ts) continue;
-    if (!checked) {
-      // (Marked when opened: no system call per frame.)
-      if (!MarkedKernelCan(fd)) return;
-      checked = true;
-    }
     const std::size_t room = c->cmsg_len - CMSG_LEN(0);
     if (tv && room >= sizeof(timeval)) {
       const timeval v{now / 1000000000, (now % 1000000000) / 1000};

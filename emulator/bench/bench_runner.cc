@@ -120,7 +120,7 @@ nlohmann::json Accounts(const nlohmann::json& wall) {
 /// firmware never answered) gives that failure as the reason, never a number.
 /// The run's clock, named as the rows say it: the firmware's virtual clock, the firmware the
 /// SYNC producer (its shipped config).
-std::vector<campaign::Override> VirtualClock() {
+std::vector<campaign::Override> VirtualClockOverrides() {
   return {{"timing.clock", "virtual", 0}, {"timing.sync_producer", "firmware", 0}};
 }
 
@@ -250,7 +250,7 @@ void RunLockstep(const BenchOptions& o, const std::string& self_exe, const std::
       SetPath(report, key, Unavailable(fmt::format("no scenario file scenarios/{}*.yaml yet", s)));
       continue;
     }
-    const LockstepRun r = RunLockstepScenario(o, self_exe, file, "", VirtualClock());
+    const LockstepRun r = RunLockstepScenario(o, self_exe, file, "", VirtualClockOverrides());
     SetPath(report, key, r.rtf);
     if (r.rtf.is_number()) {
       SetPath(report, fmt::format("lockstep.{}.scenario", s),
@@ -321,10 +321,8 @@ nlohmann::json LockstepOnKernelBus(const BenchOptions& o, const std::string& sel
       if (also_ucan) SetPath(report, fmt::format("lockstep.{}.uml_ucan_rtf", s), Unavailable(why));
       continue;
     }
-    // Both rows on the firmware's virtual clock, the firmware the SYNC producer (the default:
-    // named, as the virtual_time rows are).
-    const std::vector<campaign::Override> virtual_clock = {{"timing.clock", "virtual", 0},
-                                                           {"timing.sync_producer", "firmware", 0}};
+    // Both rows on the firmware's virtual clock, as the lockstep rows.
+    const std::vector<campaign::Override> virtual_clock = VirtualClockOverrides();
     const LockstepRun k = RunLockstepScenario(o, self_exe, file, iface, virtual_clock);
     SetPath(report, fmt::format("lockstep.{}.vcan_rtf", s), k.rtf);
     if (k.sim_s.is_number()) SetPath(report, fmt::format("lockstep.{}.vcan_sim_s", s), k.sim_s);

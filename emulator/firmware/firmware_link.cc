@@ -385,14 +385,15 @@ void FirmwareLink::TakeKernelFrames(const FrameFn& on_frame) {
         on_frame(rx.frame);
       }
     }
-    const bool theirs_in = clock_ == nullptr || clock_->KernelCanSends() <= kernel_frames_in_;
-    if (unconfirmed_ == 0 && theirs_in) return;
+    const std::uint64_t sent = clock_ != nullptr ? clock_->KernelCanSends() : 0;
+    const std::uint64_t theirs_missing = sent > kernel_frames_in_ ? sent - kernel_frames_in_ : 0;
+    if (unconfirmed_ == 0 && theirs_missing == 0) return;
     if (WallSeconds(t0) > kKernelDeliverySeconds) {
       run_.Fail(
           fmt::format("the kernel did not deliver {} frame(s) on {} within {} s ({} of the "
                       "run's own not back, {} of the firmware's sends not received)",
-                      unconfirmed_ + (theirs_in ? 0 : 1), iface_, kKernelDeliverySeconds,
-                      unconfirmed_, theirs_in ? 0 : clock_->KernelCanSends() - kernel_frames_in_));
+                      unconfirmed_ + theirs_missing, iface_, kKernelDeliverySeconds, unconfirmed_,
+                      theirs_missing));
       unconfirmed_ = 0;
       return;
     }

@@ -152,7 +152,6 @@ class FirmwareLink {
   std::int64_t last_look_ns_ = 0;
   bool opened_once_ = false;  // the firmware bound a socket once (FirmwareConnected)
   std::uint64_t handovers_ = 0;
-  std::chrono::steady_clock::time_point last_exit_check_{};
 };
 
 /// CAN receivers the kernel has registered on `iface` (one per filter of every bound CAN

@@ -60,17 +60,18 @@ bool BusForecast::RunTo(std::int64_t until_ns, PhysicsStage& physics, FaultPlan&
   return whole;
 }
 
-}  // namespace wheelhil::emulator::scenario
-
-namespace wheelhil::emulator::scenario {
-
 std::vector<firmware::RunaheadSendPlan::Gap> BusForecast::SendGaps(std::int64_t first_ns,
                                                                    std::int64_t step_ns) const {
   std::vector<firmware::RunaheadSendPlan::Gap> gaps;
   const std::int64_t bit_ns = hub_->bit_time_ns();
-  // A frame that started before reached_ns() but had not completed is not in wire_: every
-  // classic frame lasts at most 160 bits, so one that started before `known` completed.
-  const std::int64_t known = reached_ns() - 160 * bit_ns;
+  // A frame that started before reached_ns() but had not completed is not in wire_; one that
+  // started before `known` did, however long (an extended frame of 8 bytes, worst stuffing).
+  bus::CanFrame longest;
+  longest.extended = true;
+  longest.len = 8;
+  const std::int64_t known =
+      reached_ns() -
+      static_cast<std::int64_t>(CanFrameBits(longest, StuffingMode::kWorstCase)) * bit_ns;
   auto free_of = [bit_ns](const WireFrame& w) {
     return w.start_ns + static_cast<std::int64_t>(w.bits) * bit_ns;
   };

@@ -147,7 +147,6 @@ class Run final : public sim::RunStages, public sim::FirmwareGate {
   // Virtual clock: runs the firmware alone (its clock moving to its own deadlines) until it has
   // opened the bus.
   void StartFirmwareOnVirtualClock();
-  // Lockstep: waits until `done` (wall-clock timeout); false on timeout or failure.
   void OnFirmwareFrame(const bus::CanFrame& f);
   void StartWorker(std::int64_t steps);
   void RunPhases();

@@ -15,6 +15,7 @@
 
 #include "bus/can_frame.h"
 #include "bus/candump_log.h"
+#include "bus/vtime_protocol.h"
 #include "emulator/devices/can_bus_model.h"
 #include "emulator/devices/canopen_encoder_node.h"
 #include "emulator/devices/dbc_cia406_codec.h"
@@ -49,6 +50,20 @@ TEST(CanFrameBits, NoStuffingAndWorstCaseFormulas) {
     EXPECT_EQ(CanFrameBits(e, StuffingMode::kWorstCase), 80u + 10u * n);
     EXPECT_EQ(CanFrameBits(s, StuffingMode::kTindell), (269u + 48u * n) / 5u);
     EXPECT_EQ(CanFrameBits(e, StuffingMode::kTindell), (389u + 48u * n) / 5u);
+  }
+}
+
+// The firmware's clock library judges its own frames with its own copy of two of the model's
+// rules (bus/vtime_protocol.h: it links nothing of the emulator): they must agree.
+TEST(CanFrameBits, TheClockLibrarysCopyOfWorstCaseLengthAndArbitrationAgrees) {
+  for (std::uint8_t n = 0; n <= 8; ++n) {
+    CanFrame s = Std(0x123, {});
+    s.len = n;
+    EXPECT_EQ(CanFrameBits(s, StuffingMode::kWorstCase),
+              static_cast<unsigned>(bus::vtime::StandardFrameBitsAtMost(n)));
+  }
+  for (std::uint32_t id : {0x000u, 0x080u, 0x123u, 0x680u, 0x7FFu}) {
+    EXPECT_EQ(ArbitrationKey(Std(id, {1, 2})), bus::vtime::StandardDataKey(id));
   }
 }
 
