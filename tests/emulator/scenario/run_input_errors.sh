@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # `wheelhil run` options that cannot be exit 2 naming the fix: the retired cooperative clock
-# (what replaced it); a --runahead that is neither on nor off. (Malformed
-# files: malformed_inputs.sh.)
+# (what replaced it); a --runahead that is neither on nor off; a --clock that is not virtual.
+# (Malformed files: malformed_inputs.sh.)
 # Usage: run_input_errors.sh WHEELHIL_BIN SOURCE_DIR
 set -uo pipefail
 wheelhil=$1
@@ -32,3 +32,15 @@ if [ "$rc" -ne 2 ] || ! grep -qF -- "$want" "$work/log3"; then
   exit 1
 fi
 echo "ok: rc $rc: $(head -1 "$work/log3")"
+
+# --clock takes virtual (cooperative is refused above): anything else exits 2 naming it.
+"$wheelhil" run "$src/scenarios/smoke/paper000_slip_short.yaml" --clock fast \
+  --out "$work/out4" >"$work/log4" 2>&1
+rc=$?
+want="--clock: 'fast' is not virtual"
+if [ "$rc" -ne 2 ] || ! grep -qF -- "$want" "$work/log4"; then
+  echo "FAIL: --clock fast: rc $rc (want 2 and '$want'); output:"
+  cat "$work/log4"
+  exit 1
+fi
+echo "ok: rc $rc: $(head -1 "$work/log4")"
